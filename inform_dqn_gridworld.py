@@ -1,0 +1,582 @@
+"""INFORM on the Knox & Stone maze: TAMER from a simulated teacher's yes/no feedback ("day"), then offline
+IQ-Learn on the remembered transitions ("sleep"), giving a far-sighted policy and a recovered reward.
+
+Reproduces the gridworld experiment of Tarakli & Di Nuovo, "Learning while Sleeping" (ICDL 2024), Algorithm 1,
+Fig. 3 (episode length of TAMER, INFORM and the expert). See SPEC.md sections 1-3 and 9.
+
+    python inform_dqn_gridworld.py --seed 1
+"""
+
+import json
+import os
+import random
+import sys
+import time
+from dataclasses import asdict, dataclass
+
+import gymnasium as gym
+import matplotlib
+import numpy as np
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+import tyro
+from matplotlib.figure import Figure
+from matplotlib.patches import Polygon, Rectangle
+from torch.utils.tensorboard import SummaryWriter
+
+import gridworld_env
+
+MAZE_IDS = ("KnoxStoneMaze-v0", "KnoxStoneMazeWall-v0", "KnoxStoneMazeStartSet-v0")
+POLICIES = ("oracle", "tamer", "inform")
+
+
+@dataclass
+class Args:
+    exp_name: str = os.path.basename(__file__)[: -len(".py")]
+    """the name of this experiment"""
+    seed: int = 1
+    """seed of the experiment"""
+    torch_deterministic: bool = True
+    """if toggled, `torch.backends.cudnn.deterministic=True` and deterministic algorithms"""
+    cuda: bool = False
+    """if toggled, use CUDA when available (these tiny networks are faster on the CPU)"""
+    num_threads: int = 1
+    """torch CPU threads (one is fastest for networks this small)"""
+    save_model: bool = True
+    """whether to save the H and Q networks and the recovered reward table into the run directory"""
+    env_id: str = "KnoxStoneMaze-v0"
+    """the maze to train on (one of the ids gridworld_env registers)"""
+
+    # Oracle (the simulated teacher)
+    oracle_gamma: float = 0.99
+    """discount of the oracle's exact Q* (value iteration)"""
+
+    # Forward phase: TAMER (Eq. 1) with simulated feedback (Eq. 4)
+    tamer_total_timesteps: int = 20000
+    """environment steps of the forward phase"""
+    tamer_learning_rate: float = 1e-3
+    """Adam learning rate of the feedback model H"""
+    tamer_batch_size: int = 32
+    """batch size of the H regression"""
+    tamer_learning_starts: int = 1000
+    """environment steps before H is trained"""
+    tamer_train_frequency: int = 1
+    """environment steps between H updates"""
+    start_e: float = 1.0
+    """starting epsilon of the epsilon-greedy exploration"""
+    end_e: float = 0.05
+    """final epsilon"""
+    exploration_fraction: float = 0.2
+    """fraction of the forward phase over which epsilon decays from start_e to end_e"""
+    feedback_alpha_start: float = 0.999
+    """alpha of Eq. 4 at the start of the forward phase (1 = only the oracle's best action earns +1)"""
+    feedback_alpha_end: float = 0.999
+    """alpha of Eq. 4 at the end of the forward phase (alpha rises linearly: the teacher gets stricter)"""
+    success_max_steps: int = 30
+    """an episode is tagged success if it reaches the goal in fewer than this many steps"""
+
+    # Sleep phase: offline IQ-Learn (Eq. 2), no environment steps
+    sleep_gradient_steps: int = 5000
+    """gradient steps of the sleep phase"""
+    sleep_batch_size: int = 32
+    """transitions drawn from the success set, and as many from the whole buffer, per step"""
+    sleep_learning_rate: float = 1e-3
+    """Adam learning rate of the soft Q network"""
+    sleep_gamma: float = 0.99
+    """discount of the sleep phase (non-myopic, unlike TAMER's 0)"""
+    sleep_temperature: float = 0.1
+    """temperature of the soft value V(s) = temp * logsumexp(Q(s, .) / temp)"""
+    sleep_chi2_coef: float = 0.5
+    """weight of the chi-squared regulariser, 1 / (4 * 0.5) as IQ-Learn; 0 turns it off"""
+    sleep_tau: float = 1.0
+    """soft-update rate of the target Q network per step (1 copies it every step, as the authors did)"""
+
+    # Evaluation
+    eval_frequency: int = 1000
+    """forward-phase environment steps between greedy evaluations"""
+    sleep_eval_frequency: int = 500
+    """sleep-phase gradient steps between greedy evaluations"""
+
+
+def check_args(args: Args) -> None:
+    """Reject bad flag values before anything is written; each message says what is wrong and how to fix it."""
+    positive_ints = [
+        "num_threads",
+        "tamer_total_timesteps",
+        "tamer_batch_size",
+        "tamer_train_frequency",
+        "success_max_steps",
+        "sleep_gradient_steps",
+        "sleep_batch_size",
+        "eval_frequency",
+        "sleep_eval_frequency",
+    ]
+    for name in positive_ints:
+        if getattr(args, name) < 1:
+            raise ValueError(f"--{name.replace('_', '-')} must be a positive integer, got {getattr(args, name)}")
+    unit_interval = ["feedback_alpha_start", "feedback_alpha_end", "start_e", "end_e", "sleep_gamma", "oracle_gamma"]
+    for name in unit_interval:
+        if not 0.0 <= getattr(args, name) <= 1.0:
+            raise ValueError(f"--{name.replace('_', '-')} must be in [0, 1], got {getattr(args, name)}")
+    positive_floats = ["tamer_learning_rate", "sleep_learning_rate", "sleep_temperature", "exploration_fraction"]
+    for name in positive_floats:
+        if not getattr(args, name) > 0.0:
+            raise ValueError(f"--{name.replace('_', '-')} must be > 0, got {getattr(args, name)}")
+    if not 0.0 < args.sleep_tau <= 1.0:
+        raise ValueError(f"--sleep-tau must be in (0, 1], got {args.sleep_tau}")
+    if args.sleep_chi2_coef < 0.0:
+        raise ValueError(f"--sleep-chi2-coef must be >= 0 (0 turns it off), got {args.sleep_chi2_coef}")
+    if args.oracle_gamma >= 1.0:
+        raise ValueError("--oracle-gamma must be below 1 for value iteration to converge")
+    if args.tamer_learning_starts < args.tamer_batch_size:
+        raise ValueError(
+            f"--tamer-learning-starts ({args.tamer_learning_starts}) must be at least "
+            f"--tamer-batch-size ({args.tamer_batch_size})"
+        )
+    if args.tamer_learning_starts >= args.tamer_total_timesteps:
+        raise ValueError(
+            f"--tamer-total-timesteps ({args.tamer_total_timesteps}) must exceed "
+            f"--tamer-learning-starts ({args.tamer_learning_starts}), or H is never trained"
+        )
+    if args.env_id not in MAZE_IDS:
+        raise ValueError(f"unknown --env-id {args.env_id!r}; this script trains on one of {', '.join(MAZE_IDS)}")
+
+
+class QNetwork(nn.Module):
+    """The 30-32-32-4 MLP of the authors, used both for TAMER's H(s, a) and for the sleep phase's soft Q(s, a)."""
+
+    def __init__(self, obs_dim: int, n_actions: int, hidden: int = 32):
+        super().__init__()
+        self.network = nn.Sequential(
+            nn.Linear(obs_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, n_actions)
+        )
+
+    def forward(self, x):
+        return self.network(x)
+
+
+class ReplayBuffer:
+    """Keeps every forward-phase transition (s, a, s', h, terminated) and the success tag of its episode."""
+
+    def __init__(self, capacity: int, obs_dim: int, device: torch.device):
+        self.obs = torch.zeros((capacity, obs_dim), device=device)
+        self.next_obs = torch.zeros((capacity, obs_dim), device=device)
+        self.actions = torch.zeros(capacity, dtype=torch.long, device=device)
+        self.feedback = torch.zeros(capacity, device=device)
+        self.terminated = torch.zeros(capacity, device=device)
+        self.success = torch.zeros(capacity, dtype=torch.bool, device=device)
+        self.size = 0
+
+    def add(self, obs, action, next_obs, feedback, terminated):
+        i = self.size
+        self.obs[i] = torch.as_tensor(obs)
+        self.next_obs[i] = torch.as_tensor(next_obs)
+        self.actions[i], self.feedback[i], self.terminated[i] = action, feedback, float(terminated)
+        self.size += 1
+
+    def tag_episode(self, start: int, success: bool):
+        """Tag the trajectory buffer[start:size], which just ended, as a success or a failure."""
+        self.success[start : self.size] = success
+
+    def batch(self, idx):
+        return self.obs[idx], self.actions[idx], self.next_obs[idx], self.feedback[idx], self.terminated[idx]
+
+
+def linear_schedule(start: float, end: float, duration: int, t: int) -> float:
+    return start + (end - start) * min(t / duration, 1.0)
+
+
+def oracle_feedback(q_star_sa, q_star_best, alpha):  # Eq. 4, sign-safe
+    """h = 1 if Q*(s, a) >= Q*(s, a*) - (1 - alpha) |Q*(s, a*)|, else 0 (no feedback)."""
+    return (q_star_sa >= q_star_best - (1.0 - alpha) * abs(q_star_best)) * 1.0
+
+
+def tamer_loss(h_net, obs, actions, feedback):  # Eq. 1: E[(H(s, a) - h)^2], gamma = 0, no bootstrapping
+    return F.mse_loss(h_net(obs).gather(1, actions[:, None]).squeeze(1), feedback)
+
+
+def soft_value(q, temperature: float):  # V(s) = temp * logsumexp(Q(s, .) / temp)
+    return temperature * torch.logsumexp(q / temperature, dim=1)
+
+
+def iq_loss(q_net, target_net, obs, actions, next_obs, terminated, is_expert, gamma, temperature, chi2_coef):  # Eq. 2
+    """IQ-Learn's loss to minimise; `is_expert` marks the success-set rows of the batch, all rows are "all"."""
+    q = q_net(obs)
+    q_sa = q.gather(1, actions[:, None]).squeeze(1)
+    with torch.no_grad():
+        y = (1.0 - terminated) * gamma * soft_value(target_net(next_obs), temperature)  # V_target(s'), not of s
+    td = q_sa - y
+    expert_term = -td[is_expert].mean()
+    value_term = (soft_value(q, temperature) - y).mean()
+    chi2_term = chi2_coef * td.pow(2).mean()
+    return expert_term + value_term + chi2_term, (expert_term, value_term, chi2_term)
+
+
+def recover_reward(q_sa, v_next, terminated, gamma):  # Eq. 3: r(s, a, s') = Q(s, a) - (1 - terminated) gamma V(s')
+    return q_sa - (1.0 - terminated) * gamma * v_next
+
+
+def reward_table(q_net, next_cell, gamma, temperature, device):
+    """Eq. 3 for every (s, a) of the maze, with s' the deterministic move: a (30, 4) table."""
+    with torch.no_grad():
+        q = q_net(torch.eye(gridworld_env.N_CELLS, device=device)).cpu()
+    next_cell = torch.as_tensor(next_cell)
+    terminated = (next_cell == gridworld_env.GOAL).float()
+    return recover_reward(q, soft_value(q, temperature)[next_cell], terminated, gamma)
+
+
+def greedy_actions(q_net, device) -> np.ndarray:
+    """The greedy policy as a table: one forward pass over every cell's one-hot observation."""
+    with torch.no_grad():
+        return q_net(torch.eye(gridworld_env.N_CELLS, device=device)).argmax(1).cpu().numpy()
+
+
+def is_success(terminated: bool, length: int, max_steps: int) -> bool:
+    """The success tag: the goal was reached in fewer than `max_steps` steps."""
+    return bool(terminated) and length < max_steps
+
+
+def evaluate(env: gym.Env, policy: np.ndarray, start_cells, success_max_steps: int):
+    """Run the greedy table policy once from each start cell; mean episode length and success rate."""
+    lengths, successes = [], []
+    for cell in start_cells:
+        obs, _ = env.reset(options={"start_cell": cell})
+        terminated = truncated = False
+        length = 0
+        while not (terminated or truncated):
+            obs, _, terminated, truncated, _ = env.step(policy[int(obs.argmax())])
+            length += 1
+        lengths.append(length)
+        successes.append(is_success(terminated, length, success_max_steps))
+    return float(np.mean(lengths)), float(np.mean(successes))
+
+
+class Evaluator:
+    """Greedy evaluation of a policy on the plain maze, the wall maze and the start set; logs eval/ tags."""
+
+    def __init__(self, writer: SummaryWriter, success_max_steps: int):
+        self.writer = writer
+        self.success_max_steps = success_max_steps
+        self.envs = {
+            name: gym.make(env_id)
+            for name, env_id in [
+                ("plain", "KnoxStoneMaze-v0"),
+                ("wall", "KnoxStoneMazeWall-v0"),
+                ("start_set", "KnoxStoneMazeStartSet-v0"),
+            ]
+        }
+        self.seconds = 0.0
+        self.final = {}
+
+    def __call__(self, name: str, policy: np.ndarray, step: int) -> dict:
+        t0 = time.time()
+        length, _ = evaluate(self.envs["plain"], policy, [gridworld_env.START], self.success_max_steps)
+        wall_length, _ = evaluate(self.envs["wall"], policy, [gridworld_env.START], self.success_max_steps)
+        set_length, set_success = evaluate(
+            self.envs["start_set"], policy, gridworld_env.START_SET, self.success_max_steps
+        )
+        metrics = {
+            f"eval/{name}_episode_length": length,
+            f"eval/wall/{name}_episode_length": wall_length,
+            f"eval/start_set/{name}_episode_length": set_length,
+            f"eval/start_set/{name}_success_rate": set_success,
+        }
+        for tag, value in metrics.items():
+            self.writer.add_scalar(tag, value, step)
+        self.final.update(metrics)
+        self.seconds += time.time() - t0
+        return metrics
+
+    def close(self):
+        for env in self.envs.values():
+            env.close()
+
+
+class Progress:
+    """One line per ~5% of a phase: steps, SPS and ETA, plus whatever the phase reports."""
+
+    def __init__(self, phase: str, total: int):
+        self.phase, self.total, self.start = phase, total, time.time()
+        self.every = max(total // 20, 1)
+
+    def __call__(self, step: int, **info):
+        if step % self.every and step != self.total:
+            return
+        elapsed = time.time() - self.start
+        sps = step / max(elapsed, 1e-9)
+        eta = (self.total - step) / max(sps, 1e-9)
+        extra = "".join(f" | {k} {v:.4g}" if isinstance(v, float) else f" | {k} {v}" for k, v in info.items())
+        print(
+            f"[{self.phase}] {step}/{self.total} {100 * step // self.total:3d}% | {sps:,.0f} SPS | "
+            f"ETA {eta:.0f}s{extra}",
+            flush=True,
+        )
+
+
+def reward_figure(table: np.ndarray, title: str):
+    """The recovered reward drawn over the maze: each free cell split into four triangles, one per action."""
+    fig = Figure(figsize=(6, 6))
+    ax = fig.subplots()
+    lim = max(float(np.abs(table).max()), 1e-8)
+    cmap, norm = matplotlib.colormaps["coolwarm"], matplotlib.colors.Normalize(-lim, lim)
+    # triangle corners for up, down, left, right, in (x, y) with y pointing down
+    corners = {0: [(0, 0), (1, 0)], 1: [(0, 1), (1, 1)], 2: [(0, 0), (0, 1)], 3: [(1, 0), (1, 1)]}
+    for cell, (r, c) in enumerate(gridworld_env.CELLS):
+        for a, ((x1, y1), (x2, y2)) in corners.items():
+            tri = [(c + 0.5, r + 0.5), (c + x1, r + y1), (c + x2, r + y2)]
+            ax.add_patch(Polygon(tri, facecolor=cmap(norm(table[cell, a])), edgecolor="white", lw=0.5))
+        ax.text(
+            c + 0.5,
+            r + 0.5,
+            "G" if cell == gridworld_env.GOAL else "S" if cell == gridworld_env.START else "",
+            ha="center",
+            va="center",
+            fontsize=12,
+            weight="bold",
+        )
+    for r, c in gridworld_env.BLOCKED:
+        ax.add_patch(Rectangle((c, r), 1, 1, facecolor="0.25"))
+    for wall in gridworld_env.PLAIN_WALLS:
+        (r1, c1), (r2, c2) = sorted(wall)
+        xs, ys = ([c2, c2], [r1, r1 + 1]) if r1 == r2 else ([c1, c1 + 1], [r2, r2])
+        ax.plot(xs, ys, color="black", lw=3)
+    ax.set(xlim=(0, gridworld_env.COLS), ylim=(gridworld_env.ROWS, 0), aspect="equal", xticks=[], yticks=[])
+    ax.set_title(title)
+    fig.colorbar(matplotlib.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.8, label="r(s, a, s')")
+    return fig
+
+
+def make_run_dir(run_name: str) -> str:
+    """runs/{run_name}, never an existing directory: a clash gets a numeric suffix."""
+    path, n = f"runs/{run_name}", 0
+    while True:
+        try:
+            os.makedirs(path)
+            return path
+        except FileExistsError:
+            n += 1
+            path = f"runs/{run_name}_{n}"
+
+
+def write_json_atomic(path: str, data: dict) -> None:
+    with open(path + ".tmp", "w") as f:
+        json.dump(data, f, indent=2)
+    os.replace(path + ".tmp", path)
+
+
+def save_network(path: str, net: nn.Module, **extra) -> None:
+    """A state_dict plus what rebuilds the network; torch.load(path, weights_only=True) reads it."""
+    kwargs = {
+        "obs_dim": net.network[0].in_features,
+        "n_actions": net.network[-1].out_features,
+        "hidden": net.network[0].out_features,
+    }
+    torch.save({"state_dict": net.state_dict(), "kwargs": kwargs, **extra}, path)
+
+
+def main(args: Args) -> dict:
+    run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
+    run_start = time.time()
+
+    random.seed(args.seed)
+    np.random.seed(args.seed)
+    torch.manual_seed(args.seed)
+    torch.backends.cudnn.deterministic = args.torch_deterministic
+    torch.use_deterministic_algorithms(args.torch_deterministic)
+    torch.set_num_threads(args.num_threads)
+    device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
+
+    env = gym.make(args.env_id)
+    env.action_space.seed(args.seed)
+    obs_dim, n_actions = env.observation_space.shape[0], env.action_space.n
+    next_cell = env.unwrapped.next_cell
+
+    run_dir = make_run_dir(run_name)
+    writer = SummaryWriter(run_dir)
+    writer.add_text(
+        "hyperparameters",
+        "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
+    )
+    evaluator = Evaluator(writer, args.success_max_steps)
+    print(f"run directory: {run_dir}", flush=True)
+
+    # Oracle: the "fully trained model" is exact Q* by value iteration
+    t0 = time.time()
+    q_star = gridworld_env.optimal_q(env.unwrapped.variant, args.oracle_gamma)
+    times = {"time/oracle_s": time.time() - t0}
+    evaluator("oracle", q_star.argmax(1), 0)
+
+    # Forward phase ("day"): TAMER with a myopic H(s, a), simulated feedback, every transition remembered
+    t0, eval_s0 = time.time(), evaluator.seconds
+    h_net = QNetwork(obs_dim, n_actions).to(device)
+    h_optimizer = torch.optim.Adam(h_net.parameters(), lr=args.tamer_learning_rate)
+    buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, device)
+    progress = Progress("tamer", args.tamer_total_timesteps)
+    positives = episode_positives = episode_length = 0
+    episode_start = 0
+    obs, _ = env.reset(seed=args.seed)
+    for global_step in range(1, args.tamer_total_timesteps + 1):
+        epsilon = linear_schedule(
+            args.start_e, args.end_e, int(args.exploration_fraction * args.tamer_total_timesteps), global_step - 1
+        )
+        if random.random() < epsilon:
+            action = env.action_space.sample()
+        else:
+            with torch.no_grad():
+                action = int(h_net(torch.as_tensor(obs, device=device)).argmax())
+        next_obs, _, terminated, truncated, info = env.step(action)
+
+        alpha = linear_schedule(
+            args.feedback_alpha_start, args.feedback_alpha_end, args.tamer_total_timesteps, global_step - 1
+        )
+        q_star_s = q_star[int(obs.argmax())]
+        h = oracle_feedback(q_star_s[action], q_star_s.max(), alpha)
+        buffer.add(obs, action, next_obs, h, terminated)
+        positives += int(h)
+        episode_positives += int(h)
+        episode_length += 1
+
+        obs = next_obs
+        if terminated or truncated:
+            buffer.tag_episode(episode_start, is_success(terminated, episode_length, args.success_max_steps))
+            writer.add_scalar("charts/episodic_return", float(terminated), global_step)
+            writer.add_scalar("charts/episodic_length", episode_length, global_step)
+            writer.add_scalar("feedback/positive_rate", episode_positives / episode_length, global_step)
+            episode_start, episode_positives, episode_length = buffer.size, 0, 0
+            obs, _ = env.reset()
+
+        if global_step > args.tamer_learning_starts and global_step % args.tamer_train_frequency == 0:
+            idx = torch.randint(buffer.size, (args.tamer_batch_size,), device=device)
+            b_obs, b_actions, _, b_feedback, _ = buffer.batch(idx)
+            loss = tamer_loss(h_net, b_obs, b_actions, b_feedback)
+            h_optimizer.zero_grad()
+            loss.backward()
+            h_optimizer.step()
+            if global_step % 100 == 0:
+                writer.add_scalar("losses/tamer_loss", loss.item(), global_step)
+
+        if global_step % 100 == 0:
+            writer.add_scalar("feedback/positive", positives, global_step)
+            writer.add_scalar("feedback/alpha", alpha, global_step)
+            writer.add_scalar("charts/epsilon", epsilon, global_step)
+        if global_step % 1000 == 0:
+            writer.add_scalar("charts/SPS", int(global_step / (time.time() - t0)), global_step)
+        if global_step % args.eval_frequency == 0 or global_step == args.tamer_total_timesteps:
+            metrics = evaluator("tamer", greedy_actions(h_net, device), global_step)
+            progress(global_step, positives=positives, eval_length=metrics["eval/tamer_episode_length"])
+    times["time/tamer_s"] = time.time() - t0 - (evaluator.seconds - eval_s0)
+    # an episode cut off by the end of the phase is neither a success nor complete: leave it untagged (failure)
+
+    # Sleep phase: offline IQ-Learn on the buffer, successes as the expert set; no environment steps
+    t0, eval_s0 = time.time(), evaluator.seconds
+    success_idx = buffer.success[: buffer.size].nonzero().squeeze(1)
+    sleep_stats = {"sleep/expert_transitions": int(success_idx.numel()), "sleep/replay_transitions": buffer.size}
+    q_net = QNetwork(obs_dim, n_actions).to(device)
+    target_net = QNetwork(obs_dim, n_actions).to(device)
+    target_net.load_state_dict(q_net.state_dict())
+    q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_learning_rate)
+    is_expert = torch.arange(2 * args.sleep_batch_size, device=device) < args.sleep_batch_size
+    iq_terms = {}
+    if success_idx.numel() == 0:
+        print(
+            "warning: no successful episode in the buffer, so the sleep phase has no expert data and is skipped; "
+            "raise --tamer-total-timesteps",
+            file=sys.stderr,
+        )
+    else:
+        progress = Progress("sleep", args.sleep_gradient_steps)
+        for sleep_step in range(1, args.sleep_gradient_steps + 1):
+            expert_idx = success_idx[torch.randint(success_idx.numel(), (args.sleep_batch_size,), device=device)]
+            replay_idx = torch.randint(buffer.size, (args.sleep_batch_size,), device=device)
+            b_obs, b_actions, b_next_obs, _, b_terminated = buffer.batch(torch.cat([expert_idx, replay_idx]))
+            loss, terms = iq_loss(
+                q_net,
+                target_net,
+                b_obs,
+                b_actions,
+                b_next_obs,
+                b_terminated,
+                is_expert,
+                args.sleep_gamma,
+                args.sleep_temperature,
+                args.sleep_chi2_coef,
+            )
+            q_optimizer.zero_grad()
+            loss.backward()
+            q_optimizer.step()
+            with torch.no_grad():
+                for param, target_param in zip(q_net.parameters(), target_net.parameters(), strict=True):
+                    target_param.lerp_(param, args.sleep_tau)
+
+            if sleep_step % 100 == 0 or sleep_step == args.sleep_gradient_steps:
+                iq_terms = {
+                    "losses/iq_loss": loss.item(),
+                    "losses/iq_expert_term": terms[0].item(),
+                    "losses/iq_value_term": terms[1].item(),
+                    "losses/iq_chi2_term": terms[2].item(),
+                }
+                for tag, value in iq_terms.items():
+                    writer.add_scalar(tag, value, sleep_step)
+                writer.add_scalar("sleep/SPS", int(sleep_step / (time.time() - t0)), sleep_step)
+            if sleep_step % args.sleep_eval_frequency == 0 or sleep_step == args.sleep_gradient_steps:
+                metrics = evaluator("inform", greedy_actions(q_net, device), sleep_step)
+                progress(
+                    sleep_step, iq_loss=iq_terms["losses/iq_loss"], eval_length=metrics["eval/inform_episode_length"]
+                )
+    times["time/sleep_s"] = time.time() - t0 - (evaluator.seconds - eval_s0)
+
+    # Recovered reward (Eq. 3) on the maze the agent learned in
+    reward = reward_table(q_net, next_cell, args.sleep_gamma, args.sleep_temperature, device)
+    writer.add_figure("sleep/recovered_reward", reward_figure(reward.numpy(), f"recovered reward, seed {args.seed}"))
+
+    # Final evaluation of the three policies
+    evaluator("oracle", q_star.argmax(1), args.tamer_total_timesteps)
+    evaluator("tamer", greedy_actions(h_net, device), args.tamer_total_timesteps)
+    evaluator("inform", greedy_actions(q_net, device), args.sleep_gradient_steps)
+    times["time/eval_s"] = evaluator.seconds
+
+    if args.save_model:
+        save_network(f"{run_dir}/tamer_h.pt", h_net, env_id=args.env_id)
+        save_network(
+            f"{run_dir}/inform_q.pt",
+            q_net,
+            env_id=args.env_id,
+            gamma=args.sleep_gamma,
+            temperature=args.sleep_temperature,
+        )
+        torch.save(
+            {"reward": reward, "env_id": args.env_id, "gamma": args.sleep_gamma, "temperature": args.sleep_temperature},
+            f"{run_dir}/recovered_reward.pt",
+        )
+
+    summary = {
+        **evaluator.final,
+        "feedback/positive": positives,
+        "feedback/steps": args.tamer_total_timesteps,
+        "feedback/positive_rate": positives / args.tamer_total_timesteps,
+        **iq_terms,
+        **sleep_stats,
+        **times,
+        "wall_time_s": time.time() - run_start,
+        "seed": args.seed,
+        "status": "completed",
+        "args": asdict(args),
+    }
+    write_json_atomic(f"{run_dir}/summary.json", summary)
+    evaluator.close()
+    env.close()
+    writer.close()
+    print(" | ".join(f"{p}: {summary[f'eval/{p}_episode_length']:.0f} steps" for p in POLICIES), flush=True)
+    print(f"done in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json", flush=True)
+    return summary
+
+
+if __name__ == "__main__":
+    args = tyro.cli(Args)
+    try:
+        check_args(args)
+    except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(2)
+    main(args)
