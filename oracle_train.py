@@ -1,0 +1,492 @@
+"""Train the simulated teacher (the oracle) for INFORM (SPEC section 5).
+
+Pusher: a SAC agent (Haarnoja et al. 2018, CleanRL's sac_continuous_action.py) trained on the
+environment reward from random initial states, so that it is an expert from any start. The
+final checkpoint holds state_dicts only (actor and twin critics) plus the arguments to rebuild
+them, the env id, the observation and action shapes, the training steps and a 100-episode
+evaluation; `inform_sac_pusher.py --oracle-path` loads it with torch.load(weights_only=True).
+
+Written for speed on a few CPU cores (LeanRL habits): twin critics are one batched module,
+the replay buffer and the hot-loop tensors are preallocated, there is no .item() in the loop
+and scalars are logged every `log_frequency` steps only. Training state is checkpointed
+atomically every `checkpoint_frequency` steps; `--resume <run_dir>/training_state.pt`
+continues an interrupted run.
+
+Only `--env-id Pusher-v5` / `Pusher-v4` (SAC) for now; maze oracles can be added as another
+branch of `main` keyed on the env id.
+
+Example:
+    python oracle_train.py --env-id Pusher-v5 --seed 1 --total-timesteps 200000 \
+        --output-path oracles/Pusher-v5__sac_oracle.pt
+"""
+
+import json
+import math
+import os
+import random
+import sys
+import time
+from dataclasses import asdict, dataclass
+
+import gymnasium as gym
+import numpy as np
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+import tyro
+from torch.utils.tensorboard import SummaryWriter
+
+SUPPORTED_ENV_IDS = ("Pusher-v5", "Pusher-v4")
+LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
+SUCCESS_DISTANCE = 0.08
+
+
+@dataclass
+class Args:
+    exp_name: str = "oracle_sac"
+    """the name of this experiment"""
+    seed: int = 1
+    """seed of the experiment"""
+    torch_deterministic: bool = True
+    """if toggled, `torch.backends.cudnn.deterministic=True`"""
+    cuda: bool = False
+    """if toggled, cuda will be used when available"""
+    save_model: bool = True
+    """whether to write the oracle checkpoint to `output_path`"""
+    torch_threads: int = 1
+    """number of torch CPU threads (1 keeps a second core free)"""
+
+    # Oracle (SAC) arguments
+    env_id: str = "Pusher-v5"
+    """the environment id (Pusher-v5, or Pusher-v4 where mujoco<3 is installed)"""
+    total_timesteps: int = 200000
+    """total environment steps of SAC training"""
+    buffer_size: int = 1000000
+    """the replay memory buffer size (capped at total_timesteps)"""
+    gamma: float = 0.99
+    """the discount factor gamma"""
+    tau: float = 0.005
+    """target smoothing coefficient"""
+    batch_size: int = 256
+    """the batch size of sample from the replay memory"""
+    learning_starts: int = 5000
+    """timestep to start learning (random actions before)"""
+    policy_lr: float = 3e-4
+    """the learning rate of the policy network optimizer"""
+    q_lr: float = 1e-3
+    """the learning rate of the Q network optimizer"""
+    policy_frequency: int = 2
+    """the frequency of policy and entropy updates (delayed, one update each time)"""
+    hidden_size: int = 256
+    """width of the two hidden layers of actor and critics"""
+    autotune: bool = True
+    """automatic tuning of the entropy coefficient"""
+    alpha: float = 0.2
+    """entropy regularization coefficient (when not autotuned)"""
+
+    # Evaluation, logging and checkpointing
+    eval_frequency: int = 10000
+    """evaluate the deterministic policy every this many steps"""
+    eval_episodes: int = 10
+    """random-start episodes per periodic evaluation"""
+    final_eval_episodes: int = 100
+    """random-start episodes of the final evaluation stored in the checkpoint"""
+    log_frequency: int = 1000
+    """log losses and SPS every this many steps"""
+    checkpoint_frequency: int = 10000
+    """write the resumable training state every this many steps"""
+    resume: str | None = None
+    """path of a training_state.pt to continue from (same run directory)"""
+    output_path: str = "oracles/Pusher-v5__sac_oracle.pt"
+    """where the final oracle checkpoint is written"""
+
+
+def validate_args(args: Args) -> str | None:
+    """Return a one-line error message, or None when the arguments are usable."""
+    if args.env_id not in SUPPORTED_ENV_IDS:
+        return f"unknown --env-id {args.env_id!r}; supported: {', '.join(SUPPORTED_ENV_IDS)}"
+    if args.env_id == "Pusher-v4":
+        import mujoco
+
+        if int(mujoco.__version__.split(".")[0]) >= 3:
+            return (
+                f"Pusher-v4 needs mujoco<3 (installed: {mujoco.__version__}); "
+                "use --env-id Pusher-v5 or `pip install mujoco==2.3.7` in a separate venv"
+            )
+    for name in ("total_timesteps", "batch_size", "eval_frequency", "eval_episodes", "final_eval_episodes"):
+        if getattr(args, name) <= 0:
+            return f"--{name.replace('_', '-')} must be positive (got {getattr(args, name)})"
+    for name in ("learning_starts", "log_frequency", "checkpoint_frequency", "policy_frequency", "buffer_size"):
+        if getattr(args, name) <= 0:
+            return f"--{name.replace('_', '-')} must be positive (got {getattr(args, name)})"
+    if args.batch_size > args.total_timesteps:
+        return f"--batch-size {args.batch_size} is larger than --total-timesteps {args.total_timesteps}"
+    if not (0.0 < args.tau <= 1.0) or not (0.0 <= args.gamma <= 1.0):
+        return "--tau must be in (0, 1] and --gamma in [0, 1]"
+    if args.resume is not None and not os.path.isfile(args.resume):
+        return f"--resume {args.resume}: no such file"
+    return None
+
+
+def make_env(env_id: str, seed: int) -> gym.Env:
+    env = gym.make(env_id)
+    env.action_space.seed(seed)
+    env.observation_space.seed(seed)
+    return env
+
+
+class BatchedLinear(nn.Module):
+    """`n` independent linear layers applied in one batched matmul: x [n, B, in] -> [n, B, out]."""
+
+    def __init__(self, n: int, in_features: int, out_features: int):
+        super().__init__()
+        self.weight = nn.Parameter(torch.empty(n, in_features, out_features))
+        self.bias = nn.Parameter(torch.empty(n, 1, out_features))
+        bound = 1.0 / math.sqrt(in_features)  # nn.Linear's default init
+        nn.init.uniform_(self.weight, -bound, bound)
+        nn.init.uniform_(self.bias, -bound, bound)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return torch.baddbmm(self.bias, x, self.weight)
+
+
+class TwinCritic(nn.Module):
+    """Two Q networks as one module; forward returns [2, B]."""
+
+    def __init__(self, obs_dim: int, act_dim: int, hidden: int = 256, n: int = 2):
+        super().__init__()
+        self.n = n
+        self.fc1 = BatchedLinear(n, obs_dim + act_dim, hidden)
+        self.fc2 = BatchedLinear(n, hidden, hidden)
+        self.fc3 = BatchedLinear(n, hidden, 1)
+
+    def forward(self, obs: torch.Tensor, act: torch.Tensor) -> torch.Tensor:
+        x = torch.cat([obs, act], -1).unsqueeze(0).expand(self.n, -1, -1)
+        x = F.relu(self.fc1(x))
+        x = F.relu(self.fc2(x))
+        return self.fc3(x).squeeze(-1)
+
+
+class Actor(nn.Module):
+    """CleanRL's SAC actor: tanh-squashed Gaussian rescaled to the action bounds."""
+
+    def __init__(self, obs_dim: int, act_dim: int, hidden: int = 256, action_low=None, action_high=None):
+        super().__init__()
+        self.fc1 = nn.Linear(obs_dim, hidden)
+        self.fc2 = nn.Linear(hidden, hidden)
+        self.fc_mean = nn.Linear(hidden, act_dim)
+        self.fc_logstd = nn.Linear(hidden, act_dim)
+        low = torch.as_tensor(action_low if action_low is not None else -np.ones(act_dim), dtype=torch.float32)
+        high = torch.as_tensor(action_high if action_high is not None else np.ones(act_dim), dtype=torch.float32)
+        self.register_buffer("action_scale", (high - low) / 2.0)
+        self.register_buffer("action_bias", (high + low) / 2.0)
+
+    def forward(self, obs: torch.Tensor):
+        x = F.relu(self.fc1(obs))
+        x = F.relu(self.fc2(x))
+        mean = self.fc_mean(x)
+        log_std = torch.tanh(self.fc_logstd(x))
+        log_std = LOG_STD_MIN + 0.5 * (LOG_STD_MAX - LOG_STD_MIN) * (log_std + 1)
+        return mean, log_std
+
+    def get_action(self, obs: torch.Tensor):
+        """Return (sampled action, its log-prob [B], deterministic mean action)."""
+        mean, log_std = self(obs)
+        std = log_std.exp()
+        eps = torch.randn_like(mean)
+        x_t = mean + std * eps
+        y_t = torch.tanh(x_t)
+        action = y_t * self.action_scale + self.action_bias
+        log_prob = -0.5 * eps.pow(2) - log_std - 0.5 * math.log(2 * math.pi)
+        log_prob = log_prob - torch.log(self.action_scale * (1 - y_t.pow(2)) + 1e-6)
+        return action, log_prob.sum(-1), torch.tanh(mean) * self.action_scale + self.action_bias
+
+
+@torch.inference_mode()
+def evaluate(actor: Actor, env_id: str, episodes: int, seed: int, device: torch.device) -> dict:
+    """Deterministic (mean-action) episodes from random starts: return, final distance, success."""
+    env = gym.make(env_id)
+    returns, distances = [], []
+    for ep in range(episodes):
+        obs, _ = env.reset(seed=seed + ep)
+        done, ep_return, info = False, 0.0, {}
+        while not done:
+            _, _, action = actor.get_action(torch.as_tensor(obs, dtype=torch.float32, device=device).unsqueeze(0))
+            obs, reward, terminated, truncated, info = env.step(action[0].cpu().numpy())
+            ep_return += float(reward)
+            done = terminated or truncated
+        returns.append(ep_return)
+        distances.append(abs(float(info["reward_dist"])))
+    env.close()
+    distances = np.asarray(distances)
+    return {
+        "return": float(np.mean(returns)),
+        "return_std": float(np.std(returns)),
+        "final_distance": float(distances.mean()),
+        "success_rate": float((distances < SUCCESS_DISTANCE).mean()),
+        "episodes": episodes,
+    }
+
+
+def atomic_save(obj, path: str) -> None:
+    tmp = path + ".tmp"
+    torch.save(obj, tmp)
+    os.replace(tmp, path)
+
+
+def oracle_checkpoint(actor, qf, args: Args, obs_dim, act_dim, action_low, action_high, step, evaluation) -> dict:
+    """The deployable oracle: state_dicts plus everything needed to rebuild and check them."""
+    return {
+        "algorithm": "sac",
+        "env_id": args.env_id,
+        "obs_shape": [obs_dim],
+        "act_shape": [act_dim],
+        "kwargs": {"obs_dim": obs_dim, "act_dim": act_dim, "hidden": args.hidden_size},
+        "action_low": torch.as_tensor(action_low, dtype=torch.float32),
+        "action_high": torch.as_tensor(action_high, dtype=torch.float32),
+        "actor_state_dict": {k: v.detach().cpu().clone() for k, v in actor.state_dict().items()},
+        "qf_state_dict": {k: v.detach().cpu().clone() for k, v in qf.state_dict().items()},
+        "training_steps": int(step),
+        "training_seed": args.seed,
+        "random_starts": True,
+        "evaluation": {k: float(v) for k, v in evaluation.items()},
+    }
+
+
+def train_sac(args: Args) -> None:
+    torch.set_num_threads(args.torch_threads)
+    device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
+    random.seed(args.seed)
+    np.random.seed(args.seed)
+    torch.manual_seed(args.seed)
+    torch.backends.cudnn.deterministic = args.torch_deterministic
+
+    env = make_env(args.env_id, args.seed)
+    obs_dim = int(np.prod(env.observation_space.shape))
+    act_dim = int(np.prod(env.action_space.shape))
+    low, high = env.action_space.low, env.action_space.high
+
+    actor = Actor(obs_dim, act_dim, args.hidden_size, low, high).to(device)
+    qf = TwinCritic(obs_dim, act_dim, args.hidden_size).to(device)
+    qf_target = TwinCritic(obs_dim, act_dim, args.hidden_size).to(device)
+    qf_target.load_state_dict(qf.state_dict())
+    for p in qf_target.parameters():
+        p.requires_grad_(False)
+    q_optimizer = torch.optim.Adam(qf.parameters(), lr=args.q_lr)
+    actor_optimizer = torch.optim.Adam(actor.parameters(), lr=args.policy_lr)
+    target_entropy = -float(act_dim)
+    log_alpha = torch.zeros(1, device=device, requires_grad=True)
+    a_optimizer = torch.optim.Adam([log_alpha], lr=args.q_lr)
+    if not args.autotune:
+        log_alpha.data.fill_(math.log(args.alpha))
+
+    # preallocated replay buffer (float32; Pusher never terminates but the flag is kept)
+    size = min(args.buffer_size, args.total_timesteps)
+    buf_obs = torch.zeros(size, obs_dim, device=device)
+    buf_next_obs = torch.zeros(size, obs_dim, device=device)
+    buf_act = torch.zeros(size, act_dim, device=device)
+    buf_rew = torch.zeros(size, device=device)
+    buf_term = torch.zeros(size, device=device)
+    buf_n = 0
+    start_step = 0
+
+    if args.resume is not None:
+        state = torch.load(args.resume, weights_only=True)
+        run_dir = os.path.dirname(os.path.abspath(args.resume))
+        actor.load_state_dict(state["actor"])
+        qf.load_state_dict(state["qf"])
+        qf_target.load_state_dict(state["qf_target"])
+        q_optimizer.load_state_dict(state["q_optimizer"])
+        actor_optimizer.load_state_dict(state["actor_optimizer"])
+        a_optimizer.load_state_dict(state["a_optimizer"])
+        log_alpha.data.copy_(state["log_alpha"])
+        buf_n = int(state["buf_n"])
+        n = min(buf_n, size)
+        buf_obs[:n] = state["buf_obs"][:n]
+        buf_next_obs[:n] = state["buf_next_obs"][:n]
+        buf_act[:n] = state["buf_act"][:n]
+        buf_rew[:n] = state["buf_rew"][:n]
+        buf_term[:n] = state["buf_term"][:n]
+        start_step = int(state["global_step"])
+        torch.set_rng_state(state["torch_rng"])
+        np.random.seed(args.seed + start_step)
+        env.action_space.seed(args.seed + start_step)
+        print(f"resumed from {args.resume} at step {start_step}", flush=True)
+    else:
+        run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
+        run_dir = os.path.join("runs", run_name)
+        suffix = 0
+        while os.path.exists(run_dir):
+            suffix += 1
+            run_dir = os.path.join("runs", f"{run_name}_{suffix}")
+        os.makedirs(run_dir)
+    writer = SummaryWriter(run_dir)
+    if args.resume is None:
+        writer.add_text(
+            "hyperparameters",
+            "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
+        )
+    print(f"run dir: {run_dir}", flush=True)
+
+    def save_training_state(global_step: int) -> None:
+        n = min(buf_n, size)
+        atomic_save(
+            {
+                "actor": actor.state_dict(),
+                "qf": qf.state_dict(),
+                "qf_target": qf_target.state_dict(),
+                "q_optimizer": q_optimizer.state_dict(),
+                "actor_optimizer": actor_optimizer.state_dict(),
+                "a_optimizer": a_optimizer.state_dict(),
+                "log_alpha": log_alpha.detach().clone(),
+                "buf_n": buf_n,
+                "buf_obs": buf_obs[:n].clone(),
+                "buf_next_obs": buf_next_obs[:n].clone(),
+                "buf_act": buf_act[:n].clone(),
+                "buf_rew": buf_rew[:n].clone(),
+                "buf_term": buf_term[:n].clone(),
+                "global_step": global_step,
+                "torch_rng": torch.get_rng_state(),
+            },
+            os.path.join(run_dir, "training_state.pt"),
+        )
+
+    obs, _ = env.reset(seed=args.seed + start_step)  # random starts: seed once, then the env RNG runs on
+    obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
+    ep_return, ep_length = 0.0, 0
+    t0, t_last, step_last = time.time(), time.time(), start_step
+    qf_loss = actor_loss = alpha_loss = torch.zeros((), device=device)
+    last_eval = {}
+    report_every = max(1, (args.total_timesteps - start_step) // 20)
+    global_step = start_step
+    for global_step in range(start_step, args.total_timesteps):
+        if buf_n < args.learning_starts:
+            action = env.action_space.sample()
+        else:
+            with torch.no_grad():
+                action_t, _, _ = actor.get_action(obs_t.unsqueeze(0))
+            action = action_t[0].cpu().numpy()
+        next_obs, reward, terminated, truncated, info = env.step(action)
+        next_obs_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
+        i = buf_n % size
+        buf_obs[i] = obs_t
+        buf_next_obs[i] = next_obs_t
+        buf_act[i] = torch.as_tensor(action, device=device)
+        buf_rew[i] = float(reward)
+        buf_term[i] = float(terminated)
+        buf_n += 1
+        ep_return += float(reward)
+        ep_length += 1
+        if terminated or truncated:
+            writer.add_scalar("charts/episodic_return", ep_return, global_step)
+            writer.add_scalar("charts/episodic_length", ep_length, global_step)
+            writer.add_scalar("charts/final_distance", abs(float(info["reward_dist"])), global_step)
+            ep_return, ep_length = 0.0, 0
+            next_obs, _ = env.reset()
+            next_obs_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
+        obs_t = next_obs_t
+
+        if buf_n >= args.learning_starts:
+            idx = torch.randint(0, min(buf_n, size), (args.batch_size,), device=device)
+            b_obs, b_next, b_act, b_rew, b_term = (
+                buf_obs[idx],
+                buf_next_obs[idx],
+                buf_act[idx],
+                buf_rew[idx],
+                buf_term[idx],
+            )
+            alpha = log_alpha.detach().exp()
+            with torch.no_grad():
+                next_act, next_logp, _ = actor.get_action(b_next)
+                min_q_next = qf_target(b_next, next_act).min(0).values - alpha * next_logp
+                target_q = b_rew + (1.0 - b_term) * args.gamma * min_q_next
+            qf_loss = (
+                F.mse_loss(qf(b_obs, b_act), target_q.unsqueeze(0).expand(2, -1), reduction="sum") / args.batch_size
+            )
+            q_optimizer.zero_grad(set_to_none=True)
+            qf_loss.backward()
+            q_optimizer.step()
+
+            if global_step % args.policy_frequency == 0:
+                pi, logp, _ = actor.get_action(b_obs)
+                min_q_pi = qf(b_obs, pi).min(0).values
+                actor_loss = (alpha * logp - min_q_pi).mean()
+                actor_optimizer.zero_grad(set_to_none=True)
+                actor_loss.backward()
+                actor_optimizer.step()
+                qf.zero_grad(set_to_none=True)  # the actor loss left gradients on the critic
+                if args.autotune:
+                    alpha_loss = (-log_alpha.exp() * (logp.detach() + target_entropy)).mean()
+                    a_optimizer.zero_grad(set_to_none=True)
+                    alpha_loss.backward()
+                    a_optimizer.step()
+
+            with torch.no_grad():
+                torch._foreach_lerp_(list(qf_target.parameters()), list(qf.parameters()), args.tau)
+
+        step = global_step + 1
+        if step % args.log_frequency == 0:
+            sps = (step - step_last) / max(time.time() - t_last, 1e-9)
+            writer.add_scalar("losses/qf_loss", qf_loss.item(), step)
+            writer.add_scalar("losses/actor_loss", actor_loss.item(), step)
+            writer.add_scalar("losses/alpha", log_alpha.exp().item(), step)
+            writer.add_scalar("losses/alpha_loss", alpha_loss.item(), step)
+            writer.add_scalar("charts/SPS", sps, step)
+        if step % args.eval_frequency == 0 or step == args.total_timesteps:
+            last_eval = evaluate(actor, args.env_id, args.eval_episodes, 10_000 + step, device)
+            writer.add_scalar("eval/oracle_return", last_eval["return"], step)
+            writer.add_scalar("eval/oracle_final_distance", last_eval["final_distance"], step)
+            writer.add_scalar("eval/oracle_success_rate", last_eval["success_rate"], step)
+        if step % report_every == 0 or step == args.total_timesteps:
+            elapsed = time.time() - t0
+            sps = (step - start_step) / max(elapsed, 1e-9)
+            eta = (args.total_timesteps - step) / max(sps, 1e-9)
+            ev = f" | eval return {last_eval['return']:.1f} dist {last_eval['final_distance']:.3f}" if last_eval else ""
+            print(
+                f"[oracle] {step}/{args.total_timesteps} {100 * step // args.total_timesteps}% | {sps:.0f} SPS"
+                f" | ETA {int(eta // 60)}m{int(eta % 60):02d}s{ev}",
+                flush=True,
+            )
+        if step % args.checkpoint_frequency == 0 or step == args.total_timesteps:
+            save_training_state(step)
+            atomic_save(
+                oracle_checkpoint(actor, qf, args, obs_dim, act_dim, low, high, step, last_eval or {}),
+                os.path.join(run_dir, "oracle_latest.pt"),
+            )
+        t_last, step_last = (time.time(), step) if step % args.log_frequency == 0 else (t_last, step_last)
+
+    train_time = time.time() - t0
+    env.close()
+    final_eval = evaluate(actor, args.env_id, args.final_eval_episodes, 20_000, device)
+    steps = max(start_step, args.total_timesteps)
+    print(
+        f"[oracle] final eval over {args.final_eval_episodes} random-start episodes: return {final_eval['return']:.2f}"
+        f" +- {final_eval['return_std']:.2f} | final distance {final_eval['final_distance']:.4f}"
+        f" | success rate {final_eval['success_rate']:.2f} | train time {train_time:.0f}s (this session)",
+        flush=True,
+    )
+    if args.save_model:
+        ckpt = oracle_checkpoint(actor, qf, args, obs_dim, act_dim, low, high, steps, final_eval)
+        ckpt["train_time_s_this_session"] = float(train_time)
+        os.makedirs(os.path.dirname(os.path.abspath(args.output_path)), exist_ok=True)
+        atomic_save(ckpt, args.output_path)
+        with open(os.path.join(run_dir, "oracle_eval.json"), "w") as f:
+            json.dump(
+                {"eval": final_eval, "steps": steps, "train_time_s": train_time, "args": asdict(args)}, f, indent=1
+            )
+        print(f"oracle written to {args.output_path}", flush=True)
+    writer.close()
+
+
+def main() -> None:
+    args = tyro.cli(Args)
+    error = validate_args(args)
+    if error is not None:
+        print(f"error: {error}", file=sys.stderr)
+        sys.exit(2)
+    if args.env_id.startswith("Pusher"):
+        train_sac(args)
+
+
+if __name__ == "__main__":
+    main()
