@@ -53,7 +53,7 @@ class Args:
     """discount of the oracle's exact Q* (value iteration)"""
 
     # Forward phase: TAMER (Eq. 1) with simulated feedback (Eq. 4)
-    tamer_total_timesteps: int = 20000
+    tamer_total_timesteps: int = 10000
     """environment steps of the forward phase"""
     tamer_learning_rate: float = 1e-3
     """Adam learning rate of the feedback model H"""
@@ -77,7 +77,7 @@ class Args:
     """an episode is tagged success if it reaches the goal in fewer than this many steps"""
 
     # Sleep phase: offline IQ-Learn (Eq. 2), no environment steps
-    sleep_gradient_steps: int = 5000
+    sleep_gradient_steps: int = 3000
     """gradient steps of the sleep phase"""
     sleep_batch_size: int = 32
     """transitions drawn from the success set, and as many from the whole buffer, per step"""
@@ -93,7 +93,7 @@ class Args:
     """soft-update rate of the target Q network per step (1 copies it every step, as the authors did)"""
 
     # Evaluation
-    eval_frequency: int = 1000
+    eval_frequency: int = 500
     """forward-phase environment steps between greedy evaluations"""
     sleep_eval_frequency: int = 500
     """sleep-phase gradient steps between greedy evaluations"""
@@ -389,7 +389,7 @@ def main(args: Args) -> dict:
 
     env = gym.make(args.env_id)
     env.action_space.seed(args.seed)
-    obs_dim, n_actions = env.observation_space.shape[0], env.action_space.n
+    obs_dim, n_actions = env.observation_space.shape[0], int(env.action_space.n)
     next_cell = env.unwrapped.next_cell
 
     run_dir = make_run_dir(run_name)

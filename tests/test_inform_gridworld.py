@@ -1,0 +1,254 @@
+import glob
+import json
+import math
+import os
+
+import numpy as np
+import pytest
+import torch
+
+import gridworld_env as g
+import inform_dqn_gridworld as inform
+
+SCRIPT = "inform_dqn_gridworld.py"
+TINY = ["--tamer-total-timesteps", "2000", "--tamer-learning-starts", "500", "--sleep-gradient-steps", "200",
+        "--eval-frequency", "500", "--sleep-eval-frequency", "100"]  # fmt: skip
+
+
+class TableQ(torch.nn.Module):
+    """A Q table as a network on one-hot observations, for hand-computed cases."""
+
+    def __init__(self, table):
+        super().__init__()
+        self.table = torch.nn.Parameter(torch.tensor(table, dtype=torch.float32))
+
+    def forward(self, obs):
+        return obs @ self.table
+
+
+def one_hot(cells, n):
+    return torch.eye(n)[torch.tensor(cells)]
+
+
+# Eq. 4 -----------------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    "q_sa, q_best, alpha, expected",
+    [
+        (1.0, 1.0, 0.999, 1.0),  # the oracle's own action
+        (0.9995, 1.0, 0.999, 1.0),  # within 0.1% of the best
+        (0.99, 1.0, 0.999, 0.0),  # one step worse at gamma 0.99: too far
+        (0.8, 1.0, 0.8, 1.0),  # Q >= alpha Q* exactly at the boundary
+        (-10.05, -10.0, 0.99, 1.0),  # negative Q: threshold -10 - 0.01 * 10 = -10.1 = (2 - alpha) Q*
+        (-10.2, -10.0, 0.99, 0.0),
+        (-10.0, -10.0, 1.0, 1.0),  # alpha 1: only the best action
+    ],
+)
+def test_oracle_feedback_eq4(q_sa, q_best, alpha, expected):
+    assert inform.oracle_feedback(q_sa, q_best, alpha) == expected
+
+
+def test_oracle_feedback_eq4_on_arrays_and_exact_q():
+    q = g.optimal_q("plain")
+    h = inform.oracle_feedback(q, q.max(1, keepdims=True), 0.999)
+    # with exact Q* and alpha 0.999 the teacher says yes to exactly the optimal actions
+    assert np.array_equal(h == 1.0, q >= q.max(1, keepdims=True) - 1e-12)
+
+
+# Eq. 1 -----------------------------------------------------------------------------------------------------------
+def test_tamer_loss_eq1():
+    h_net = TableQ([[0.5, -1.0], [2.0, 0.0]])
+    obs = one_hot([0, 1, 1], 2)
+    actions = torch.tensor([0, 0, 1])
+    feedback = torch.tensor([1.0, 1.0, 0.0])
+    expected = ((0.5 - 1.0) ** 2 + (2.0 - 1.0) ** 2 + (0.0 - 0.0) ** 2) / 3  # no discount, no bootstrap
+    assert inform.tamer_loss(h_net, obs, actions, feedback).item() == pytest.approx(expected)
+
+
+# Eq. 2 -----------------------------------------------------------------------------------------------------------
+def test_iq_loss_eq2_by_hand():
+    q_net = TableQ([[1.0, 0.0], [0.0, 2.0]])
+    target = TableQ([[1.0, 0.0], [0.0, 2.0]])
+    # row 0: expert, s=0 a=0 s'=1, not terminated; row 1: replay, s=1 a=1 s'=0, terminated
+    obs, next_obs = one_hot([0, 1], 2), one_hot([1, 0], 2)
+    actions, terminated = torch.tensor([0, 1]), torch.tensor([0.0, 1.0])
+    is_expert = torch.tensor([True, False])
+    gamma, temp, chi2 = 0.5, 1.0, 0.5
+    loss, (expert_term, value_term, chi2_term) = inform.iq_loss(
+        q_net, target, obs, actions, next_obs, terminated, is_expert, gamma, temp, chi2
+    )
+    v0, v1 = math.log(math.e + 1.0), math.log(1.0 + math.e**2)  # temp * logsumexp(Q / temp)
+    y = [gamma * v1, 0.0]  # V_target of s' (not of s); nothing after a terminal transition
+    td = [1.0 - y[0], 2.0 - y[1]]
+    assert expert_term.item() == pytest.approx(-td[0], rel=1e-5)
+    assert value_term.item() == pytest.approx(((v0 - y[0]) + (v1 - y[1])) / 2, rel=1e-5)
+    assert chi2_term.item() == pytest.approx(chi2 * (td[0] ** 2 + td[1] ** 2) / 2, rel=1e-5)
+    assert loss.item() == pytest.approx(expert_term.item() + value_term.item() + chi2_term.item(), rel=1e-6)
+
+
+def test_iq_loss_uses_target_network_on_next_state_without_gradient():
+    q_net = TableQ([[1.0, 0.0], [0.0, 2.0]])
+    target = TableQ([[5.0, 5.0], [-3.0, 7.0]])
+    obs, next_obs = one_hot([0], 2), one_hot([1], 2)
+    loss, (expert_term, _, _) = inform.iq_loss(
+        q_net, target, obs, torch.tensor([0]), next_obs, torch.tensor([0.0]), torch.tensor([True]), 0.9, 1.0, 0.0
+    )
+    y = 0.9 * math.log(math.exp(-3.0) + math.exp(7.0))
+    assert expert_term.item() == pytest.approx(-(1.0 - y), rel=1e-5)
+    loss.backward()
+    assert target.table.grad is None
+
+
+def test_chi2_flag_turns_the_regulariser_off():
+    q_net = TableQ([[1.0, 0.0], [0.0, 2.0]])
+    args = (q_net, q_net, one_hot([0, 1], 2), torch.tensor([0, 1]), one_hot([1, 0], 2), torch.tensor([0.0, 1.0]))
+    _, (_, _, chi2_term) = inform.iq_loss(*args, torch.tensor([True, False]), 0.5, 1.0, 0.0)
+    assert chi2_term.item() == 0.0
+
+
+# Eq. 3 -----------------------------------------------------------------------------------------------------------
+def test_recover_reward_eq3():
+    q_sa = torch.tensor([1.0, 2.0])
+    v_next = torch.tensor([3.0, 4.0])
+    terminated = torch.tensor([0.0, 1.0])
+    r = inform.recover_reward(q_sa, v_next, terminated, 0.5)
+    assert r.tolist() == pytest.approx([1.0 - 0.5 * 3.0, 2.0])  # a terminal transition keeps Q(s, a)
+
+
+def test_reward_table_is_eq3_over_the_maze():
+    rng = np.random.default_rng(0)
+    table = rng.normal(size=(30, 4))
+    r = inform.reward_table(TableQ(table), g.transition_table("plain"), 0.9, 0.5, torch.device("cpu")).numpy()
+    assert r.shape == (30, 4)
+    v = 0.5 * np.log(np.exp(table / 0.5).sum(1))
+    assert r[10, 0] == pytest.approx(table[10, 0], abs=1e-5)  # 10 up enters G: terminated
+    assert r[4, 2] == pytest.approx(table[4, 2] - 0.9 * v[3], abs=1e-5)  # S left moves to cell 3
+    assert r[4, 0] == pytest.approx(table[4, 0] - 0.9 * v[4], abs=1e-5)  # S up bumps: s' = s
+
+
+# success tag and buffer ---------------------------------------------------------------------------------------------
+def test_success_tag():
+    assert inform.is_success(True, 19, 30)
+    assert inform.is_success(True, 29, 30)
+    assert not inform.is_success(True, 30, 30)  # fewer than 30 steps
+    assert not inform.is_success(False, 5, 30)  # truncated, not at the goal
+
+
+def test_buffer_tags_whole_trajectories():
+    buf = inform.ReplayBuffer(10, 2, torch.device("cpu"))
+    for i in range(3):
+        buf.add(np.eye(2)[0], 1, np.eye(2)[1], 1.0, i == 2)
+    buf.tag_episode(0, True)
+    for _ in range(2):
+        buf.add(np.eye(2)[1], 0, np.eye(2)[1], 0.0, False)
+    buf.tag_episode(3, False)
+    assert buf.size == 5 and buf.success[:5].tolist() == [True, True, True, False, False]
+    assert buf.terminated[:5].tolist() == [0, 0, 1, 0, 0]
+
+
+def test_greedy_actions_and_evaluate():
+    import gymnasium as gym
+
+    q = g.optimal_q("plain")
+    policy = inform.greedy_actions(TableQ(q), torch.device("cpu"))
+    assert np.array_equal(policy, q.argmax(1))
+    length, success = inform.evaluate(gym.make("KnoxStoneMaze-v0"), policy, [g.START], 30)
+    assert (length, success) == (19, 1.0)
+    length, success = inform.evaluate(gym.make("KnoxStoneMazeWall-v0"), policy, [g.START], 30)
+    assert (length, success) == (200, 0.0)
+
+
+# the script end to end ----------------------------------------------------------------------------------------------
+SUMMARY_KEYS = [
+    f"eval/{p}_episode_length" for p in inform.POLICIES
+] + [f"eval/wall/{p}_episode_length" for p in inform.POLICIES] + [
+    f"eval/start_set/{p}_{m}" for p in inform.POLICIES for m in ("episode_length", "success_rate")
+] + ["feedback/positive", "feedback/steps", "time/oracle_s", "time/tamer_s", "time/sleep_s", "time/eval_s",
+     "wall_time_s", "seed", "args", "status", "losses/iq_loss", "losses/iq_expert_term", "losses/iq_value_term",
+     "losses/iq_chi2_term"]  # fmt: skip
+
+
+def only_run_dir(cwd):
+    dirs = glob.glob(os.path.join(cwd, "runs", "*"))
+    assert len(dirs) == 1, dirs
+    return dirs[0]
+
+
+def test_smoke_run_writes_the_outputs(run_script):
+    result = run_script(SCRIPT, "--seed", "3", *TINY)
+    assert result.returncode == 0, result.stderr
+    run_dir = only_run_dir(run_script.cwd)
+    assert os.path.basename(run_dir).startswith("KnoxStoneMaze-v0__inform_dqn_gridworld__3__")
+    summary = json.load(open(os.path.join(run_dir, "summary.json")))
+    assert set(SUMMARY_KEYS) <= set(summary), set(SUMMARY_KEYS) - set(summary)
+    assert summary["status"] == "completed" and summary["feedback/steps"] == 2000
+    assert summary["sleep/expert_transitions"] > 0  # the sleep loop really ran
+    assert glob.glob(os.path.join(run_dir, "events.out.tfevents.*"))
+    reward = torch.load(os.path.join(run_dir, "recovered_reward.pt"), weights_only=True)
+    assert reward["reward"].shape == (30, 4)
+    for name in ("tamer_h.pt", "inform_q.pt"):
+        ckpt = torch.load(os.path.join(run_dir, name), weights_only=True)
+        net = inform.QNetwork(**ckpt["kwargs"])
+        net.load_state_dict(ckpt["state_dict"])
+    # the saved INFORM network reproduces the reported greedy episode length
+    policy = inform.greedy_actions(net, torch.device("cpu"))
+    assert g.greedy_episode_length(policy, "plain") == summary["eval/inform_episode_length"]
+
+
+def test_tensorboard_tags(run_script):
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    assert run_script(SCRIPT, *TINY).returncode == 0
+    acc = EventAccumulator(only_run_dir(run_script.cwd))
+    acc.Reload()
+    tags = set(acc.Tags()["scalars"])
+    expected = {"charts/episodic_return", "charts/episodic_length", "charts/SPS", "feedback/positive",
+                "feedback/positive_rate", "feedback/alpha", "losses/tamer_loss", "losses/iq_loss",
+                "losses/iq_expert_term", "losses/iq_value_term", "losses/iq_chi2_term"}  # fmt: skip
+    expected |= {k for k in SUMMARY_KEYS if k.startswith("eval/")}
+    assert expected <= tags, expected - tags
+    assert "sleep/recovered_reward" in acc.Tags()["images"]
+    # curves during the phases, not just a final point
+    assert len(acc.Scalars("eval/tamer_episode_length")) >= 4
+    assert len(acc.Scalars("eval/inform_episode_length")) >= 2
+
+
+def test_same_seed_same_numbers(run_script):
+    summaries = []
+    for _ in range(2):
+        assert run_script(SCRIPT, "--seed", "7", *TINY).returncode == 0
+    for run_dir in sorted(glob.glob(os.path.join(run_script.cwd, "runs", "*"))):
+        summary = json.load(open(os.path.join(run_dir, "summary.json")))
+        summaries.append({k: v for k, v in summary.items() if not (k.startswith("time/") or k == "wall_time_s")})
+    assert len(summaries) == 2  # and the second run did not overwrite the first
+    assert summaries[0] == summaries[1]
+
+
+@pytest.mark.parametrize(
+    "flags, message",
+    [
+        (["--tamer-total-timesteps", "-5"], "--tamer-total-timesteps"),
+        (["--feedback-alpha-start", "1.5"], "--feedback-alpha-start"),
+        (["--env-id", "CartPole-v1"], "--env-id"),
+        (["--sleep-temperature", "0"], "--sleep-temperature"),
+        (["--tamer-total-timesteps", "100"], "--tamer-learning-starts"),
+        (["--sleep-tau", "2"], "--sleep-tau"),
+    ],
+)
+def test_bad_input_is_one_line_and_leaves_nothing(run_script, flags, message):
+    result = run_script(SCRIPT, *flags)
+    assert result.returncode != 0
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:") and message in lines[0], result.stderr
+    assert "Traceback" not in result.stderr
+    assert not os.path.exists(os.path.join(run_script.cwd, "runs"))
+
+
+@pytest.mark.slow
+def test_default_run_learns_the_optimum(run_script):
+    """The paper's Fig. 3 claim on one seed: TAMER and INFORM both reach the 19-step optimum."""
+    result = run_script(SCRIPT, "--seed", "1")
+    assert result.returncode == 0, result.stderr
+    summary = json.load(open(os.path.join(only_run_dir(run_script.cwd), "summary.json")))
+    assert summary["eval/oracle_episode_length"] == 19
+    assert summary["eval/tamer_episode_length"] == 19
+    assert summary["eval/inform_episode_length"] == 19
