@@ -1,0 +1,1055 @@
+"""INFORM on MuJoCo Pusher: SAC-style TAMER from a simulated teacher's yes/no feedback ("day"), then offline
+IQ-Learn on the remembered transitions ("sleep"), giving a far-sighted policy and a recovered reward.
+
+Reproduces the Pusher experiment of Tarakli & Di Nuovo, "Learning while Sleeping" (ICDL 2024): Algorithm 1,
+Fig. 3 (returns of TAMER, INFORM and the expert) and the obstacle robustness test. See SPEC.md sections 1, 2, 4,
+5, 8 and 9. The paper's fixed-start protocol is the default (every episode resets with the run's seed);
+`--random-starts` gives the standard task. The oracle is the shipped `oracles/{env_id}__sac_oracle.pt`
+(written by oracle_train.py) when it exists, a checkpoint named by `--oracle-path`, or a SAC agent trained here
+on the environment reward (`--train-oracle`).
+
+    python inform_sac_pusher.py --seed 1
+"""
+
+import atexit
+import json
+import math
+import os
+import random
+import shutil
+import sys
+import tempfile
+import time
+import xml.etree.ElementTree as ET
+from dataclasses import asdict, dataclass
+
+import gymnasium as gym
+import numpy as np
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+import tyro
+from torch.utils.tensorboard import SummaryWriter
+
+ENV_IDS = ("Pusher-v5", "Pusher-v4")
+POLICIES = ("oracle", "tamer", "inform")
+LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
+REPO_DIR = os.path.dirname(os.path.abspath(__file__))
+# the robustness test's three 3 cm cubes on the table (SPEC section 4)
+OBSTACLE_HALF_SIZE = 0.015
+OBSTACLE_POSITIONS = ((0.32, -0.20), (0.35, -0.23), (0.38, -0.26))
+OBSTACLE_Z = -0.325
+
+
+@dataclass
+class Args:
+    exp_name: str = os.path.basename(__file__)[: -len(".py")]
+    """the name of this experiment"""
+    seed: int = 1
+    """seed of the experiment (also the reset seed of every episode under the fixed-start protocol)"""
+    torch_deterministic: bool = True
+    """if toggled, `torch.backends.cudnn.deterministic=True` and deterministic algorithms"""
+    cuda: bool = False
+    """if toggled, use CUDA when available (these small networks are fast enough on one CPU thread)"""
+    num_threads: int = 1
+    """torch CPU threads"""
+    save_model: bool = True
+    """whether to save the oracle (when trained here), TAMER and INFORM networks into the run directory"""
+    env_id: str = "Pusher-v5"
+    """Pusher-v5 (current MuJoCo) or Pusher-v4 (the paper's; needs mujoco<3)"""
+    random_starts: bool = False
+    """random initial states (the standard task) instead of the paper's fixed start (reset with the run's seed)"""
+    success_distance: float = 0.08
+    """an episode is a success if its final object-goal distance |info['reward_dist']| is below this"""
+
+    # Oracle (the simulated teacher): a SAC agent trained on the environment reward
+    oracle_path: str | None = None
+    """oracle checkpoint from oracle_train.py; default: the shipped oracles/{env_id}__sac_oracle.pt if present"""
+    train_oracle: bool = False
+    """train the SAC oracle here on the environment reward (also what happens when no checkpoint is found)"""
+    oracle_total_timesteps: int = 200000
+    """environment steps of the in-script SAC oracle"""
+    oracle_random_starts: bool = True
+    """train the in-script oracle from random initial states, so it is an expert from any start"""
+    oracle_learning_starts: int = 5000
+    """random-action steps before the oracle learns"""
+    oracle_batch_size: int = 256
+    """SAC batch size of the oracle"""
+    oracle_q_lr: float = 1e-3
+    """learning rate of the oracle's twin critics"""
+    oracle_policy_lr: float = 3e-4
+    """learning rate of the oracle's actor"""
+    oracle_policy_frequency: int = 2
+    """oracle actor and entropy updates every this many steps"""
+    oracle_gamma: float = 0.99
+    """discount of the oracle's SAC"""
+    hidden_size: int = 256
+    """width of the two hidden layers of every network (oracle, TAMER, INFORM)"""
+    tau: float = 0.005
+    """soft-update rate of target networks (oracle SAC and sleep phase)"""
+
+    # Forward phase: TAMER (Eq. 1) with simulated feedback (Eq. 4)
+    tamer_total_timesteps: int = 30000
+    """environment steps of the forward phase (each gets one feedback signal)"""
+    tamer_learning_starts: int = 5000
+    """random-action steps before H and the actor are trained"""
+    tamer_batch_size: int = 256
+    """batch size of the H regression and the actor update"""
+    tamer_q_lr: float = 1e-3
+    """learning rate of the twin feedback models H"""
+    tamer_policy_lr: float = 3e-4
+    """learning rate of the TAMER actor"""
+    tamer_policy_frequency: int = 1
+    """TAMER actor and entropy updates every this many steps"""
+    feedback_alpha_start: float = 0.99
+    """alpha of Eq. 4 at the start of the forward phase (1 = only the oracle's action earns +1)"""
+    feedback_alpha_end: float = 0.992
+    """alpha of Eq. 4 at the end of the forward phase (alpha rises linearly: the teacher gets stricter)"""
+
+    # Sleep phase: offline IQ-Learn (Eq. 2), no environment steps
+    sleep_gradient_steps: int = 50000
+    """gradient steps of the sleep phase"""
+    sleep_batch_size: int = 256
+    """transitions from the success set, and as many from the whole buffer, per step"""
+    sleep_q_lr: float = 3e-4
+    """learning rate of the soft Q network"""
+    sleep_policy_lr: float = 5e-6
+    """learning rate of the INFORM actor"""
+    sleep_gamma: float = 0.99
+    """discount of the sleep phase (non-myopic, unlike TAMER's 0)"""
+    sleep_temperature: float = 0.01
+    """fixed entropy temperature of V(s) = Q(s, a~pi) - temp * log pi(a|s)"""
+    sleep_chi2_coef: float = 0.5
+    """weight of the chi-squared regulariser, 1 / (4 * 0.5) as IQ-Learn; 0 turns it off"""
+    sleep_init_actor_from_tamer: bool = True
+    """start the INFORM actor from the TAMER actor (consolidation); False starts it from scratch"""
+
+    # Evaluation
+    eval_episodes: int = 20
+    """episodes of each final evaluation (deterministic and sampled actions)"""
+    eval_frequency: int = 2000
+    """forward-phase environment steps between evaluations of TAMER (curves like Fig. 3)"""
+    sleep_eval_frequency: int = 5000
+    """sleep-phase gradient steps between evaluations of INFORM"""
+    periodic_eval_episodes: int = 5
+    """episodes of each evaluation during the phases"""
+    obstacle_episodes: int = 100
+    """episodes per policy on the obstacle variant, all from the run's initial state, sampled actions"""
+    log_frequency: int = 1000
+    """steps between scalar logs (losses, SPS, feedback)"""
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# argument and checkpoint validation: everything is checked before anything is created
+
+
+def mujoco_major() -> int:
+    import mujoco
+
+    return int(mujoco.__version__.split(".")[0])
+
+
+def shipped_oracle_path(env_id: str) -> str:
+    return os.path.join(REPO_DIR, "oracles", f"{env_id}__sac_oracle.pt")
+
+
+def env_shapes(env_id: str) -> tuple[int, int]:
+    env = gym.make(env_id)
+    shapes = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
+    env.close()
+    return shapes
+
+
+def load_oracle_checkpoint(path: str, env_id: str, obs_dim: int, act_dim: int) -> dict:
+    """Read an oracle_train.py checkpoint with weights_only=True and check it fits; ValueError names the file."""
+    if not os.path.isfile(path):
+        raise ValueError(f"--oracle-path {path}: no such file (train one with oracle_train.py)")
+    try:
+        ckpt = torch.load(path, weights_only=True, map_location="cpu")
+    except Exception as e:
+        raise ValueError(
+            f"--oracle-path {path}: cannot be read as a weights-only torch checkpoint ({type(e).__name__})"
+        ) from None
+    required = ("env_id", "kwargs", "actor_state_dict", "qf_state_dict", "action_low", "action_high")
+    if not isinstance(ckpt, dict) or any(k not in ckpt for k in required):
+        raise ValueError(f"--oracle-path {path}: not an oracle checkpoint (needs keys {', '.join(required)})")
+    if ckpt["env_id"] != env_id:
+        raise ValueError(f"--oracle-path {path}: oracle was trained on {ckpt['env_id']}, this run uses {env_id}")
+    kw = ckpt["kwargs"]
+    if kw.get("obs_dim") != obs_dim or kw.get("act_dim") != act_dim:
+        raise ValueError(
+            f"--oracle-path {path}: shapes obs {kw.get('obs_dim')} act {kw.get('act_dim')} do not match "
+            f"{env_id} (obs {obs_dim}, act {act_dim})"
+        )
+    try:
+        Actor(obs_dim, act_dim, kw["hidden"]).load_state_dict(ckpt["actor_state_dict"])
+        QEnsemble(obs_dim, act_dim, kw["hidden"], n=2).load_state_dict(ckpt["qf_state_dict"])
+    except Exception as e:
+        raise ValueError(
+            f"--oracle-path {path}: networks do not load ({type(e).__name__}: {' '.join(str(e).split())[:100]})"
+        ) from None
+    return ckpt
+
+
+def check_args(args: Args) -> dict | None:
+    """Reject bad flag values before anything is written; returns the oracle checkpoint to use, if any."""
+    if args.env_id not in ENV_IDS:
+        raise ValueError(f"unknown --env-id {args.env_id!r}; this script trains on one of {', '.join(ENV_IDS)}")
+    if args.env_id == "Pusher-v4" and mujoco_major() >= 3:
+        raise ValueError(
+            "Pusher-v4 needs mujoco<3 (Gymnasium issue 950); use --env-id Pusher-v5, or run in a separate venv "
+            "with `pip install mujoco==2.3.7`"
+        )
+    positive_ints = [
+        "num_threads",
+        "oracle_total_timesteps",
+        "oracle_batch_size",
+        "oracle_policy_frequency",
+        "hidden_size",
+        "tamer_total_timesteps",
+        "tamer_batch_size",
+        "tamer_policy_frequency",
+        "sleep_gradient_steps",
+        "sleep_batch_size",
+        "eval_episodes",
+        "eval_frequency",
+        "sleep_eval_frequency",
+        "periodic_eval_episodes",
+        "obstacle_episodes",
+        "log_frequency",
+    ]
+    for name in positive_ints:
+        if getattr(args, name) < 1:
+            raise ValueError(f"--{name.replace('_', '-')} must be a positive integer, got {getattr(args, name)}")
+    for name in ["feedback_alpha_start", "feedback_alpha_end", "sleep_gamma", "oracle_gamma"]:
+        if not 0.0 <= getattr(args, name) <= 1.0:
+            raise ValueError(f"--{name.replace('_', '-')} must be in [0, 1], got {getattr(args, name)}")
+    positive_floats = [
+        "oracle_q_lr",
+        "oracle_policy_lr",
+        "tamer_q_lr",
+        "tamer_policy_lr",
+        "sleep_q_lr",
+        "sleep_policy_lr",
+        "sleep_temperature",
+        "success_distance",
+    ]
+    for name in positive_floats:
+        if not getattr(args, name) > 0.0:
+            raise ValueError(f"--{name.replace('_', '-')} must be > 0, got {getattr(args, name)}")
+    if not 0.0 < args.tau <= 1.0:
+        raise ValueError(f"--tau must be in (0, 1], got {args.tau}")
+    if args.sleep_chi2_coef < 0.0:
+        raise ValueError(f"--sleep-chi2-coef must be >= 0 (0 turns it off), got {args.sleep_chi2_coef}")
+    if not 1 <= args.tamer_learning_starts < args.tamer_total_timesteps:
+        raise ValueError(
+            f"--tamer-learning-starts ({args.tamer_learning_starts}) must be >= 1 and below "
+            f"--tamer-total-timesteps ({args.tamer_total_timesteps}), or H is never trained"
+        )
+    if args.tamer_batch_size > args.tamer_total_timesteps or args.sleep_batch_size > args.tamer_total_timesteps:
+        raise ValueError(
+            f"--tamer-batch-size ({args.tamer_batch_size}) and --sleep-batch-size ({args.sleep_batch_size}) "
+            f"must not exceed --tamer-total-timesteps ({args.tamer_total_timesteps}), the size of the buffer"
+        )
+    obs_dim, act_dim = env_shapes(args.env_id)
+    if args.oracle_path is not None and args.train_oracle:
+        raise ValueError("--oracle-path and --train-oracle exclude each other; pass one of them")
+    path = args.oracle_path
+    if path is None and not args.train_oracle and os.path.isfile(shipped_oracle_path(args.env_id)):
+        path = shipped_oracle_path(args.env_id)
+    if path is not None:
+        ckpt = load_oracle_checkpoint(path, args.env_id, obs_dim, act_dim)
+        ckpt["path"] = path
+        return ckpt
+    if args.oracle_batch_size > args.oracle_total_timesteps:
+        raise ValueError(
+            f"--oracle-batch-size ({args.oracle_batch_size}) exceeds --oracle-total-timesteps "
+            f"({args.oracle_total_timesteps})"
+        )
+    if not 1 <= args.oracle_learning_starts < args.oracle_total_timesteps:
+        raise ValueError(
+            f"--oracle-learning-starts ({args.oracle_learning_starts}) must be >= 1 and below "
+            f"--oracle-total-timesteps ({args.oracle_total_timesteps})"
+        )
+    return None
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# environments
+
+
+def pusher_xml_path(env_id: str) -> str:
+    """The Pusher model file of the installed Gymnasium (never modified: the obstacle variant is a copy)."""
+    import gymnasium.envs.mujoco as gym_mujoco
+
+    name = "pusher_v5.xml" if env_id == "Pusher-v5" else "pusher.xml"
+    return os.path.join(os.path.dirname(gym_mujoco.__file__), "assets", name)
+
+
+def obstacle_xml(env_id: str, directory: str) -> str:
+    """Write Pusher's own model plus the three boxes of the robustness test to `directory`; return the path."""
+    tree = ET.parse(pusher_xml_path(env_id))
+    worldbody = tree.getroot().find("worldbody")
+    h = OBSTACLE_HALF_SIZE
+    for i, (x, y) in enumerate(OBSTACLE_POSITIONS):
+        ET.SubElement(
+            worldbody,
+            "geom",
+            {
+                "name": f"obstacle_{i}",
+                "type": "box",
+                "size": f"{h} {h} {h}",
+                "pos": f"{x} {y} {OBSTACLE_Z}",
+                "contype": "1",
+                "conaffinity": "1",
+                "rgba": "0.2 0.2 0.8 1",
+            },
+        )
+    path = os.path.join(directory, f"{env_id.lower().replace('-', '_')}_obstacle.xml")
+    tree.write(path)
+    return path
+
+
+_OBSTACLE_DIR: list[str] = []
+
+
+def _obstacle_dir() -> str:
+    if not _OBSTACLE_DIR:
+        _OBSTACLE_DIR.append(tempfile.mkdtemp(prefix="inform_pusher_obstacle_"))
+        atexit.register(shutil.rmtree, _OBSTACLE_DIR[0], True)
+    return _OBSTACLE_DIR[0]
+
+
+def make_env(env_id: str, seed: int, obstacle: bool = False) -> gym.Env:
+    """Plain Pusher, or the obstacle variant built at run time from the installed model."""
+    if obstacle:
+        # the model file must outlive construction (EzPickle re-creates the env from it), so it stays in a
+        # per-process temporary directory removed at exit
+        xml = obstacle_xml(env_id, _obstacle_dir())
+        if env_id == "Pusher-v5":
+            env = gym.make(env_id, xml_file=xml)
+        else:  # Pusher-v4 has no xml_file argument: same class, model file swapped at construction
+            from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
+            from gymnasium.envs.mujoco.pusher_v4 import PusherEnv
+
+            class PusherObstacleV4(PusherEnv):
+                def __init__(self, **kwargs):
+                    gym.utils.EzPickle.__init__(self, **kwargs)
+                    MujocoEnv.__init__(
+                        self, xml, 5, observation_space=gym.spaces.Box(-np.inf, np.inf, (23,), np.float64), **kwargs
+                    )
+
+            env = gym.wrappers.TimeLimit(PusherObstacleV4(), max_episode_steps=100)
+    else:
+        env = gym.make(env_id)
+    env.action_space.seed(seed)
+    env.observation_space.seed(seed)
+    return env
+
+
+def final_distance(info: dict) -> float:
+    return abs(float(info["reward_dist"]))
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# networks
+
+
+class BatchedLinear(nn.Module):
+    """`n` independent linear layers in one batched matmul: x [n, B, in] -> [n, B, out]."""
+
+    def __init__(self, n: int, in_features: int, out_features: int):
+        super().__init__()
+        self.weight = nn.Parameter(torch.empty(n, in_features, out_features))
+        self.bias = nn.Parameter(torch.empty(n, 1, out_features))
+        bound = 1.0 / math.sqrt(in_features)  # nn.Linear's default init
+        nn.init.uniform_(self.weight, -bound, bound)
+        nn.init.uniform_(self.bias, -bound, bound)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return torch.baddbmm(self.bias, x, self.weight)
+
+
+class QEnsemble(nn.Module):
+    """`n` Q (or H) networks as one module: twin critics with n=2, the sleep critic with n=1. Returns [n, B]."""
+
+    def __init__(self, obs_dim: int, act_dim: int, hidden: int = 256, n: int = 2):
+        super().__init__()
+        self.n = n
+        self.fc1 = BatchedLinear(n, obs_dim + act_dim, hidden)
+        self.fc2 = BatchedLinear(n, hidden, hidden)
+        self.fc3 = BatchedLinear(n, hidden, 1)
+
+    def forward(self, obs: torch.Tensor, act: torch.Tensor) -> torch.Tensor:
+        x = torch.cat([obs, act], -1).unsqueeze(0).expand(self.n, -1, -1)
+        x = F.relu(self.fc1(x))
+        x = F.relu(self.fc2(x))
+        return self.fc3(x).squeeze(-1)
+
+
+class Actor(nn.Module):
+    """CleanRL's SAC actor: a tanh-squashed Gaussian rescaled to the action bounds."""
+
+    def __init__(self, obs_dim: int, act_dim: int, hidden: int = 256, action_low=None, action_high=None):
+        super().__init__()
+        self.fc1 = nn.Linear(obs_dim, hidden)
+        self.fc2 = nn.Linear(hidden, hidden)
+        self.fc_mean = nn.Linear(hidden, act_dim)
+        self.fc_logstd = nn.Linear(hidden, act_dim)
+        low = torch.as_tensor(action_low if action_low is not None else -np.ones(act_dim), dtype=torch.float32)
+        high = torch.as_tensor(action_high if action_high is not None else np.ones(act_dim), dtype=torch.float32)
+        self.register_buffer("action_scale", (high - low) / 2.0)
+        self.register_buffer("action_bias", (high + low) / 2.0)
+
+    def forward(self, obs: torch.Tensor):
+        x = F.relu(self.fc1(obs))
+        x = F.relu(self.fc2(x))
+        log_std = torch.tanh(self.fc_logstd(x))
+        return self.fc_mean(x), LOG_STD_MIN + 0.5 * (LOG_STD_MAX - LOG_STD_MIN) * (log_std + 1)
+
+    def get_action(self, obs: torch.Tensor, generator: torch.Generator | None = None):
+        """(sampled action, its log-prob [B], mean action); `generator` keeps evaluation off the training RNG."""
+        mean, log_std = self(obs)
+        eps = torch.randn(mean.shape, generator=generator, device=mean.device)
+        x_t = mean + log_std.exp() * eps
+        y_t = torch.tanh(x_t)
+        log_prob = -0.5 * eps.pow(2) - log_std - 0.5 * math.log(2 * math.pi)
+        log_prob = log_prob - torch.log(self.action_scale * (1 - y_t.pow(2)) + 1e-6)
+        mean_action = torch.tanh(mean) * self.action_scale + self.action_bias
+        return y_t * self.action_scale + self.action_bias, log_prob.sum(-1), mean_action
+
+
+def soft_update(target: nn.Module, source: nn.Module, tau: float) -> None:
+    with torch.no_grad():
+        torch._foreach_lerp_(list(target.parameters()), list(source.parameters()), tau)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# the pieces of the algorithm, named after the paper
+
+
+def oracle_feedback(q_star_sa: torch.Tensor, q_star_best: torch.Tensor, alpha: float) -> torch.Tensor:
+    # Eq. 4, sign-safe: h = 1 if Q*(s, a) >= Q*(s, a*) - (1 - alpha) |Q*(s, a*)|, else 0
+    return (q_star_sa >= q_star_best - (1.0 - alpha) * q_star_best.abs()).float()
+
+
+def tamer_loss(h_net: QEnsemble, obs: torch.Tensor, actions: torch.Tensor, feedback: torch.Tensor) -> torch.Tensor:
+    # Eq. 1: E[(H(s, a) - h)^2], gamma = 0: no bootstrapping, no target network; summed over the twin H models
+    return (h_net(obs, actions) - feedback.unsqueeze(0)).pow(2).mean(-1).sum()
+
+
+def soft_value(q_net: QEnsemble, actor: Actor, obs: torch.Tensor, temperature: float, generator=None):
+    """V(s) = Q(s, a~pi) - temp * log pi(a|s), one sample (continuous IQ-Learn)."""
+    with torch.no_grad():
+        action, log_prob, _ = actor.get_action(obs, generator)
+    return q_net(obs, action).min(0).values - temperature * log_prob
+
+
+def iq_loss(q_net, target_net, actor, obs, actions, next_obs, terminated, is_expert, gamma, temperature, chi2_coef):
+    # Eq. 2 (to minimise): y = (1 - done) gamma V_target(s');
+    # L = -E_success[Q(s,a) - y] + E_all[V(s) - y] + chi2 * E_all[(Q(s,a) - y)^2]
+    q_sa = q_net(obs, actions).min(0).values
+    with torch.no_grad():
+        y = (1.0 - terminated) * gamma * soft_value(target_net, actor, next_obs, temperature)
+    v_s = soft_value(q_net, actor, obs, temperature)
+    expert_term = -(q_sa - y)[is_expert].mean()
+    value_term = (v_s - y).mean()
+    chi2_term = chi2_coef * (q_sa - y).pow(2).mean()
+    return expert_term + value_term + chi2_term, expert_term.detach(), value_term.detach(), chi2_term.detach()
+
+
+def recover_reward(q_sa: torch.Tensor, v_next: torch.Tensor, terminated: torch.Tensor, gamma: float) -> torch.Tensor:
+    # Eq. 3: r(s, a, s') = Q(s, a) - (1 - terminated) gamma V(s')
+    return q_sa - (1.0 - terminated) * gamma * v_next
+
+
+def actor_loss(q_net: QEnsemble, actor: Actor, obs: torch.Tensor, temperature: torch.Tensor | float):
+    """SAC-style actor objective, to minimise: E[temp * log pi(a|s) - min_i Q_i(s, a~pi)]; also returns log pi."""
+    action, log_prob, _ = actor.get_action(obs)
+    return (temperature * log_prob - q_net(obs, action).min(0).values).mean(), log_prob
+
+
+class RecoveredReward:
+    """The reward INFORM recovers (Eq. 3), imitation-style: reward(obs, action, next_obs, terminated) -> array.
+
+    V(s') is averaged over `samples` actions drawn with a fixed generator, so the reward is deterministic."""
+
+    def __init__(self, q_net: QEnsemble, actor: Actor, gamma: float, temperature: float, samples: int = 16):
+        self.q_net, self.actor = q_net, actor
+        self.gamma, self.temperature, self.samples = gamma, temperature, samples
+
+    @classmethod
+    def load(cls, run_dir: str, samples: int = 16) -> "RecoveredReward":
+        critic = torch.load(os.path.join(run_dir, "inform_critic.pt"), weights_only=True)
+        actor_ckpt = torch.load(os.path.join(run_dir, "inform_actor.pt"), weights_only=True)
+        q_net = QEnsemble(**critic["kwargs"])
+        q_net.load_state_dict(critic["state_dict"])
+        actor = Actor(
+            **actor_ckpt["kwargs"], action_low=actor_ckpt["action_low"], action_high=actor_ckpt["action_high"]
+        )
+        actor.load_state_dict(actor_ckpt["state_dict"])
+        return cls(q_net, actor, critic["gamma"], critic["temperature"], samples)
+
+    @torch.no_grad()
+    def __call__(self, obs, action, next_obs, terminated) -> np.ndarray:
+        obs_t = torch.as_tensor(np.asarray(obs), dtype=torch.float32)
+        batched = obs_t.ndim == 2
+        obs_t = obs_t if batched else obs_t.unsqueeze(0)
+        act_t = torch.as_tensor(np.asarray(action), dtype=torch.float32).reshape(obs_t.shape[0], -1)
+        next_t = torch.as_tensor(np.asarray(next_obs), dtype=torch.float32).reshape(obs_t.shape)
+        term_t = torch.as_tensor(np.asarray(terminated), dtype=torch.float32).reshape(-1)
+        g = torch.Generator().manual_seed(0)
+        v_next = torch.stack(
+            [soft_value(self.q_net, self.actor, next_t, self.temperature, g) for _ in range(self.samples)]
+        ).mean(0)
+        q_sa = self.q_net(obs_t, act_t).min(0).values
+        return recover_reward(q_sa, v_next, term_t, self.gamma).numpy()
+
+
+class RecoveredRewardWrapper(gym.Wrapper):
+    """Replaces the environment reward with the recovered one; the original goes to info['env_reward']."""
+
+    def __init__(self, env: gym.Env, reward_fn: RecoveredReward):
+        super().__init__(env)
+        self.reward_fn = reward_fn
+        self._obs = None
+
+    def reset(self, **kwargs):
+        obs, info = self.env.reset(**kwargs)
+        self._obs = obs
+        return obs, info
+
+    def step(self, action):
+        next_obs, reward, terminated, truncated, info = self.env.step(action)
+        info = {**info, "env_reward": reward}
+        new_reward = float(self.reward_fn(self._obs, action, next_obs, terminated)[0])
+        self._obs = next_obs
+        return next_obs, new_reward, terminated, truncated, info
+
+
+@torch.no_grad()
+def evaluate(actor: Actor, env: gym.Env, episodes: int, reset_seed, deterministic: bool, generator, success_dist):
+    """Run `episodes` episodes; reset_seed(ep) gives each episode's reset seed. Returns means and per-episode data."""
+    returns, distances = [], []
+    for ep in range(episodes):
+        obs, _ = env.reset(seed=reset_seed(ep))
+        done, ep_return, info = False, 0.0, {}
+        while not done:
+            sampled, _, mean = actor.get_action(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0), generator)
+            action = (mean if deterministic else sampled)[0].numpy()
+            obs, reward, terminated, truncated, info = env.step(action)
+            ep_return += float(reward)
+            done = terminated or truncated
+        returns.append(ep_return)
+        distances.append(final_distance(info))
+    distances = np.asarray(distances)
+    return {
+        "return": float(np.mean(returns)),
+        "final_distance": float(distances.mean()),
+        "final_distance_std": float(distances.std()),
+        "success_rate": float((distances < success_dist).mean()),
+        "distances": distances,
+        "returns": np.asarray(returns),
+    }
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# run bookkeeping
+
+
+class Progress:
+    """One line per ~5% of a phase: steps, SPS and ETA, plus whatever the phase reports."""
+
+    def __init__(self, phase: str, total: int):
+        self.phase, self.total, self.start = phase, total, time.time()
+        self.every = max(total // 20, 1)
+        self.excluded = 0.0  # seconds spent in evaluations, not counted in SPS
+
+    def sps(self, step: int) -> float:
+        return step / max(time.time() - self.start - self.excluded, 1e-9)
+
+    def __call__(self, step: int, **info):
+        if step % self.every and step != self.total:
+            return
+        sps = self.sps(step)
+        eta = (self.total - step) / max(sps, 1e-9)
+        extra = "".join(f" | {k} {v:.4g}" if isinstance(v, float) else f" | {k} {v}" for k, v in info.items())
+        print(
+            f"[{self.phase}] {step}/{self.total} {100 * step // self.total}% | {sps:,.0f} SPS | "
+            f"ETA {int(eta // 60)}m{int(eta % 60):02d}s{extra}",
+            flush=True,
+        )
+
+
+def make_run_dir(run_name: str) -> str:
+    """runs/{run_name}, never an existing directory: a clash gets a numeric suffix."""
+    path, n = f"runs/{run_name}", 0
+    while True:
+        try:
+            os.makedirs(path)
+            return path
+        except FileExistsError:
+            n += 1
+            path = f"runs/{run_name}_{n}"
+
+
+def write_json_atomic(path: str, data: dict) -> None:
+    with open(path + ".tmp", "w") as f:
+        json.dump(data, f, indent=2)
+    os.replace(path + ".tmp", path)
+
+
+def state_dict_cpu(net: nn.Module) -> dict:
+    return {k: v.detach().cpu().clone() for k, v in net.state_dict().items()}
+
+
+def save_actor(path: str, actor: Actor, **extra) -> None:
+    kwargs = {"obs_dim": actor.fc1.in_features, "act_dim": actor.fc_mean.out_features, "hidden": actor.fc1.out_features}
+    low = (actor.action_bias - actor.action_scale).cpu()
+    high = (actor.action_bias + actor.action_scale).cpu()
+    torch.save(
+        {"state_dict": state_dict_cpu(actor), "kwargs": kwargs, "action_low": low, "action_high": high, **extra}, path
+    )
+
+
+def save_critic(path: str, q_net: QEnsemble, **extra) -> None:
+    fc1 = q_net.fc1.weight
+    kwargs = {"obs_dim": None, "act_dim": None, "hidden": fc1.shape[2], "n": q_net.n}
+    kwargs.update(extra.pop("dims"))
+    torch.save({"state_dict": state_dict_cpu(q_net), "kwargs": kwargs, **extra}, path)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# the oracle: SAC on the environment reward (same networks and checkpoint format as oracle_train.py)
+
+
+def train_oracle(args: Args, writer: SummaryWriter, device: torch.device):
+    env = make_env(args.env_id, args.seed)
+    obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
+    actor = Actor(obs_dim, act_dim, args.hidden_size, env.action_space.low, env.action_space.high).to(device)
+    qf = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
+    qf_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
+    qf_target.load_state_dict(qf.state_dict())
+    q_opt = torch.optim.Adam(qf.parameters(), lr=args.oracle_q_lr)
+    pi_opt = torch.optim.Adam(actor.parameters(), lr=args.oracle_policy_lr)
+    log_alpha = torch.zeros(1, device=device, requires_grad=True)
+    a_opt = torch.optim.Adam([log_alpha], lr=args.oracle_q_lr)
+    target_entropy = -float(act_dim)
+    n = args.oracle_total_timesteps
+    b_obs, b_next = torch.zeros(n, obs_dim, device=device), torch.zeros(n, obs_dim, device=device)
+    b_act, b_rew, b_term = torch.zeros(n, act_dim, device=device), torch.zeros(n, device=device), torch.zeros(n)
+    progress = Progress("oracle", n)
+    reset_seed = None if args.oracle_random_starts else args.seed
+    obs, _ = env.reset(seed=args.seed)
+    obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
+    ep_return, last_return = 0.0, float("nan")
+    for step in range(n):
+        if step < args.oracle_learning_starts:
+            action = env.action_space.sample()
+        else:
+            with torch.no_grad():
+                action = actor.get_action(obs_t.unsqueeze(0))[0][0].cpu().numpy()
+        next_obs, reward, terminated, truncated, info = env.step(action)
+        next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
+        b_obs[step], b_next[step], b_act[step] = obs_t, next_t, torch.as_tensor(action)
+        b_rew[step], b_term[step] = float(reward), float(terminated)
+        ep_return += float(reward)
+        if terminated or truncated:
+            writer.add_scalar("oracle/episodic_return", ep_return, step)
+            writer.add_scalar("oracle/final_distance", final_distance(info), step)
+            last_return, ep_return = ep_return, 0.0
+            next_obs, _ = env.reset(seed=reset_seed)
+            next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
+        obs_t = next_t
+        if step >= args.oracle_learning_starts:
+            idx = torch.randint(0, step + 1, (args.oracle_batch_size,), device=device)
+            alpha = log_alpha.detach().exp()
+            with torch.no_grad():
+                next_a, next_logp, _ = actor.get_action(b_next[idx])
+                v_next = qf_target(b_next[idx], next_a).min(0).values - alpha * next_logp
+                target = b_rew[idx] + (1.0 - b_term[idx]) * args.oracle_gamma * v_next
+            q_loss = (qf(b_obs[idx], b_act[idx]) - target.unsqueeze(0)).pow(2).mean(-1).sum()
+            q_opt.zero_grad(set_to_none=True)
+            q_loss.backward()
+            q_opt.step()
+            if step % args.oracle_policy_frequency == 0:
+                pi_loss, logp = actor_loss(qf, actor, b_obs[idx], alpha)
+                pi_opt.zero_grad(set_to_none=True)
+                pi_loss.backward()
+                pi_opt.step()
+                qf.zero_grad(set_to_none=True)
+                alpha_loss = (-log_alpha.exp() * (logp.detach() + target_entropy)).mean()
+                a_opt.zero_grad(set_to_none=True)
+                alpha_loss.backward()
+                a_opt.step()
+            soft_update(qf_target, qf, args.tau)
+            if (step + 1) % args.log_frequency == 0:
+                writer.add_scalar("oracle/qf_loss", q_loss.item(), step + 1)
+                writer.add_scalar("oracle/SPS", progress.sps(step + 1), step + 1)
+        progress(step + 1, **{"return": last_return})
+    env.close()
+    return actor, qf, n / max(time.time() - progress.start, 1e-9)
+
+
+def oracle_from_checkpoint(ckpt: dict, device: torch.device):
+    kw = ckpt["kwargs"]
+    actor = Actor(kw["obs_dim"], kw["act_dim"], kw["hidden"], ckpt["action_low"], ckpt["action_high"]).to(device)
+    actor.load_state_dict(ckpt["actor_state_dict"])
+    qf = QEnsemble(kw["obs_dim"], kw["act_dim"], kw["hidden"], n=2).to(device)
+    qf.load_state_dict(ckpt["qf_state_dict"])
+    return actor, qf
+
+
+# ---------------------------------------------------------------------------------------------------------------
+
+
+def main(args: Args, oracle_ckpt: dict | None) -> dict:
+    run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
+    run_start = time.time()
+    random.seed(args.seed)
+    np.random.seed(args.seed)
+    torch.manual_seed(args.seed)
+    torch.backends.cudnn.deterministic = args.torch_deterministic
+    torch.use_deterministic_algorithms(args.torch_deterministic)
+    torch.set_num_threads(args.num_threads)
+    device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
+
+    run_dir = make_run_dir(run_name)
+    writer = SummaryWriter(run_dir)
+    writer.add_text(
+        "hyperparameters",
+        "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
+    )
+    print(f"run dir: {run_dir}", flush=True)
+    times = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0, "time/eval_s": 0.0}
+    sps = {}
+    env = make_env(args.env_id, args.seed)
+    eval_env = make_env(args.env_id, args.seed)
+    obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
+    low, high = env.action_space.low, env.action_space.high
+    eval_gen = torch.Generator().manual_seed(args.seed + 12345)
+
+    def fixed_or_random(base: int):
+        # fixed start: every episode resets with the run's seed; random starts: a fresh seed per episode
+        return (lambda ep: args.seed) if not args.random_starts else (lambda ep: base + ep)
+
+    def run_eval(name: str, actor: Actor, step: int, episodes: int, final: bool = False) -> dict:
+        t = time.time()
+        results = {}
+        for deterministic, suffix in ((True, ""), (False, "_sampled")):
+            res = evaluate(
+                actor,
+                eval_env,
+                episodes,
+                fixed_or_random(1_000_000 + 1000 * args.seed),
+                deterministic,
+                eval_gen,
+                args.success_distance,
+            )
+            for key in ("return", "final_distance", "success_rate"):
+                tag = f"eval/{name}_{key}{suffix}"
+                writer.add_scalar(tag, res[key], step)
+                results[tag] = res[key]
+        times["time/eval_s"] += time.time() - t
+        return results
+
+    # ---- oracle: the simulated teacher (SPEC section 5)
+    t0 = time.time()
+    if oracle_ckpt is not None:
+        oracle_actor, oracle_qf = oracle_from_checkpoint(oracle_ckpt, device)
+        print(f"[oracle] loaded {oracle_ckpt['path']} ({oracle_ckpt.get('training_steps', '?')} SAC steps)", flush=True)
+    else:
+        print(f"[oracle] training SAC on the env reward for {args.oracle_total_timesteps} steps", flush=True)
+        oracle_actor, oracle_qf, sps["sps/oracle"] = train_oracle(args, writer, device)
+        if args.save_model:
+            torch.save(
+                {
+                    "algorithm": "sac",
+                    "env_id": args.env_id,
+                    "obs_shape": [obs_dim],
+                    "act_shape": [act_dim],
+                    "kwargs": {"obs_dim": obs_dim, "act_dim": act_dim, "hidden": args.hidden_size},
+                    "action_low": torch.as_tensor(low),
+                    "action_high": torch.as_tensor(high),
+                    "actor_state_dict": state_dict_cpu(oracle_actor),
+                    "qf_state_dict": state_dict_cpu(oracle_qf),
+                    "training_steps": args.oracle_total_timesteps,
+                    "training_seed": args.seed,
+                    "random_starts": args.oracle_random_starts,
+                },
+                f"{run_dir}/oracle.pt",
+            )
+    for p in (*oracle_actor.parameters(), *oracle_qf.parameters()):
+        p.requires_grad_(False)
+    times["time/oracle_s"] = time.time() - t0
+    final = run_eval("oracle", oracle_actor, 0, args.periodic_eval_episodes)
+
+    # ---- forward phase ("day"): TAMER with simulated feedback, every transition remembered
+    n = args.tamer_total_timesteps
+    buf_obs, buf_next = torch.zeros(n, obs_dim, device=device), torch.zeros(n, obs_dim, device=device)
+    buf_act, buf_h = torch.zeros(n, act_dim, device=device), torch.zeros(n, device=device)
+    buf_term = torch.zeros(n, device=device)
+    buf_success = torch.zeros(n, dtype=torch.bool, device=device)
+    episode_final_distances, episode_bounds = [], []
+
+    h_net = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
+    tamer_actor = Actor(obs_dim, act_dim, args.hidden_size, low, high).to(device)
+    h_opt = torch.optim.Adam(h_net.parameters(), lr=args.tamer_q_lr)
+    pi_opt = torch.optim.Adam(tamer_actor.parameters(), lr=args.tamer_policy_lr)
+    log_alpha = torch.zeros(1, device=device, requires_grad=True)
+    a_opt = torch.optim.Adam([log_alpha], lr=args.tamer_q_lr)
+    target_entropy = -float(act_dim)
+    h_loss = torch.zeros((), device=device)
+
+    progress = Progress("tamer", n)
+    t0 = time.time()
+    eval_before = times["time/eval_s"]
+    reset_seed = None if args.random_starts else args.seed
+    obs, _ = env.reset(seed=args.seed)
+    obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
+    ep_start, ep_return, ep_length, last_return = 0, 0.0, 0, float("nan")
+    for step in range(n):
+        alpha_t = args.feedback_alpha_start + (args.feedback_alpha_end - args.feedback_alpha_start) * step / max(
+            n - 1, 1
+        )
+        if step < args.tamer_learning_starts:
+            action_t = torch.as_tensor(env.action_space.sample(), device=device)
+        else:
+            with torch.no_grad():
+                action_t = tamer_actor.get_action(obs_t.unsqueeze(0))[0][0]
+        with torch.no_grad():  # the teacher watches (s, a) and answers (Eq. 4)
+            a_star = oracle_actor.get_action(obs_t.unsqueeze(0))[2][0]
+            q_star = oracle_qf(obs_t.expand(2, -1), torch.stack([action_t, a_star])).min(0).values
+            buf_h[step] = oracle_feedback(q_star[0], q_star[1], alpha_t)
+        next_obs, reward, terminated, truncated, info = env.step(action_t.cpu().numpy())
+        next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
+        buf_obs[step], buf_next[step], buf_act[step], buf_term[step] = obs_t, next_t, action_t, float(terminated)
+        ep_return += float(reward)
+        ep_length += 1
+        if terminated or truncated or step == n - 1:
+            # tag the whole trajectory at episode end (a cut-off last episode is judged by where it stands)
+            success = final_distance(info) < args.success_distance
+            buf_success[ep_start : step + 1] = success
+            episode_final_distances.append(final_distance(info))
+            episode_bounds.append((ep_start, step + 1))
+            writer.add_scalar("charts/episodic_return", ep_return, step + 1)
+            writer.add_scalar("charts/episodic_length", ep_length, step + 1)
+            writer.add_scalar("charts/final_distance", final_distance(info), step + 1)
+            writer.add_scalar("charts/episode_success", float(success), step + 1)
+            last_return, ep_return, ep_length, ep_start = ep_return, 0.0, 0, step + 1
+            next_obs, _ = env.reset(seed=reset_seed)
+            next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
+        obs_t = next_t
+
+        if step >= args.tamer_learning_starts:
+            idx = torch.randint(0, step + 1, (args.tamer_batch_size,), device=device)
+            h_loss = tamer_loss(h_net, buf_obs[idx], buf_act[idx], buf_h[idx])
+            h_opt.zero_grad(set_to_none=True)
+            h_loss.backward()
+            h_opt.step()
+            if step % args.tamer_policy_frequency == 0:
+                pi_loss, logp = actor_loss(h_net, tamer_actor, buf_obs[idx], log_alpha.detach().exp())
+                pi_opt.zero_grad(set_to_none=True)
+                pi_loss.backward()
+                pi_opt.step()
+                h_net.zero_grad(set_to_none=True)
+                alpha_loss = (-log_alpha.exp() * (logp.detach() + target_entropy)).mean()
+                a_opt.zero_grad(set_to_none=True)
+                alpha_loss.backward()
+                a_opt.step()
+        if (step + 1) % args.log_frequency == 0 or step == n - 1:
+            positives = buf_h[: step + 1].sum().item()
+            writer.add_scalar("losses/tamer_loss", h_loss.item(), step + 1)
+            writer.add_scalar("losses/tamer_entropy_coef", log_alpha.exp().item(), step + 1)
+            writer.add_scalar("feedback/positive", positives, step + 1)
+            writer.add_scalar("feedback/positive_rate", positives / (step + 1), step + 1)
+            writer.add_scalar("feedback/alpha", alpha_t, step + 1)
+            writer.add_scalar("charts/SPS", progress.sps(step + 1), step + 1)
+        if (step + 1) % args.eval_frequency == 0 or step == n - 1:
+            t_eval = time.time()
+            res = run_eval("tamer", tamer_actor, step + 1, args.periodic_eval_episodes)
+            progress.excluded += time.time() - t_eval
+            progress(step + 1, **{"return": last_return, "eval return": res["eval/tamer_return"]})
+        else:
+            progress(step + 1, **{"return": last_return})
+    times["time/tamer_s"] = time.time() - t0 - (times["time/eval_s"] - eval_before)
+    sps["sps/tamer"] = n / max(times["time/tamer_s"], 1e-9)
+    positives = int(buf_h.sum().item())
+    n_success_eps = sum(d < args.success_distance for d in episode_final_distances)
+    print(
+        f"[tamer] feedback +1 on {positives}/{n} steps ({positives / n:.1%}); "
+        f"{n_success_eps}/{len(episode_bounds)} episodes tagged success",
+        flush=True,
+    )
+
+    # ---- sleep phase ("night"): offline IQ-Learn on the buffer, successful trajectories as the expert set
+    expert_idx = buf_success.nonzero().squeeze(-1)
+    expert_fallback = 0
+    if expert_idx.numel() == 0:
+        # no success at all: fall back to the 10% of episodes that ended closest to the goal (reported in summary)
+        expert_fallback = 1
+        k = max(1, len(episode_bounds) // 10)
+        best = np.argsort(episode_final_distances)[:k]
+        expert_idx = torch.cat([torch.arange(*episode_bounds[i], device=device) for i in best])
+        print(f"[sleep] warning: no successful episode; using the {k} closest episodes as the expert set", flush=True)
+    q_net = QEnsemble(obs_dim, act_dim, args.hidden_size, n=1).to(device)
+    q_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=1).to(device)
+    q_target.load_state_dict(q_net.state_dict())
+    inform_actor = Actor(obs_dim, act_dim, args.hidden_size, low, high).to(device)
+    if args.sleep_init_actor_from_tamer:
+        inform_actor.load_state_dict(tamer_actor.state_dict())
+    q_opt = torch.optim.Adam(q_net.parameters(), lr=args.sleep_q_lr)
+    inf_opt = torch.optim.Adam(inform_actor.parameters(), lr=args.sleep_policy_lr)
+    B = args.sleep_batch_size
+    is_expert = torch.cat([torch.zeros(B, dtype=torch.bool), torch.ones(B, dtype=torch.bool)]).to(device)
+    progress = Progress("sleep", args.sleep_gradient_steps)
+    t0 = time.time()
+    eval_before = times["time/eval_s"]
+    iq_terms = {}
+    for step in range(args.sleep_gradient_steps):
+        replay = torch.randint(0, n, (B,), device=device)
+        expert = expert_idx[torch.randint(0, expert_idx.numel(), (B,), device=device)]
+        idx = torch.cat([replay, expert])
+        loss, expert_term, value_term, chi2_term = iq_loss(
+            q_net,
+            q_target,
+            inform_actor,
+            buf_obs[idx],
+            buf_act[idx],
+            buf_next[idx],
+            buf_term[idx],
+            is_expert,
+            args.sleep_gamma,
+            args.sleep_temperature,
+            args.sleep_chi2_coef,
+        )
+        q_opt.zero_grad(set_to_none=True)
+        loss.backward()
+        q_opt.step()
+        pi_loss, _ = actor_loss(q_net, inform_actor, buf_obs[replay], args.sleep_temperature)
+        inf_opt.zero_grad(set_to_none=True)
+        pi_loss.backward()
+        inf_opt.step()
+        q_net.zero_grad(set_to_none=True)
+        soft_update(q_target, q_net, args.tau)
+        if (step + 1) % args.log_frequency == 0 or step == args.sleep_gradient_steps - 1:
+            iq_terms = {
+                "losses/iq_loss": loss.item(),
+                "losses/iq_expert_term": expert_term.item(),
+                "losses/iq_value_term": value_term.item(),
+                "losses/iq_chi2_term": chi2_term.item(),
+                "losses/inform_actor_loss": pi_loss.item(),
+            }
+            for tag, value in iq_terms.items():
+                writer.add_scalar(tag, value, step + 1)
+            writer.add_scalar("sleep/SPS", progress.sps(step + 1), step + 1)
+        if (step + 1) % args.sleep_eval_frequency == 0 or step == args.sleep_gradient_steps - 1:
+            t_eval = time.time()
+            res = run_eval("inform", inform_actor, step + 1, args.periodic_eval_episodes)
+            progress.excluded += time.time() - t_eval
+            progress(step + 1, **{"iq_loss": iq_terms.get("losses/iq_loss"), "eval return": res["eval/inform_return"]})
+        else:
+            progress(step + 1, iq_loss=iq_terms.get("losses/iq_loss", float("nan")))
+    times["time/sleep_s"] = time.time() - t0 - (times["time/eval_s"] - eval_before)
+    sps["sps/sleep"] = args.sleep_gradient_steps / max(times["time/sleep_s"], 1e-9)
+
+    # ---- recover the reward (Eq. 3) on the buffer: mean over success vs failure transitions, for the record
+    reward_fn = RecoveredReward(q_net, inform_actor, args.sleep_gamma, args.sleep_temperature, samples=4)
+    r_all = reward_fn(buf_obs.cpu().numpy(), buf_act.cpu().numpy(), buf_next.cpu().numpy(), buf_term.cpu().numpy())
+    succ = buf_success.cpu().numpy()
+    reward_stats = {
+        "sleep/recovered_reward_success_mean": float(r_all[succ].mean()) if succ.any() else float("nan"),
+        "sleep/recovered_reward_failure_mean": float(r_all[~succ].mean()) if (~succ).any() else float("nan"),
+    }
+
+    # ---- final evaluation on the plain env, then the obstacle robustness test
+    policies = {"oracle": oracle_actor, "tamer": tamer_actor, "inform": inform_actor}
+    print("[eval] final evaluation", flush=True)
+    for name, actor in policies.items():
+        final.update(run_eval(name, actor, args.tamer_total_timesteps + args.sleep_gradient_steps, args.eval_episodes))
+    t = time.time()
+    obstacle_env = make_env(args.env_id, args.seed, obstacle=True)
+    obstacle_distances = {}
+    for name, actor in policies.items():
+        # the same initial state for every episode (the run's seed); sampled actions give the spread
+        res = evaluate(
+            actor, obstacle_env, args.obstacle_episodes, lambda ep: args.seed, False, eval_gen, args.success_distance
+        )
+        det = evaluate(actor, obstacle_env, 1, lambda ep: args.seed, True, eval_gen, args.success_distance)
+        obstacle_distances[name] = res["distances"]
+        final[f"eval/obstacle/{name}_final_distance"] = res["final_distance"]
+        final[f"eval/obstacle/{name}_final_distance_std"] = res["final_distance_std"]
+        final[f"eval/obstacle/{name}_success_rate"] = res["success_rate"]
+        final[f"eval/obstacle/{name}_return"] = res["return"]
+        final[f"eval/obstacle/{name}_final_distance_deterministic"] = det["final_distance"]
+    obstacle_env.close()
+    for tag in [k for k in final if k.startswith("eval/obstacle/")]:
+        writer.add_scalar(tag, final[tag], args.tamer_total_timesteps + args.sleep_gradient_steps)
+    np.savez(f"{run_dir}/obstacle_distances.npz", **obstacle_distances)
+    times["time/eval_s"] += time.time() - t
+
+    if args.save_model:
+        dims = {"obs_dim": obs_dim, "act_dim": act_dim}
+        save_actor(f"{run_dir}/tamer_actor.pt", tamer_actor, env_id=args.env_id)
+        save_critic(f"{run_dir}/tamer_h.pt", h_net, dims=dims, env_id=args.env_id)
+        save_actor(f"{run_dir}/inform_actor.pt", inform_actor, env_id=args.env_id)
+        save_critic(
+            f"{run_dir}/inform_critic.pt",
+            q_net,
+            dims=dims,
+            env_id=args.env_id,
+            gamma=args.sleep_gamma,
+            temperature=args.sleep_temperature,
+        )
+
+    summary = {
+        **final,
+        "feedback/positive": positives,
+        "feedback/steps": n,
+        "feedback/positive_rate": positives / n,
+        "sleep/success_episodes": int(n_success_eps),
+        "sleep/episodes": len(episode_bounds),
+        "sleep/expert_transitions": int(expert_idx.numel()),
+        "sleep/expert_fallback": expert_fallback,
+        **reward_stats,
+        **iq_terms,
+        **sps,
+        **times,
+        "oracle_path": oracle_ckpt["path"] if oracle_ckpt is not None else None,
+        "wall_time_s": time.time() - run_start,
+        "seed": args.seed,
+        "status": "completed",
+        "args": asdict(args),
+    }
+    write_json_atomic(f"{run_dir}/summary.json", summary)
+    env.close()
+    eval_env.close()
+    writer.close()
+    for name in POLICIES:
+        print(
+            f"{name:>6}: return {summary[f'eval/{name}_return']:.2f} "
+            f"(sampled {summary[f'eval/{name}_return_sampled']:.2f})"
+            f" | final distance {summary[f'eval/{name}_final_distance']:.3f} | success "
+            f"{summary[f'eval/{name}_success_rate']:.2f} | obstacle distance "
+            f"{summary[f'eval/obstacle/{name}_final_distance']:.3f} +- "
+            f"{summary[f'eval/obstacle/{name}_final_distance_std']:.3f}",
+            flush=True,
+        )
+    print(
+        " | ".join(f"{k.split('/')[1]} {v:.0f}s" for k, v in times.items())
+        + " | "
+        + " | ".join(f"{k} {v:.0f}" for k, v in sps.items()),
+        flush=True,
+    )
+    print(f"done in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json", flush=True)
+    return summary
+
+
+if __name__ == "__main__":
+    args = tyro.cli(Args)
+    try:
+        oracle_ckpt = check_args(args)
+    except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(2)
+    main(args, oracle_ckpt)

@@ -1,0 +1,102 @@
+"""Aggregate the Pusher obstacle robustness test over seeds (SPEC section 4, paper: INFORM closer, p < 0.0001).
+
+Reads `obstacle_distances.npz` (per-episode final object-goal distances) and `summary.json` from each run
+directory written by inform_sac_pusher.py, prints per-seed and pooled means and standard deviations, and a
+Welch t-test (scipy.stats.ttest_ind, equal_var=False) of TAMER against INFORM final distances, on the pooled
+episodes and on the per-seed means.
+
+    python pusher_obstacle_stats.py runs/Pusher-v5__inform_sac_pusher__1__* runs/Pusher-v5__inform_sac_pusher__2__* \
+        runs/Pusher-v5__inform_sac_pusher__3__*
+"""
+
+import json
+import os
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+import tyro
+from scipy import stats
+
+
+@dataclass
+class Args:
+    run_dirs: tyro.conf.Positional[tuple[str, ...]]
+    """run directories of inform_sac_pusher.py (one per seed), each with obstacle_distances.npz"""
+    output: str | None = None
+    """optional path of a JSON file with the aggregated numbers"""
+
+
+def load_run(run_dir: str) -> dict:
+    path = os.path.join(run_dir, "obstacle_distances.npz")
+    if not os.path.isfile(path) or not os.path.isfile(os.path.join(run_dir, "summary.json")):
+        raise ValueError(f"{run_dir}: no obstacle_distances.npz and summary.json (did the run finish?)")
+    with open(os.path.join(run_dir, "summary.json")) as f:
+        summary = json.load(f)
+    with np.load(path) as data:
+        distances = {k: data[k] for k in data.files}
+    if "tamer" not in distances or "inform" not in distances:
+        raise ValueError(f"{path}: needs 'tamer' and 'inform' arrays")
+    return {
+        "seed": summary.get("seed"),
+        "distances": distances,
+        "success_distance": summary["args"]["success_distance"],
+    }
+
+
+def aggregate(runs: list[dict]) -> dict:
+    policies = [p for p in ("oracle", "tamer", "inform") if all(p in r["distances"] for r in runs)]
+    out = {"seeds": [r["seed"] for r in runs], "episodes_per_seed": int(len(runs[0]["distances"]["tamer"]))}
+    for p in policies:
+        pooled = np.concatenate([r["distances"][p] for r in runs])
+        seed_means = np.array([r["distances"][p].mean() for r in runs])
+        out[f"{p}_mean"] = float(pooled.mean())
+        out[f"{p}_std"] = float(pooled.std(ddof=1)) if pooled.size > 1 else 0.0
+        out[f"{p}_seed_means"] = seed_means.tolist()
+        out[f"{p}_seed_mean_std"] = float(seed_means.std(ddof=1)) if len(runs) > 1 else 0.0
+        out[f"{p}_success_rate"] = float((pooled < runs[0]["success_distance"]).mean())
+    tamer = np.concatenate([r["distances"]["tamer"] for r in runs])
+    inform = np.concatenate([r["distances"]["inform"] for r in runs])
+    welch = stats.ttest_ind(tamer, inform, equal_var=False)
+    out["welch_t_episodes"], out["welch_p_episodes"] = float(welch.statistic), float(welch.pvalue)
+    if len(runs) > 1:
+        welch = stats.ttest_ind(out["tamer_seed_means"], out["inform_seed_means"], equal_var=False)
+        out["welch_t_seed_means"], out["welch_p_seed_means"] = float(welch.statistic), float(welch.pvalue)
+    return out
+
+
+def main(args: Args) -> dict:
+    runs = [load_run(d) for d in args.run_dirs]
+    out = aggregate(runs)
+    print(f"obstacle test: {len(runs)} seeds {out['seeds']}, {out['episodes_per_seed']} episodes per policy and seed")
+    for p in ("oracle", "tamer", "inform"):
+        if f"{p}_mean" in out:
+            per_seed = ", ".join(f"{m:.3f}" for m in out[f"{p}_seed_means"])
+            print(
+                f"  {p:>6}: final distance {out[f'{p}_mean']:.4f} +- {out[f'{p}_std']:.4f} (pooled episodes) | "
+                f"per-seed means [{per_seed}] | success rate {out[f'{p}_success_rate']:.2f}"
+            )
+    print(
+        f"  Welch t-test TAMER vs INFORM, pooled episodes: t = {out['welch_t_episodes']:.3f}, "
+        f"p = {out['welch_p_episodes']:.3g}"
+    )
+    if "welch_p_seed_means" in out:
+        print(
+            f"  Welch t-test TAMER vs INFORM, per-seed means (n={len(runs)}): t = {out['welch_t_seed_means']:.3f}, "
+            f"p = {out['welch_p_seed_means']:.3g}"
+        )
+    if args.output:
+        with open(args.output, "w") as f:
+            json.dump(out, f, indent=2)
+    return out
+
+
+if __name__ == "__main__":
+    args = tyro.cli(Args)
+    try:
+        if not args.run_dirs:
+            raise ValueError("pass at least one run directory")
+        main(args)
+    except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(2)

@@ -1,0 +1,353 @@
+"""Tests of inform_sac_pusher.py: equations on hand-computed cases, the obstacle env, smoke runs, the recovered
+reward, bad input. Smoke runs use tiny budgets and run with cwd in a pytest tmp_path."""
+
+import glob
+import json
+import os
+import subprocess
+import sys
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+import torch.nn as nn
+import tyro
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, REPO)
+
+import inform_sac_pusher as isp  # noqa: E402
+
+SCRIPT = os.path.join(REPO, "inform_sac_pusher.py")
+SHIPPED = os.path.join(REPO, "oracles", "Pusher-v5__sac_oracle.pt")
+TINY = [
+    "--tamer-total-timesteps", "600",
+    "--tamer-learning-starts", "300",
+    "--tamer-batch-size", "64",
+    "--sleep-gradient-steps", "200",
+    "--sleep-batch-size", "64",
+    "--hidden-size", "64",
+    "--eval-frequency", "300",
+    "--sleep-eval-frequency", "100",
+    "--eval-episodes", "2",
+    "--periodic-eval-episodes", "1",
+    "--obstacle-episodes", "3",
+    "--log-frequency", "100",
+]  # fmt: skip
+
+
+def run(cwd, *flags, timeout=120):
+    return subprocess.run([sys.executable, SCRIPT, *flags], cwd=cwd, capture_output=True, text=True, timeout=timeout)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# equations on hand-computed cases
+
+
+def test_oracle_feedback_eq4_positive_and_negative_q():
+    alpha = 0.9
+    # Q* >= 0: h = 1 iff Q*(s,a) >= alpha Q*(s,a*) = 9
+    q_best = torch.tensor([10.0, 10.0, 10.0])
+    assert isp.oracle_feedback(torch.tensor([9.5, 9.0, 8.9]), q_best, alpha).tolist() == [1.0, 1.0, 0.0]
+    # Q* < 0 (Pusher): h = 1 iff Q*(s,a) >= (2 - alpha) Q*(s,a*) = -11
+    q_best = torch.tensor([-10.0, -10.0, -10.0, -10.0])
+    q_sa = torch.tensor([-10.0, -10.5, -11.0, -11.5])
+    assert isp.oracle_feedback(q_sa, q_best, alpha).tolist() == [1.0, 1.0, 1.0, 0.0]
+    # alpha = 1: only actions at least as good as the oracle's earn +1
+    assert isp.oracle_feedback(torch.tensor([-10.01, -9.9]), torch.tensor([-10.0, -10.0]), 1.0).tolist() == [0.0, 1.0]
+
+
+class StubQ(nn.Module):
+    """Q(s, a) = s[0] + a[0], shaped [1, B] like a one-member QEnsemble."""
+
+    def forward(self, obs, act):
+        return (obs[:, 0] + act[:, 0]).unsqueeze(0)
+
+
+class StubActor:
+    """Always samples action 0 with log pi = -1."""
+
+    def get_action(self, obs, generator=None):
+        zeros = torch.zeros(obs.shape[0], 1)
+        return zeros, -torch.ones(obs.shape[0]), zeros
+
+
+def test_tamer_loss_eq1():
+    h_net = isp.QEnsemble(3, 2, hidden=4, n=2)
+    for p in h_net.parameters():
+        nn.init.zeros_(p)
+    with torch.no_grad():
+        h_net.fc3.bias[0].fill_(0.5)  # H_1 = 0.5
+        h_net.fc3.bias[1].fill_(1.0)  # H_2 = 1
+    h = torch.tensor([1.0, 0.0])
+    loss = isp.tamer_loss(h_net, torch.zeros(2, 3), torch.zeros(2, 2), h)
+    # twin 1: ((0.5-1)^2 + 0.5^2)/2 = 0.25; twin 2: (0 + 1)/2 = 0.5
+    assert loss.item() == pytest.approx(0.75)
+
+
+def test_iq_loss_eq2_hand_computed_with_terminal():
+    obs = torch.tensor([[1.0], [2.0], [3.0], [4.0]])
+    act = torch.tensor([[0.5], [0.0], [1.0], [0.0]])
+    next_obs = torch.tensor([[2.0], [3.0], [4.0], [5.0]])
+    terminated = torch.tensor([0.0, 1.0, 0.0, 0.0])  # the second transition ends the episode: y = 0
+    is_expert = torch.tensor([False, False, True, True])
+    loss, expert, value, chi2 = isp.iq_loss(
+        StubQ(), StubQ(), StubActor(), obs, act, next_obs, terminated, is_expert, 0.9, 0.1, 0.5
+    )
+    # Q(s,a) = [1.5, 2, 4, 4]; V(x) = x + 0.1; y = (1 - done) 0.9 V(s') = [1.89, 0, 3.69, 4.59]
+    # Q - y = [-0.39, 2, 0.31, -0.59]; V(s) - y = [-0.79, 2.1, -0.59, -0.49]
+    assert expert.item() == pytest.approx(-(0.31 - 0.59) / 2, abs=1e-5)
+    assert value.item() == pytest.approx((-0.79 + 2.1 - 0.59 - 0.49) / 4, abs=1e-5)
+    assert chi2.item() == pytest.approx(0.5 * (0.39**2 + 2**2 + 0.31**2 + 0.59**2) / 4, abs=1e-5)
+    assert loss.item() == pytest.approx(0.14 + 0.0575 + 0.5745375, abs=1e-5)
+    _, _, _, chi2_off = isp.iq_loss(
+        StubQ(), StubQ(), StubActor(), obs, act, next_obs, terminated, is_expert, 0.9, 0.1, 0.0
+    )
+    assert chi2_off.item() == 0.0
+
+
+def test_recover_reward_eq3_with_terminal():
+    r = isp.recover_reward(torch.tensor([1.0, 2.0]), torch.tensor([3.0, 4.0]), torch.tensor([0.0, 1.0]), 0.9)
+    assert r.tolist() == pytest.approx([1.0 - 0.9 * 3.0, 2.0], abs=1e-5)
+    # through the reward object: Q(s,a) = s + a, V(s') = s' + 0.1 (stub networks)
+    reward = isp.RecoveredReward(StubQ(), StubActor(), gamma=0.9, temperature=0.1, samples=2)
+    out = reward(np.array([[1.0], [2.0]]), np.array([[0.5], [0.0]]), np.array([[2.0], [3.0]]), np.array([0, 1]))
+    assert out == pytest.approx([1.5 - 0.9 * 2.1, 2.0], abs=1e-5)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# obstacle variant
+
+
+def test_obstacle_env_check_env_and_boxes():
+    from gymnasium.utils.env_checker import check_env
+
+    env = isp.make_env("Pusher-v5", seed=0, obstacle=True)
+    check_env(env.unwrapped, skip_render_check=True)
+    env.reset(seed=0)
+    model, data = env.unwrapped.model, env.unwrapped.data
+    for i, (x, y) in enumerate(isp.OBSTACLE_POSITIONS):
+        geom = model.geom(f"obstacle_{i}")
+        assert np.allclose(data.geom(f"obstacle_{i}").xpos, [x, y, -0.325])
+        assert np.allclose(geom.size, [0.015, 0.015, 0.015])
+        assert int(geom.contype[0]) == 1 and int(geom.conaffinity[0]) == 1
+    # the installed model is untouched: the plain env has no obstacle
+    plain = isp.make_env("Pusher-v5", seed=0)
+    assert plain.unwrapped.model.ngeom == model.ngeom - 3
+    env.close()
+    plain.close()
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# smoke runs
+
+
+def check_run(tmp_path, proc):
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    run_dirs = glob.glob(str(tmp_path / "runs" / "*"))
+    assert len(run_dirs) == 1
+    run_dir = run_dirs[0]
+    assert glob.glob(os.path.join(run_dir, "events.out.tfevents.*"))
+    with open(os.path.join(run_dir, "summary.json")) as f:
+        summary = json.load(f)
+    assert summary["status"] == "completed"
+    for p in isp.POLICIES:
+        for key in ("return", "final_distance", "success_rate"):
+            assert np.isfinite(summary[f"eval/{p}_{key}"])
+            assert np.isfinite(summary[f"eval/{p}_{key}_sampled"])
+        for key in ("final_distance", "final_distance_std", "success_rate"):
+            assert np.isfinite(summary[f"eval/obstacle/{p}_{key}"])
+    for key in ("feedback/positive", "feedback/steps", "time/oracle_s", "time/tamer_s", "time/sleep_s"):
+        assert key in summary
+    for key in ("time/eval_s", "wall_time_s", "seed", "args"):
+        assert key in summary
+    assert summary["feedback/steps"] == 600
+    for name in ("tamer_actor.pt", "tamer_h.pt", "inform_actor.pt", "inform_critic.pt"):
+        ckpt = torch.load(os.path.join(run_dir, name), weights_only=True)
+        assert "state_dict" in ckpt and "kwargs" in ckpt and ckpt["env_id"] == "Pusher-v5"
+    with np.load(os.path.join(run_dir, "obstacle_distances.npz")) as d:
+        assert d["tamer"].shape == (3,) and d["inform"].shape == (3,)
+    # the recovered reward loads from the run directory and drives a wrapped env
+    env = isp.RecoveredRewardWrapper(gym.make("Pusher-v5"), isp.RecoveredReward.load(run_dir))
+    env.reset(seed=0)
+    _, r, _, _, info = env.step(env.action_space.sample())
+    assert isinstance(r, float) and "env_reward" in info
+    return run_dir, summary
+
+
+def test_smoke_in_script_oracle(tmp_path):
+    proc = run(tmp_path, "--train-oracle", "--oracle-total-timesteps", "400", "--oracle-learning-starts", "200", *TINY)
+    run_dir, summary = check_run(tmp_path, proc)
+    assert summary["oracle_path"] is None
+    ckpt = torch.load(os.path.join(run_dir, "oracle.pt"), weights_only=True)
+    assert ckpt["env_id"] == "Pusher-v5" and ckpt["training_steps"] == 400
+
+
+@pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")
+def test_smoke_oracle_path_and_determinism(tmp_path):
+    flags = ["--oracle-path", SHIPPED, *TINY]
+    (tmp_path / "a").mkdir()
+    _, first = check_run(tmp_path / "a", run(tmp_path / "a", *flags))
+    assert first["oracle_path"] == SHIPPED
+    (tmp_path / "b").mkdir()
+    _, second = check_run(tmp_path / "b", run(tmp_path / "b", *flags))
+    for key, value in first.items():
+        if key.startswith(("eval/", "feedback/", "losses/")):
+            assert second[key] == value, key
+
+
+def test_shipped_oracle_checkpoint():
+    ckpt = torch.load(SHIPPED, weights_only=True)
+    assert ckpt["env_id"] == "Pusher-v5" and ckpt["obs_shape"] == [23] and ckpt["act_shape"] == [7]
+    assert ckpt["random_starts"] and ckpt["training_steps"] > 0
+    assert set(ckpt["evaluation"]) >= {"return", "final_distance", "success_rate"}
+    assert os.path.getsize(SHIPPED) < 5_000_000
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# the recovered reward ranks the oracle's trajectories above random ones
+
+
+def rollouts(env, policy, episodes, seed):
+    data = []
+    for ep in range(episodes):
+        obs, _ = env.reset(seed=seed + ep)
+        done, traj = False, []
+        while not done:
+            action = policy(obs)
+            next_obs, _, terminated, truncated, _ = env.step(action)
+            traj.append((obs, action, next_obs, float(terminated)))
+            obs, done = next_obs, terminated or truncated
+        data.append([np.array(x, dtype=np.float32) for x in zip(*traj, strict=True)])
+    return data
+
+
+def test_recovered_reward_ranks_oracle_above_random():
+    torch.manual_seed(0)
+    torch.set_num_threads(1)
+    ckpt = isp.load_oracle_checkpoint(SHIPPED, "Pusher-v5", 23, 7)
+    oracle_actor, _ = isp.oracle_from_checkpoint(ckpt, torch.device("cpu"))
+    env = gym.make("Pusher-v5")
+    env.action_space.seed(0)
+
+    def oracle_policy(obs):
+        with torch.no_grad():
+            return oracle_actor.get_action(torch.as_tensor(obs, dtype=torch.float32)[None])[2][0].numpy()
+
+    expert = rollouts(env, oracle_policy, 10, seed=0)
+    rand = rollouts(env, lambda obs: env.action_space.sample(), 10, seed=100)
+    obs, act, nxt, term = (torch.as_tensor(np.concatenate(x)) for x in zip(*(expert + rand), strict=True))
+    n_expert = sum(len(t[0]) for t in expert)
+    q_net, q_target = isp.QEnsemble(23, 7, 64, n=1), isp.QEnsemble(23, 7, 64, n=1)
+    q_target.load_state_dict(q_net.state_dict())
+    actor = isp.Actor(23, 7, 64, env.action_space.low, env.action_space.high)
+    q_opt = torch.optim.Adam(q_net.parameters(), lr=1e-3)
+    pi_opt = torch.optim.Adam(actor.parameters(), lr=3e-4)
+    B = 128
+    is_expert = torch.cat([torch.zeros(B, dtype=torch.bool), torch.ones(B, dtype=torch.bool)])
+    for _ in range(1500):  # the sleep phase on a hand-made buffer: oracle trajectories are the success set
+        idx = torch.cat([torch.randint(0, len(obs), (B,)), torch.randint(0, n_expert, (B,))])
+        loss, *_ = isp.iq_loss(
+            q_net, q_target, actor, obs[idx], act[idx], nxt[idx], term[idx], is_expert, 0.99, 0.01, 0.5
+        )
+        q_opt.zero_grad()
+        loss.backward()
+        q_opt.step()
+        pi_loss, _ = isp.actor_loss(q_net, actor, obs[idx[:B]], 0.01)
+        pi_opt.zero_grad()
+        pi_loss.backward()
+        pi_opt.step()
+        isp.soft_update(q_target, q_net, 0.005)
+    reward = isp.RecoveredReward(q_net, actor, 0.99, 0.01, samples=4)
+    expert_returns = [reward(*t).sum() for t in expert]
+    random_returns = [reward(*t).sum() for t in rand]
+    assert min(expert_returns) > max(random_returns), (expert_returns, random_returns)
+    env.close()
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# bad input: one line on stderr, exit 2, no run directory
+
+
+def write_bad_checkpoints(tmp_path):
+    corrupt = tmp_path / "corrupt.pt"
+    corrupt.write_bytes(b"not a checkpoint")
+    ckpt = torch.load(SHIPPED, weights_only=True)
+    wrong_env = tmp_path / "wrong_env.pt"
+    torch.save({**ckpt, "env_id": "Pusher-v4"}, wrong_env)
+    wrong_shape = tmp_path / "wrong_shape.pt"
+    torch.save({**ckpt, "kwargs": {**ckpt["kwargs"], "obs_dim": 10}}, wrong_shape)
+    wrong_weights = tmp_path / "wrong_weights.pt"
+    torch.save({**ckpt, "kwargs": {**ckpt["kwargs"], "hidden": 32}}, wrong_weights)
+    return {"corrupt": corrupt, "wrong_env": wrong_env, "wrong_shape": wrong_shape, "wrong_weights": wrong_weights}
+
+
+BAD_FLAGS = [
+    (["--tamer-total-timesteps", "-5"], "tamer-total-timesteps"),
+    (["--sleep-gradient-steps", "0"], "sleep-gradient-steps"),
+    (["--obstacle-episodes", "-1"], "obstacle-episodes"),
+    (["--feedback-alpha-start", "1.5"], "feedback-alpha-start"),
+    (["--env-id", "CartPole-v1"], "env-id"),
+    (["--tamer-batch-size", "100000"], "tamer-batch-size"),
+    (["--oracle-path", "missing.pt"], "missing.pt"),
+    (["--oracle-path", "{corrupt}"], "corrupt.pt"),
+    (["--oracle-path", "{wrong_env}"], "wrong_env.pt"),
+    (["--oracle-path", "{wrong_shape}"], "wrong_shape.pt"),
+    (["--oracle-path", "{wrong_weights}"], "wrong_weights.pt"),
+    (["--train-oracle", "--oracle-total-timesteps", "100", "--oracle-batch-size", "256"], "oracle-batch-size"),
+]
+
+
+@pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")
+def test_bad_input_messages(tmp_path):
+    """Every bad input is rejected by check_args with a one-line message naming the flag or file."""
+    paths = write_bad_checkpoints(tmp_path)
+    cases = list(BAD_FLAGS)
+    if isp.mujoco_major() >= 3:
+        cases.append((["--env-id", "Pusher-v4"], "mujoco==2.3.7"))
+    for flags, needle in cases:
+        flags = [f.format(**paths) if f.startswith("{") else f for f in flags]
+        args = tyro.cli(isp.Args, args=flags)
+        with pytest.raises(ValueError) as err:
+            isp.check_args(args)
+        message = str(err.value)
+        assert "\n" not in message and needle in message, (flags, message)
+
+
+@pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")
+def test_bad_input_exits_before_creating_anything(tmp_path):
+    paths = write_bad_checkpoints(tmp_path)
+    for flags in (["--tamer-total-timesteps", "-5"], ["--oracle-path", str(paths["wrong_weights"])]):
+        proc = run(tmp_path, *flags, timeout=60)
+        assert proc.returncode == 2, (flags, proc.stderr)
+        lines = proc.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("error: "), (flags, proc.stderr)
+        assert not (tmp_path / "runs").exists(), flags
+
+
+# ---------------------------------------------------------------------------------------------------------------
+
+
+def mujoco_below_3() -> bool:
+    try:
+        import mujoco
+
+        return int(mujoco.__version__.split(".")[0]) < 3
+    except ImportError:
+        return False
+
+
+@pytest.mark.pusher_v4
+@pytest.mark.skipif(not mujoco_below_3(), reason="Pusher-v4 needs mujoco<3 (pip install mujoco==2.3.7)")
+def test_smoke_pusher_v4(tmp_path):
+    proc = run(
+        tmp_path,
+        "--env-id", "Pusher-v4",
+        "--train-oracle", "--oracle-total-timesteps", "400", "--oracle-learning-starts", "200",
+        *TINY,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    (run_dir,) = glob.glob(str(tmp_path / "runs" / "*"))
+    with open(os.path.join(run_dir, "summary.json")) as f:
+        assert json.load(f)["status"] == "completed"
