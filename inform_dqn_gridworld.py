@@ -7,11 +7,15 @@ Fig. 3 (episode length of TAMER, INFORM and the expert). See SPEC.md sections 1-
     python inform_dqn_gridworld.py --seed 1
 """
 
+import contextlib
+import io
 import json
 import os
+import pickle
 import random
 import sys
 import time
+import zipfile
 from dataclasses import asdict, dataclass
 
 import gymnasium as gym
@@ -51,6 +55,8 @@ class Args:
     # Oracle (the simulated teacher)
     oracle_gamma: float = 0.99
     """discount of the oracle's exact Q* (value iteration)"""
+    oracle_path: str | None = None
+    """a maze teacher saved by oracle_train.py (e.g. a half-trained Q-learner) instead of exact Q*"""
 
     # Forward phase: TAMER (Eq. 1) with simulated feedback (Eq. 4)
     tamer_total_timesteps: int = 10000
@@ -97,6 +103,16 @@ class Args:
     """forward-phase environment steps between greedy evaluations"""
     sleep_eval_frequency: int = 500
     """sleep-phase gradient steps between greedy evaluations"""
+    evaluate: str | None = None
+    """re-evaluate a saved tamer_h.pt or inform_q.pt, print its episode lengths as JSON, train nothing"""
+
+
+class InputError(Exception):
+    """Bad input from the user: a flag value, a file. Reported as one line, before anything is written."""
+
+
+class Diverged(Exception):
+    """The sleep loss became NaN or inf."""
 
 
 def check_args(args: Args) -> None:
@@ -114,33 +130,33 @@ def check_args(args: Args) -> None:
     ]
     for name in positive_ints:
         if getattr(args, name) < 1:
-            raise ValueError(f"--{name.replace('_', '-')} must be a positive integer, got {getattr(args, name)}")
+            raise InputError(f"--{name.replace('_', '-')} must be a positive integer, got {getattr(args, name)}")
     unit_interval = ["feedback_alpha_start", "feedback_alpha_end", "start_e", "end_e", "sleep_gamma", "oracle_gamma"]
     for name in unit_interval:
         if not 0.0 <= getattr(args, name) <= 1.0:
-            raise ValueError(f"--{name.replace('_', '-')} must be in [0, 1], got {getattr(args, name)}")
+            raise InputError(f"--{name.replace('_', '-')} must be in [0, 1], got {getattr(args, name)}")
     positive_floats = ["tamer_learning_rate", "sleep_learning_rate", "sleep_temperature", "exploration_fraction"]
     for name in positive_floats:
         if not getattr(args, name) > 0.0:
-            raise ValueError(f"--{name.replace('_', '-')} must be > 0, got {getattr(args, name)}")
+            raise InputError(f"--{name.replace('_', '-')} must be > 0, got {getattr(args, name)}")
     if not 0.0 < args.sleep_tau <= 1.0:
-        raise ValueError(f"--sleep-tau must be in (0, 1], got {args.sleep_tau}")
+        raise InputError(f"--sleep-tau must be in (0, 1], got {args.sleep_tau}")
     if args.sleep_chi2_coef < 0.0:
-        raise ValueError(f"--sleep-chi2-coef must be >= 0 (0 turns it off), got {args.sleep_chi2_coef}")
+        raise InputError(f"--sleep-chi2-coef must be >= 0 (0 turns it off), got {args.sleep_chi2_coef}")
     if args.oracle_gamma >= 1.0:
-        raise ValueError("--oracle-gamma must be below 1 for value iteration to converge")
+        raise InputError("--oracle-gamma must be below 1 for value iteration to converge")
     if args.tamer_learning_starts < args.tamer_batch_size:
-        raise ValueError(
+        raise InputError(
             f"--tamer-learning-starts ({args.tamer_learning_starts}) must be at least "
             f"--tamer-batch-size ({args.tamer_batch_size})"
         )
     if args.tamer_learning_starts >= args.tamer_total_timesteps:
-        raise ValueError(
+        raise InputError(
             f"--tamer-total-timesteps ({args.tamer_total_timesteps}) must exceed "
             f"--tamer-learning-starts ({args.tamer_learning_starts}), or H is never trained"
         )
     if args.env_id not in MAZE_IDS:
-        raise ValueError(f"unknown --env-id {args.env_id!r}; this script trains on one of {', '.join(MAZE_IDS)}")
+        raise InputError(f"unknown --env-id {args.env_id!r}; this script trains on one of {', '.join(MAZE_IDS)}")
 
 
 class QNetwork(nn.Module):
@@ -255,7 +271,7 @@ def evaluate(env: gym.Env, policy: np.ndarray, start_cells, success_max_steps: i
 class Evaluator:
     """Greedy evaluation of a policy on the plain maze, the wall maze and the start set; logs eval/ tags."""
 
-    def __init__(self, writer: SummaryWriter, success_max_steps: int):
+    def __init__(self, writer: SummaryWriter | None, success_max_steps: int):
         self.writer = writer
         self.success_max_steps = success_max_steps
         self.envs = {
@@ -283,7 +299,8 @@ class Evaluator:
             f"eval/start_set/{name}_success_rate": set_success,
         }
         for tag, value in metrics.items():
-            self.writer.add_scalar(tag, value, step)
+            if self.writer is not None:
+                self.writer.add_scalar(tag, value, step)
         self.final.update(metrics)
         self.seconds += time.time() - t0
         return metrics
@@ -347,6 +364,164 @@ def reward_figure(table: np.ndarray, title: str):
     return fig
 
 
+def read_checkpoint(path: str) -> dict:
+    """torch.load(path, weights_only=True), with every way it can fail turned into one InputError naming the file."""
+    if not os.path.isfile(path):
+        raise InputError(f"{path}: no such file")
+    if not zipfile.is_zipfile(path):  # torch.save writes a zip archive; a truncated one has lost its directory
+        raise InputError(f"{path}: not a torch checkpoint, or a truncated one (not a complete zip archive)")
+    try:
+        ckpt = torch.load(path, weights_only=True, map_location="cpu")
+    except pickle.UnpicklingError as e:
+        unsupported = [line.strip() for line in str(e).splitlines() if "unsupported" in line.lower()]
+        raise InputError(f"{path}: refused, it holds more than tensors and plain values (it could run code): "
+                         f"{(unsupported or [type(e).__name__])[0][:160]}") from None  # fmt: skip
+    except Exception as e:  # a damaged archive: torch raises RuntimeError, EOFError, ...
+        raise InputError(
+            f"{path}: corrupt checkpoint: {(str(e).strip() or type(e).__name__).splitlines()[0][:160]}"
+        ) from None
+    if not isinstance(ckpt, dict):
+        raise InputError(f"{path}: not a checkpoint of this project (expected a dict, found {type(ckpt).__name__})")
+    return ckpt
+
+
+def load_oracle(path: str, env_id: str) -> np.ndarray:
+    """The maze teacher's Q table from an oracle_train.py checkpoint, checked against the env and its shapes."""
+    ckpt = read_checkpoint(path)
+    if "q_table" not in ckpt:
+        raise InputError(f"{path}: not a maze oracle checkpoint (no 'q_table'); make one with oracle_train.py")
+    if ckpt.get("env_id") != env_id:
+        raise InputError(f"{path}: an oracle for {ckpt.get('env_id')!r}, not for --env-id {env_id}")
+    q_table = ckpt["q_table"]
+    if not isinstance(q_table, torch.Tensor) or tuple(q_table.shape) != (
+        gridworld_env.N_CELLS,
+        gridworld_env.N_ACTIONS,
+    ):
+        shape = tuple(q_table.shape) if isinstance(q_table, torch.Tensor) else type(q_table).__name__
+        raise InputError(f"{path}: q_table has shape {shape}, expected ({gridworld_env.N_CELLS}, "
+                         f"{gridworld_env.N_ACTIONS})")  # fmt: skip
+    return q_table.double().numpy()
+
+
+def load_q_network(path: str) -> QNetwork:
+    """Rebuild a saved H or Q network (tamer_h.pt, inform_q.pt) from its state_dict and arguments."""
+    ckpt = read_checkpoint(path)
+    if "state_dict" not in ckpt or "kwargs" not in ckpt:
+        raise InputError(f"{path}: not a saved network of this script (needs 'state_dict' and 'kwargs')")
+    net = QNetwork(**ckpt["kwargs"])
+    try:
+        net.load_state_dict(ckpt["state_dict"])
+    except RuntimeError as e:
+        raise InputError(f"{path}: the weights do not fit the network: {str(e).splitlines()[0][:160]}") from None
+    if ckpt["kwargs"].get("obs_dim") != gridworld_env.N_CELLS:
+        raise InputError(f"{path}: a network for {ckpt['kwargs'].get('obs_dim')}-d observations, not the maze's 30")
+    return net
+
+
+def forward_phase(args, env, q_star, h_net, buffer, evaluator, writer, device) -> dict:
+    """TAMER ("day"): act on H, get feedback by Eq. 4, fit H by Eq. 1, remember and tag every transition."""
+    h_optimizer = torch.optim.Adam(h_net.parameters(), lr=args.tamer_learning_rate)
+    progress = Progress("tamer", args.tamer_total_timesteps)
+    positives = episode_positives = episode_length = episode_start = 0
+    start_time = time.time()
+    obs, _ = env.reset(seed=args.seed)
+    for global_step in range(1, args.tamer_total_timesteps + 1):
+        epsilon = linear_schedule(args.start_e, args.end_e, int(args.exploration_fraction * args.tamer_total_timesteps),
+                                  global_step - 1)  # fmt: skip
+        if random.random() < epsilon:
+            action = env.action_space.sample()
+        else:
+            with torch.no_grad():
+                action = int(h_net(torch.as_tensor(obs, device=device)).argmax())
+        next_obs, _, terminated, truncated, _ = env.step(action)
+
+        alpha = linear_schedule(args.feedback_alpha_start, args.feedback_alpha_end, args.tamer_total_timesteps,
+                                global_step - 1)  # fmt: skip
+        q_star_s = q_star[int(obs.argmax())]
+        h = oracle_feedback(q_star_s[action], q_star_s.max(), alpha)
+        buffer.add(obs, action, next_obs, h, terminated)
+        positives += int(h)
+        episode_positives += int(h)
+        episode_length += 1
+
+        obs = next_obs
+        if terminated or truncated:
+            buffer.tag_episode(episode_start, is_success(terminated, episode_length, args.success_max_steps))
+            writer.add_scalar("charts/episodic_return", float(terminated), global_step)
+            writer.add_scalar("charts/episodic_length", episode_length, global_step)
+            writer.add_scalar("feedback/positive_rate", episode_positives / episode_length, global_step)
+            episode_start, episode_positives, episode_length = buffer.size, 0, 0
+            obs, _ = env.reset()
+
+        if global_step > args.tamer_learning_starts and global_step % args.tamer_train_frequency == 0:
+            idx = torch.randint(buffer.size, (args.tamer_batch_size,), device=device)
+            b_obs, b_actions, _, b_feedback, _ = buffer.batch(idx)
+            loss = tamer_loss(h_net, b_obs, b_actions, b_feedback)
+            h_optimizer.zero_grad()
+            loss.backward()
+            h_optimizer.step()
+            if global_step % 100 == 0:
+                writer.add_scalar("losses/tamer_loss", loss.item(), global_step)
+
+        if global_step % 100 == 0:
+            writer.add_scalar("feedback/positive", positives, global_step)
+            writer.add_scalar("feedback/alpha", alpha, global_step)
+            writer.add_scalar("charts/epsilon", epsilon, global_step)
+        if global_step % 1000 == 0:
+            writer.add_scalar("charts/SPS", int(global_step / (time.time() - start_time)), global_step)
+        if global_step % args.eval_frequency == 0 or global_step == args.tamer_total_timesteps:
+            metrics = evaluator("tamer", greedy_actions(h_net, device), global_step)
+            progress(global_step, positives=positives, eval_length=metrics["eval/tamer_episode_length"])
+    # an episode cut off by the end of the phase never reached the goal: it stays untagged (failure)
+    return {
+        "feedback/positive": positives,
+        "feedback/steps": args.tamer_total_timesteps,
+        "feedback/positive_rate": positives / args.tamer_total_timesteps,
+    }
+
+
+def sleep_phase(args, buffer, q_net, target_net, evaluator, writer, device) -> dict:
+    """Offline IQ-Learn ("sleep", Eq. 2) on the buffer, successful trajectories as the expert set."""
+    success_idx = buffer.success[: buffer.size].nonzero().squeeze(1)
+    stats = {"sleep/expert_transitions": int(success_idx.numel()), "sleep/replay_transitions": buffer.size}
+    if success_idx.numel() == 0:
+        print("warning: no successful episode in the buffer, so the sleep phase has no expert data and is skipped; "
+              "raise --tamer-total-timesteps", file=sys.stderr)  # fmt: skip
+        return stats
+    q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_learning_rate)
+    is_expert = torch.arange(2 * args.sleep_batch_size, device=device) < args.sleep_batch_size
+    progress = Progress("sleep", args.sleep_gradient_steps)
+    start_time = time.time()
+    for sleep_step in range(1, args.sleep_gradient_steps + 1):
+        expert_idx = success_idx[torch.randint(success_idx.numel(), (args.sleep_batch_size,), device=device)]
+        replay_idx = torch.randint(buffer.size, (args.sleep_batch_size,), device=device)
+        b_obs, b_actions, b_next_obs, _, b_terminated = buffer.batch(torch.cat([expert_idx, replay_idx]))
+        loss, terms = iq_loss(q_net, target_net, b_obs, b_actions, b_next_obs, b_terminated, is_expert,
+                              args.sleep_gamma, args.sleep_temperature, args.sleep_chi2_coef)  # fmt: skip
+        q_optimizer.zero_grad()
+        loss.backward()
+        q_optimizer.step()
+        with torch.no_grad():
+            for param, target_param in zip(q_net.parameters(), target_net.parameters(), strict=True):
+                target_param.lerp_(param, args.sleep_tau)
+
+        if sleep_step % 100 == 0 or sleep_step == args.sleep_gradient_steps:  # one host sync per 100 steps
+            values = torch.stack([loss, *terms]).tolist()
+            if not all(map(np.isfinite, values)):
+                last = ", ".join(f"{k.split('/')[1]} {v:.4g}" for k, v in stats.items() if k.startswith("losses/"))
+                raise Diverged(f"the sleep loss diverged (NaN or inf) by gradient step {sleep_step}; last finite "
+                               f"losses: {last or 'none yet'}; try a lower --sleep-learning-rate")  # fmt: skip
+            names = ("losses/iq_loss", "losses/iq_expert_term", "losses/iq_value_term", "losses/iq_chi2_term")
+            stats.update(zip(names, values, strict=True))
+            for tag in names:
+                writer.add_scalar(tag, stats[tag], sleep_step)
+            writer.add_scalar("sleep/SPS", int(sleep_step / (time.time() - start_time)), sleep_step)
+        if sleep_step % args.sleep_eval_frequency == 0 or sleep_step == args.sleep_gradient_steps:
+            metrics = evaluator("inform", greedy_actions(q_net, device), sleep_step)
+            progress(sleep_step, iq_loss=stats["losses/iq_loss"], eval_length=metrics["eval/inform_episode_length"])
+    return stats
+
+
 def make_run_dir(run_name: str) -> str:
     """runs/{run_name}, never an existing directory: a clash gets a numeric suffix."""
     path, n = f"runs/{run_name}", 0
@@ -390,9 +565,16 @@ def main(args: Args) -> dict:
     env = gym.make(args.env_id)
     env.action_space.seed(args.seed)
     obs_dim, n_actions = env.observation_space.shape[0], int(env.action_space.n)
-    next_cell = env.unwrapped.next_cell
 
-    run_dir = make_run_dir(run_name)
+    # Oracle: exact Q* by value iteration (the "fully trained model"), or a teacher saved by oracle_train.py
+    t0 = time.time()
+    if args.oracle_path:
+        q_star = load_oracle(args.oracle_path, args.env_id)
+    else:
+        q_star = gridworld_env.optimal_q(env.unwrapped.variant, args.oracle_gamma)
+    summary = {"time/oracle_s": time.time() - t0}
+
+    run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
     writer = SummaryWriter(run_dir)
     writer.add_text(
         "hyperparameters",
@@ -401,182 +583,104 @@ def main(args: Args) -> dict:
     evaluator = Evaluator(writer, args.success_max_steps)
     print(f"run directory: {run_dir}", flush=True)
 
-    # Oracle: the "fully trained model" is exact Q* by value iteration
-    t0 = time.time()
-    q_star = gridworld_env.optimal_q(env.unwrapped.variant, args.oracle_gamma)
-    times = {"time/oracle_s": time.time() - t0}
-    evaluator("oracle", q_star.argmax(1), 0)
-
-    # Forward phase ("day"): TAMER with a myopic H(s, a), simulated feedback, every transition remembered
-    t0, eval_s0 = time.time(), evaluator.seconds
     h_net = QNetwork(obs_dim, n_actions).to(device)
-    h_optimizer = torch.optim.Adam(h_net.parameters(), lr=args.tamer_learning_rate)
     buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, device)
-    progress = Progress("tamer", args.tamer_total_timesteps)
-    positives = episode_positives = episode_length = 0
-    episode_start = 0
-    obs, _ = env.reset(seed=args.seed)
-    for global_step in range(1, args.tamer_total_timesteps + 1):
-        epsilon = linear_schedule(
-            args.start_e, args.end_e, int(args.exploration_fraction * args.tamer_total_timesteps), global_step - 1
-        )
-        if random.random() < epsilon:
-            action = env.action_space.sample()
-        else:
-            with torch.no_grad():
-                action = int(h_net(torch.as_tensor(obs, device=device)).argmax())
-        next_obs, _, terminated, truncated, info = env.step(action)
-
-        alpha = linear_schedule(
-            args.feedback_alpha_start, args.feedback_alpha_end, args.tamer_total_timesteps, global_step - 1
-        )
-        q_star_s = q_star[int(obs.argmax())]
-        h = oracle_feedback(q_star_s[action], q_star_s.max(), alpha)
-        buffer.add(obs, action, next_obs, h, terminated)
-        positives += int(h)
-        episode_positives += int(h)
-        episode_length += 1
-
-        obs = next_obs
-        if terminated or truncated:
-            buffer.tag_episode(episode_start, is_success(terminated, episode_length, args.success_max_steps))
-            writer.add_scalar("charts/episodic_return", float(terminated), global_step)
-            writer.add_scalar("charts/episodic_length", episode_length, global_step)
-            writer.add_scalar("feedback/positive_rate", episode_positives / episode_length, global_step)
-            episode_start, episode_positives, episode_length = buffer.size, 0, 0
-            obs, _ = env.reset()
-
-        if global_step > args.tamer_learning_starts and global_step % args.tamer_train_frequency == 0:
-            idx = torch.randint(buffer.size, (args.tamer_batch_size,), device=device)
-            b_obs, b_actions, _, b_feedback, _ = buffer.batch(idx)
-            loss = tamer_loss(h_net, b_obs, b_actions, b_feedback)
-            h_optimizer.zero_grad()
-            loss.backward()
-            h_optimizer.step()
-            if global_step % 100 == 0:
-                writer.add_scalar("losses/tamer_loss", loss.item(), global_step)
-
-        if global_step % 100 == 0:
-            writer.add_scalar("feedback/positive", positives, global_step)
-            writer.add_scalar("feedback/alpha", alpha, global_step)
-            writer.add_scalar("charts/epsilon", epsilon, global_step)
-        if global_step % 1000 == 0:
-            writer.add_scalar("charts/SPS", int(global_step / (time.time() - t0)), global_step)
-        if global_step % args.eval_frequency == 0 or global_step == args.tamer_total_timesteps:
-            metrics = evaluator("tamer", greedy_actions(h_net, device), global_step)
-            progress(global_step, positives=positives, eval_length=metrics["eval/tamer_episode_length"])
-    times["time/tamer_s"] = time.time() - t0 - (evaluator.seconds - eval_s0)
-    # an episode cut off by the end of the phase is neither a success nor complete: leave it untagged (failure)
-
-    # Sleep phase: offline IQ-Learn on the buffer, successes as the expert set; no environment steps
-    t0, eval_s0 = time.time(), evaluator.seconds
-    success_idx = buffer.success[: buffer.size].nonzero().squeeze(1)
-    sleep_stats = {"sleep/expert_transitions": int(success_idx.numel()), "sleep/replay_transitions": buffer.size}
     q_net = QNetwork(obs_dim, n_actions).to(device)
     target_net = QNetwork(obs_dim, n_actions).to(device)
     target_net.load_state_dict(q_net.state_dict())
-    q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_learning_rate)
-    is_expert = torch.arange(2 * args.sleep_batch_size, device=device) < args.sleep_batch_size
-    iq_terms = {}
-    if success_idx.numel() == 0:
-        print(
-            "warning: no successful episode in the buffer, so the sleep phase has no expert data and is skipped; "
-            "raise --tamer-total-timesteps",
-            file=sys.stderr,
+
+    status, phase = "completed", "oracle"
+    try:
+        evaluator("oracle", q_star.argmax(1), 0)
+
+        # Forward phase ("day"): TAMER with a myopic H(s, a), simulated feedback, every transition remembered
+        phase, t0, eval_s0 = "tamer", time.time(), evaluator.seconds
+        summary.update(forward_phase(args, env, q_star, h_net, buffer, evaluator, writer, device))
+        summary["time/tamer_s"] = time.time() - t0 - (evaluator.seconds - eval_s0)
+        if args.save_model:
+            save_network(f"{run_dir}/tamer_h.pt", h_net, env_id=args.env_id)
+
+        # Sleep phase: offline IQ-Learn on the buffer; no environment steps
+        phase, t0, eval_s0 = "sleep", time.time(), evaluator.seconds
+        summary.update(sleep_phase(args, buffer, q_net, target_net, evaluator, writer, device))
+        summary["time/sleep_s"] = time.time() - t0 - (evaluator.seconds - eval_s0)
+
+        # Recovered reward (Eq. 3) on the maze the agent learned in
+        phase = "reward"
+        reward = reward_table(q_net, env.unwrapped.next_cell, args.sleep_gamma, args.sleep_temperature, device)
+        writer.add_figure(
+            "sleep/recovered_reward", reward_figure(reward.numpy(), f"recovered reward, seed {args.seed}")
         )
-    else:
-        progress = Progress("sleep", args.sleep_gradient_steps)
-        for sleep_step in range(1, args.sleep_gradient_steps + 1):
-            expert_idx = success_idx[torch.randint(success_idx.numel(), (args.sleep_batch_size,), device=device)]
-            replay_idx = torch.randint(buffer.size, (args.sleep_batch_size,), device=device)
-            b_obs, b_actions, b_next_obs, _, b_terminated = buffer.batch(torch.cat([expert_idx, replay_idx]))
-            loss, terms = iq_loss(
-                q_net,
-                target_net,
-                b_obs,
-                b_actions,
-                b_next_obs,
-                b_terminated,
-                is_expert,
-                args.sleep_gamma,
-                args.sleep_temperature,
-                args.sleep_chi2_coef,
-            )
-            q_optimizer.zero_grad()
-            loss.backward()
-            q_optimizer.step()
-            with torch.no_grad():
-                for param, target_param in zip(q_net.parameters(), target_net.parameters(), strict=True):
-                    target_param.lerp_(param, args.sleep_tau)
+        if args.save_model:
+            save_network(f"{run_dir}/inform_q.pt", q_net, env_id=args.env_id, gamma=args.sleep_gamma,
+                         temperature=args.sleep_temperature)  # fmt: skip
+            torch.save({"reward": reward, "env_id": args.env_id, "gamma": args.sleep_gamma,
+                        "temperature": args.sleep_temperature}, f"{run_dir}/recovered_reward.pt")  # fmt: skip
 
-            if sleep_step % 100 == 0 or sleep_step == args.sleep_gradient_steps:
-                iq_terms = {
-                    "losses/iq_loss": loss.item(),
-                    "losses/iq_expert_term": terms[0].item(),
-                    "losses/iq_value_term": terms[1].item(),
-                    "losses/iq_chi2_term": terms[2].item(),
-                }
-                for tag, value in iq_terms.items():
-                    writer.add_scalar(tag, value, sleep_step)
-                writer.add_scalar("sleep/SPS", int(sleep_step / (time.time() - t0)), sleep_step)
-            if sleep_step % args.sleep_eval_frequency == 0 or sleep_step == args.sleep_gradient_steps:
-                metrics = evaluator("inform", greedy_actions(q_net, device), sleep_step)
-                progress(
-                    sleep_step, iq_loss=iq_terms["losses/iq_loss"], eval_length=metrics["eval/inform_episode_length"]
-                )
-    times["time/sleep_s"] = time.time() - t0 - (evaluator.seconds - eval_s0)
+        # Final evaluation of the three policies
+        phase = "eval"
+        evaluator("oracle", q_star.argmax(1), args.tamer_total_timesteps)
+        evaluator("tamer", greedy_actions(h_net, device), args.tamer_total_timesteps)
+        evaluator("inform", greedy_actions(q_net, device), args.sleep_gradient_steps)
+    except KeyboardInterrupt:
+        status = "interrupted"
+        print(f"interrupted during the {phase} phase; what finished is saved in {run_dir}", file=sys.stderr)
+    except Diverged as e:
+        status = "diverged"
+        print(f"error: {e}", file=sys.stderr)
 
-    # Recovered reward (Eq. 3) on the maze the agent learned in
-    reward = reward_table(q_net, next_cell, args.sleep_gamma, args.sleep_temperature, device)
-    writer.add_figure("sleep/recovered_reward", reward_figure(reward.numpy(), f"recovered reward, seed {args.seed}"))
-
-    # Final evaluation of the three policies
-    evaluator("oracle", q_star.argmax(1), args.tamer_total_timesteps)
-    evaluator("tamer", greedy_actions(h_net, device), args.tamer_total_timesteps)
-    evaluator("inform", greedy_actions(q_net, device), args.sleep_gradient_steps)
-    times["time/eval_s"] = evaluator.seconds
-
-    if args.save_model:
-        save_network(f"{run_dir}/tamer_h.pt", h_net, env_id=args.env_id)
-        save_network(
-            f"{run_dir}/inform_q.pt",
-            q_net,
-            env_id=args.env_id,
-            gamma=args.sleep_gamma,
-            temperature=args.sleep_temperature,
-        )
-        torch.save(
-            {"reward": reward, "env_id": args.env_id, "gamma": args.sleep_gamma, "temperature": args.sleep_temperature},
-            f"{run_dir}/recovered_reward.pt",
-        )
-
-    summary = {
-        **evaluator.final,
-        "feedback/positive": positives,
-        "feedback/steps": args.tamer_total_timesteps,
-        "feedback/positive_rate": positives / args.tamer_total_timesteps,
-        **iq_terms,
-        **sleep_stats,
-        **times,
-        "wall_time_s": time.time() - run_start,
-        "seed": args.seed,
-        "status": "completed",
-        "args": asdict(args),
-    }
+    summary.update(evaluator.final)
+    summary.update({"time/eval_s": evaluator.seconds, "wall_time_s": time.time() - run_start, "seed": args.seed,
+                    "status": status, "args": asdict(args)})  # fmt: skip
+    if status != "completed":
+        summary["phase"] = phase
     write_json_atomic(f"{run_dir}/summary.json", summary)
     evaluator.close()
     env.close()
     writer.close()
-    print(" | ".join(f"{p}: {summary[f'eval/{p}_episode_length']:.0f} steps" for p in POLICIES), flush=True)
-    print(f"done in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json", flush=True)
+    if status == "completed":
+        print(" | ".join(f"{p}: {summary[f'eval/{p}_episode_length']:.0f} steps" for p in POLICIES), flush=True)
+    print(f"{status} in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json", flush=True)
     return summary
 
 
-if __name__ == "__main__":
-    args = tyro.cli(Args)
+def evaluate_saved(path: str, success_max_steps: int) -> dict:
+    """Re-evaluate a saved tamer_h.pt or inform_q.pt: its greedy policy on the plain and wall mazes, the start set."""
+    evaluator = Evaluator(None, success_max_steps)
+    metrics = evaluator("policy", greedy_actions(load_q_network(path), torch.device("cpu")), 0)
+    evaluator.close()
+    return metrics
+
+
+def parse_args() -> Args:
+    """tyro's command line, with tyro's multi-line error box shortened to one line."""
+    captured = io.StringIO()
     try:
+        with contextlib.redirect_stderr(captured):
+            return tyro.cli(Args)
+    except SystemExit as e:
+        if e.code == 0:  # --help
+            raise
+        message = []
+        for line in captured.getvalue().splitlines()[1:]:  # the first line is the box's title bar
+            text = line.strip().strip("│╰╯").strip()
+            if not text or set(text) <= set("─"):
+                if message:
+                    break
+                continue
+            message.append(text)
+        raise InputError(" ".join(message) + " (see --help)") from None
+
+
+if __name__ == "__main__":
+    try:
+        args = parse_args()
         check_args(args)
-    except ValueError as e:
+        if args.evaluate:
+            print(json.dumps(evaluate_saved(args.evaluate, args.success_max_steps), indent=2))
+            sys.exit(0)
+        summary = main(args)
+    except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
-    main(args)
+    sys.exit({"completed": 0, "interrupted": 130, "diverged": 1}[summary["status"]])

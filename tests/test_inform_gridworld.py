@@ -252,3 +252,139 @@ def test_default_run_learns_the_optimum(run_script):
     assert summary["eval/oracle_episode_length"] == 19
     assert summary["eval/tamer_episode_length"] == 19
     assert summary["eval/inform_episode_length"] == 19
+
+
+# reliability: bad files, interruption, divergence, re-evaluation ---------------------------------------------------
+class CodeCarrier:
+    def __reduce__(self):
+        return (os.system, ("echo this must never run",))
+
+
+def bad_checkpoints(tmp):
+    """Files an --oracle-path or --evaluate may be given, each wrong in its own way."""
+    paths = {}
+    good = tmp / "good.pt"
+    torch.save({"q_table": torch.zeros(30, 4), "env_id": "KnoxStoneMaze-v0"}, good)
+    paths["truncated"] = tmp / "truncated.pt"
+    paths["truncated"].write_bytes(good.read_bytes()[: good.stat().st_size // 2])
+    paths["not a checkpoint"] = tmp / "notes.txt"
+    paths["not a checkpoint"].write_text("hello")
+    paths["carries code"] = tmp / "evil.pt"
+    torch.save({"q_table": CodeCarrier()}, paths["carries code"])
+    paths["wrong env"] = tmp / "wall.pt"
+    torch.save({"q_table": torch.zeros(30, 4), "env_id": "KnoxStoneMazeWall-v0"}, paths["wrong env"])
+    paths["wrong shape"] = tmp / "shape.pt"
+    torch.save({"q_table": torch.zeros(29, 4), "env_id": "KnoxStoneMaze-v0"}, paths["wrong shape"])
+    paths["not a dict"] = tmp / "list.pt"
+    torch.save([1, 2], paths["not a dict"])
+    paths["no q table"] = tmp / "net.pt"
+    torch.save({"state_dict": {}, "env_id": "KnoxStoneMaze-v0"}, paths["no q table"])
+    return paths
+
+
+BAD_FILES = [
+    ("truncated", "truncated"),
+    ("not a checkpoint", "not a torch checkpoint"),
+    ("carries code", "refused"),
+    ("wrong env", "not for --env-id"),
+    ("wrong shape", "expected (30, 4)"),
+    ("not a dict", "expected a dict"),
+    ("no q table", "no 'q_table'"),
+]
+
+
+def assert_one_line_error(result, cwd, message):
+    assert result.returncode == 2, (result.returncode, result.stderr)
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:") and message in lines[0], result.stderr
+    assert "Traceback" not in result.stderr and "this must never run" not in result.stdout + result.stderr
+    assert not os.path.exists(os.path.join(cwd, "runs"))
+
+
+@pytest.mark.parametrize("kind, message", BAD_FILES)
+def test_bad_oracle_checkpoint(run_script, kind, message):
+    path = bad_checkpoints(run_script.cwd)[kind]
+    assert_one_line_error(run_script(SCRIPT, "--oracle-path", str(path)), run_script.cwd, message)
+
+
+@pytest.mark.parametrize(
+    "flags, message",
+    [
+        (["--seed", "abc"], "--seed"),  # a wrong type: tyro's box, shortened to one line
+        (["--sed", "1"], "Unrecognized options"),
+        (["--oracle-path", "missing.pt"], "no such file"),
+        (["--evaluate", "missing.pt"], "no such file"),
+    ],
+)
+def test_bad_command_line(run_script, flags, message):
+    assert_one_line_error(run_script(SCRIPT, *flags), run_script.cwd, message)
+
+
+def test_oracle_path_is_used(run_script):
+    """A teacher from a file replaces exact Q*: here a deliberately bad one whose best action is always 'up'."""
+    q = np.zeros((30, 4))
+    q[:, 0] = 1.0
+    torch.save({"q_table": torch.tensor(q), "env_id": "KnoxStoneMaze-v0"}, run_script.cwd / "up.pt")
+    result = run_script(SCRIPT, "--oracle-path", "up.pt", *TINY)
+    assert result.returncode == 0, result.stderr
+    summary = json.load(open(os.path.join(only_run_dir(run_script.cwd), "summary.json")))
+    assert summary["eval/oracle_episode_length"] == 200  # 'up' from S hits the border forever
+    assert summary["sleep/expert_transitions"] == 0  # nobody reached the goal in time
+    assert summary["eval/tamer_episode_length"] == 200
+
+
+def test_save_load_same_actions(tmp_path):
+    torch.manual_seed(0)
+    net = inform.QNetwork(30, 4)
+    inform.save_network(str(tmp_path / "q.pt"), net, env_id="KnoxStoneMaze-v0")
+    loaded = inform.load_q_network(str(tmp_path / "q.pt"))
+    obs = torch.eye(30)
+    assert torch.equal(net(obs), loaded(obs))
+    assert np.array_equal(inform.greedy_actions(net, "cpu"), inform.greedy_actions(loaded, "cpu"))
+
+
+def test_evaluate_mode_reproduces_the_run(run_script):
+    assert run_script(SCRIPT, *TINY).returncode == 0
+    run_dir = only_run_dir(run_script.cwd)
+    summary = json.load(open(os.path.join(run_dir, "summary.json")))
+    for name, policy in (("tamer_h.pt", "tamer"), ("inform_q.pt", "inform")):
+        result = run_script(SCRIPT, "--evaluate", os.path.join(run_dir, name))
+        assert result.returncode == 0, result.stderr
+        metrics = json.loads(result.stdout)
+        for key in ("episode_length", "wall/{}_episode_length", "start_set/{}_success_rate"):
+            ours = "eval/" + (key.format("policy") if "{}" in key else f"policy_{key}")
+            theirs = "eval/" + (key.format(policy) if "{}" in key else f"{policy}_{key}")
+            assert metrics[ours] == summary[theirs], (name, key)
+    assert len(glob.glob(os.path.join(run_script.cwd, "runs", "*"))) == 1  # evaluating writes no run
+
+
+@pytest.mark.parametrize("phase, wait_for", [("tamer", "[tamer]"), ("sleep", "[sleep]")])
+def test_sigint_ends_the_run_cleanly(tmp_path, phase, wait_for):
+    import signal
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen(
+        [sys.executable, os.path.join(os.path.dirname(os.path.dirname(__file__)), SCRIPT), "--sleep-gradient-steps",
+         "100000", "--sleep-eval-frequency", "500"],
+        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    for line in proc.stdout:
+        if line.startswith(wait_for):
+            break
+    proc.send_signal(signal.SIGINT)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and "Traceback" not in stderr, stderr
+    run_dir = only_run_dir(tmp_path)
+    summary = json.load(open(os.path.join(run_dir, "summary.json")))
+    assert summary["status"] == "interrupted" and summary["phase"] == phase
+    assert os.path.exists(os.path.join(run_dir, "tamer_h.pt")) == (phase == "sleep")  # what finished is saved
+    assert not os.path.exists(os.path.join(run_dir, "inform_q.pt"))
+
+
+def test_divergence_is_reported(run_script):
+    result = run_script(SCRIPT, *TINY[:4], "--sleep-gradient-steps", "1000", "--sleep-learning-rate", "1e9")
+    assert result.returncode == 1
+    assert "Traceback" not in result.stderr and "diverged" in result.stderr and "step" in result.stderr
+    summary = json.load(open(os.path.join(only_run_dir(run_script.cwd), "summary.json")))
+    assert summary["status"] == "diverged" and summary["phase"] == "sleep"
