@@ -27,6 +27,7 @@ import json
 import os
 import sys
 import time
+import warnings
 from dataclasses import asdict, dataclass
 
 import gymnasium as gym
@@ -134,7 +135,9 @@ def find_newest_reward(runs_dir: str) -> str:
 
 def load_checkpoint(path: str, what: str) -> dict:
     try:
-        ckpt = torch.load(path, weights_only=True, map_location="cpu")
+        with warnings.catch_warnings():  # a foreign pickle warns before it fails; the error line says enough
+            warnings.simplefilter("ignore")
+            ckpt = torch.load(path, weights_only=True, map_location="cpu")
     except Exception as e:  # a corrupt or foreign file raises many kinds of errors; one line names it
         raise ValueError(f"cannot read {what} {path} as a torch checkpoint ({one_line(e)})") from None
     if not isinstance(ckpt, dict):
@@ -439,9 +442,9 @@ def main(args: Args, source: dict) -> dict:
     summary.update(shape)
     summary.update(
         {
-            "reward/source": source["path"],
+            "reward/source": os.path.abspath(source["path"]),
             "reward/env_id": source["meta"].get("env_id"),
-            "reward/tamer_path": source["tamer_path"] if tamer_length is not None else None,
+            "reward/tamer_path": os.path.abspath(source["tamer_path"]) if tamer_length is not None else None,
             "seeds": seeds,
             **times,
             "wall_time_s": time.time() - run_start,
