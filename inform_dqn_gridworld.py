@@ -420,7 +420,7 @@ def load_q_network(path: str) -> QNetwork:
 
 def forward_phase(args, env, q_star, h_net, buffer, evaluator, writer, device) -> dict:
     """TAMER ("day"): act on H, get feedback by Eq. 4, fit H by Eq. 1, remember and tag every transition."""
-    h_optimizer = torch.optim.Adam(h_net.parameters(), lr=args.tamer_learning_rate)
+    h_optimizer = torch.optim.Adam(h_net.parameters(), lr=args.tamer_learning_rate, fused=True)
     progress = Progress("tamer", args.tamer_total_timesteps)
     positives = episode_positives = episode_length = episode_start = 0
     start_time = time.time()
@@ -488,7 +488,7 @@ def sleep_phase(args, buffer, q_net, target_net, evaluator, writer, device) -> d
         print("warning: no successful episode in the buffer, so the sleep phase has no expert data and is skipped; "
               "raise --tamer-total-timesteps", file=sys.stderr)  # fmt: skip
         return stats
-    q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_learning_rate)
+    q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_learning_rate, fused=True)
     is_expert = torch.arange(2 * args.sleep_batch_size, device=device) < args.sleep_batch_size
     progress = Progress("sleep", args.sleep_gradient_steps)
     start_time = time.time()
