@@ -335,23 +335,20 @@ def reward_figure(table: np.ndarray, title: str):
     """The recovered reward drawn over the maze: each free cell split into four triangles, one per action."""
     fig = Figure(figsize=(6, 6))
     ax = fig.subplots()
-    lim = max(float(np.abs(table).max()), 1e-8)
+    visited = np.arange(gridworld_env.N_CELLS) != gridworld_env.GOAL  # the agent never acts in G (terminal)
+    lim = max(float(np.abs(table[visited]).max()), 1e-8)
     cmap, norm = matplotlib.colormaps["coolwarm"], matplotlib.colors.Normalize(-lim, lim)
     # triangle corners for up, down, left, right, in (x, y) with y pointing down
     corners = {0: [(0, 0), (1, 0)], 1: [(0, 1), (1, 1)], 2: [(0, 0), (0, 1)], 3: [(1, 0), (1, 1)]}
     for cell, (r, c) in enumerate(gridworld_env.CELLS):
-        for a, ((x1, y1), (x2, y2)) in corners.items():
-            tri = [(c + 0.5, r + 0.5), (c + x1, r + y1), (c + x2, r + y2)]
-            ax.add_patch(Polygon(tri, facecolor=cmap(norm(table[cell, a])), edgecolor="white", lw=0.5))
-        ax.text(
-            c + 0.5,
-            r + 0.5,
-            "G" if cell == gridworld_env.GOAL else "S" if cell == gridworld_env.START else "",
-            ha="center",
-            va="center",
-            fontsize=12,
-            weight="bold",
-        )
+        if cell == gridworld_env.GOAL:
+            ax.add_patch(Rectangle((c, r), 1, 1, facecolor="0.85"))
+        else:
+            for a, ((x1, y1), (x2, y2)) in corners.items():
+                tri = [(c + 0.5, r + 0.5), (c + x1, r + y1), (c + x2, r + y2)]
+                ax.add_patch(Polygon(tri, facecolor=cmap(norm(table[cell, a])), edgecolor="white", lw=0.5))
+        label = "G" if cell == gridworld_env.GOAL else "S" if cell == gridworld_env.START else ""
+        ax.text(c + 0.5, r + 0.5, label, ha="center", va="center", fontsize=12, weight="bold")
     for r, c in gridworld_env.BLOCKED:
         ax.add_patch(Rectangle((c, r), 1, 1, facecolor="0.25"))
     for wall in gridworld_env.PLAIN_WALLS:
