@@ -316,8 +316,8 @@ def interpolate_curves(runs: list[dict], grid: np.ndarray) -> np.ndarray:
     return np.stack([np.interp(grid, run["steps"], run["lengths"]) for run in runs])
 
 
-def fig6(curves: dict, optimum: int, tamer_length: float | None, title: str) -> Figure:
-    """Paper Fig. 6: mean and spread (min-max band, +-1 std line band) of episode length against env steps."""
+def fig6(curves: dict, optimum: int, tamer_length: float | None, title: str, tamer_label: str) -> Figure:
+    """Paper Fig. 6: mean and spread (+-1 std and min-max bands) over seeds of episode length against env steps."""
     fig = Figure(figsize=(7, 5), layout="constrained")
     ax = fig.subplots()
     colours = {"recovered": "tab:blue", "env": "tab:orange"}
@@ -329,10 +329,9 @@ def fig6(curves: dict, optimum: int, tamer_length: float | None, title: str) -> 
         ax.fill_between(grid, np.maximum(mean - std, 0), mean + std, color=colours[arm], alpha=0.25, lw=0)
     ax.axhline(optimum, color="black", ls="--", lw=1, label=f"optimum ({optimum})")
     if tamer_length is not None:
-        ax.axhline(
-            tamer_length, color="tab:red", ls=":", lw=1.5, label=f"TAMER, untrained on the wall ({tamer_length:g})"
-        )
-    ax.set(xlabel="environment steps", ylabel="episode length", title=title, ylim=(0, 210))
+        ax.axhline(tamer_length, color="tab:red", ls=":", lw=1.5, label=f"{tamer_label} ({tamer_length:g})")
+    ax.set(xlabel="environment steps", ylabel="episode length", ylim=(0, 210))
+    ax.set_title(f"{title}\nline: mean over seeds; bands: +-1 std (dark), min-max (light)", fontsize=10)
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, fontsize=8)
     ax.grid(alpha=0.3)
     return fig
@@ -421,10 +420,12 @@ def main(args: Args, source: dict) -> dict:
         curves[arm] = (grid, interpolate_curves(runs[arm], grid))
         for step, mean in zip(grid, curves[arm][1].mean(0), strict=True):
             writer.add_scalar(f"qlearning/{arm}/episode_length", mean, int(step))
-    figure = fig6(curves, optimum, tamer_length, f"{args.env_id}: Q-learning, {len(seeds)} seeds")
+    tamer_label = "TAMER, untrained on the wall" if variant == "wall" else "TAMER"
+    figure = fig6(curves, optimum, tamer_length, f"{args.env_id}: Q-learning, {len(seeds)} seeds", tamer_label)
     figure.savefig(f"{run_dir}/fig6.png", dpi=120)
 
-    summary = {"optimum_episode_length": optimum, "eval/wall/tamer_episode_length": tamer_length}
+    tamer_key = "eval/wall/tamer_episode_length" if variant == "wall" else "eval/tamer_episode_length"
+    summary = {"optimum_episode_length": optimum, tamer_key: tamer_length}
     for arm in ARMS:
         per_seed = [run_metrics(run, optimum, args.final_window) for run in runs[arm]]
         for metric in (*METRICS, "final_greedy_episode_length"):
