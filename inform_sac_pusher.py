@@ -107,7 +107,7 @@ class Args:
     """alpha of Eq. 4 at the end of the forward phase (alpha rises linearly: the teacher gets stricter)"""
 
     # Sleep phase: offline IQ-Learn (Eq. 2), no environment steps
-    sleep_gradient_steps: int = 50000
+    sleep_gradient_steps: int = 30000
     """gradient steps of the sleep phase"""
     sleep_batch_size: int = 256
     """transitions from the success set, and as many from the whole buffer, per step"""

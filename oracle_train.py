@@ -53,7 +53,7 @@ class Args:
     """if toggled, cuda will be used when available"""
     save_model: bool = True
     """whether to write the oracle checkpoint to `output_path`"""
-    torch_threads: int = 1
+    num_threads: int = 1
     """number of torch CPU threads (1 keeps a second core free)"""
 
     # Oracle (SAC) arguments
@@ -254,7 +254,7 @@ def oracle_checkpoint(actor, qf, args: Args, obs_dim, act_dim, action_low, actio
 
 
 def train_sac(args: Args) -> None:
-    torch.set_num_threads(args.torch_threads)
+    torch.set_num_threads(args.num_threads)
     device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
     random.seed(args.seed)
     np.random.seed(args.seed)
