@@ -12,12 +12,15 @@ and scalars are logged every `log_frequency` steps only. Training state is check
 atomically every `checkpoint_frequency` steps; `--resume <run_dir>/training_state.pt`
 continues an interrupted run.
 
-Only `--env-id Pusher-v5` / `Pusher-v4` (SAC) for now; maze oracles can be added as another
-branch of `main` keyed on the env id.
+Maze (`--env-id KnoxStoneMaze-v0` and the other ids of gridworld_env): `--method value-iteration`
+(the default) saves the exact Q*; `--method q-learning` saves the Q-table of a tabular Q-learner
+after `--maze-episodes` episodes, a less than perfect teacher like the authors' half-trained table.
+The checkpoint holds the 30 x 4 `q_table`, which `inform_dqn_gridworld.py --oracle-path` loads.
 
-Example:
+Examples:
     python oracle_train.py --env-id Pusher-v5 --seed 1 --total-timesteps 200000 \
         --output-path oracles/Pusher-v5__sac_oracle.pt
+    python oracle_train.py --env-id KnoxStoneMaze-v0 --method q-learning --maze-episodes 50
 """
 
 import json
@@ -36,7 +39,12 @@ import torch.nn.functional as F
 import tyro
 from torch.utils.tensorboard import SummaryWriter
 
-SUPPORTED_ENV_IDS = ("Pusher-v5", "Pusher-v4")
+import gridworld_env
+
+PUSHER_IDS = ("Pusher-v5", "Pusher-v4")
+MAZE_IDS = ("KnoxStoneMaze-v0", "KnoxStoneMazeWall-v0", "KnoxStoneMazeStartSet-v0")
+SUPPORTED_ENV_IDS = PUSHER_IDS + MAZE_IDS
+METHODS = {"pusher": ("sac",), "maze": ("value-iteration", "q-learning")}
 LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
 SUCCESS_DISTANCE = 0.08
 
@@ -97,14 +105,29 @@ class Args:
     """write the resumable training state every this many steps"""
     resume: str | None = None
     """path of a training_state.pt to continue from (same run directory)"""
-    output_path: str = "oracles/Pusher-v5__sac_oracle.pt"
-    """where the final oracle checkpoint is written"""
+    output_path: str | None = None
+    """where the final oracle checkpoint is written (default: oracles/{env_id}__{method}_oracle.pt)"""
+
+    # Maze oracles
+    method: str | None = None
+    """sac (Pusher); value-iteration (exact Q*) or q-learning (an imperfect teacher) on the maze; default: the first"""
+    maze_episodes: int = 50
+    """episodes of the maze's tabular Q-learning (--method q-learning)"""
+    maze_alpha: float = 0.2
+    """step size of the maze's tabular Q-learning"""
+    maze_epsilon: float = 0.1
+    """exploration rate of the maze's tabular Q-learning"""
 
 
 def validate_args(args: Args) -> str | None:
     """Return a one-line error message, or None when the arguments are usable."""
     if args.env_id not in SUPPORTED_ENV_IDS:
         return f"unknown --env-id {args.env_id!r}; supported: {', '.join(SUPPORTED_ENV_IDS)}"
+    methods = METHODS["pusher" if args.env_id in PUSHER_IDS else "maze"]
+    if args.method is not None and args.method not in methods:
+        return f"--method {args.method} does not apply to {args.env_id}; choose one of {', '.join(methods)}"
+    if args.maze_episodes < 1 or not 0.0 < args.maze_alpha <= 1.0 or not 0.0 <= args.maze_epsilon <= 1.0:
+        return "--maze-episodes must be >= 1, --maze-alpha in (0, 1] and --maze-epsilon in [0, 1]"
     if args.env_id == "Pusher-v4":
         import mujoco
 
@@ -478,14 +501,71 @@ def train_sac(args: Args) -> None:
     writer.close()
 
 
+def maze_q_learning(env: gym.Env, args: Args) -> tuple[np.ndarray, int]:
+    """Tabular Q-learning on the maze's own reward; ties broken at random. Returns (Q table, env steps)."""
+    rng = np.random.default_rng(args.seed)
+    q = np.zeros((gridworld_env.N_CELLS, gridworld_env.N_ACTIONS))
+    steps = 0
+    obs, _ = env.reset(seed=args.seed)
+    for _ in range(args.maze_episodes):
+        s, done = int(obs.argmax()), False
+        while not done:
+            best = np.flatnonzero(q[s] == q[s].max())
+            a = (
+                int(rng.integers(gridworld_env.N_ACTIONS))
+                if rng.random() < args.maze_epsilon
+                else int(rng.choice(best))
+            )
+            obs, reward, terminated, truncated, _ = env.step(a)
+            s_next = int(obs.argmax())
+            q[s, a] += args.maze_alpha * (reward + args.gamma * (1.0 - terminated) * q[s_next].max() - q[s, a])
+            s, done, steps = s_next, terminated or truncated, steps + 1
+        obs, _ = env.reset()
+    return q, steps
+
+
+def train_maze(args: Args) -> None:
+    """A maze teacher: exact Q* by value iteration, or a tabular Q-learner's table; saved as a 30 x 4 q_table."""
+    env = gym.make(args.env_id)
+    variant = env.unwrapped.variant
+    start = time.time()
+    if args.method == "q-learning":
+        q, steps = maze_q_learning(env, args)
+    else:
+        q, steps = gridworld_env.optimal_q(variant, args.gamma), 0
+    length = gridworld_env.greedy_episode_length(q.argmax(1), variant)
+    ckpt = {
+        "algorithm": args.method,
+        "env_id": args.env_id,
+        "obs_shape": [gridworld_env.N_CELLS],
+        "n_actions": gridworld_env.N_ACTIONS,
+        "q_table": torch.tensor(q),
+        "gamma": args.gamma,
+        "training_steps": steps,
+        "training_seed": args.seed,
+        "evaluation": {"episode_length": float(length)},
+    }
+    print(f"[oracle] {args.method} on {args.env_id}: {steps} env steps, greedy episode length {length} "
+          f"({time.time() - start:.1f}s)", flush=True)  # fmt: skip
+    if args.save_model:
+        os.makedirs(os.path.dirname(os.path.abspath(args.output_path)), exist_ok=True)
+        atomic_save(ckpt, args.output_path)
+        print(f"oracle written to {args.output_path}", flush=True)
+
+
 def main() -> None:
     args = tyro.cli(Args)
     error = validate_args(args)
     if error is not None:
         print(f"error: {error}", file=sys.stderr)
         sys.exit(2)
-    if args.env_id.startswith("Pusher"):
+    is_pusher = args.env_id in PUSHER_IDS
+    args.method = args.method or ("sac" if is_pusher else "value-iteration")
+    args.output_path = args.output_path or os.path.join("oracles", f"{args.env_id}__{args.method}_oracle.pt")
+    if is_pusher:
         train_sac(args)
+    else:
+        train_maze(args)
 
 
 if __name__ == "__main__":
