@@ -107,7 +107,7 @@ class Args:
     """alpha of Eq. 4 at the end of the forward phase (alpha rises linearly: the teacher gets stricter)"""
 
     # Sleep phase: offline IQ-Learn (Eq. 2), no environment steps
-    sleep_gradient_steps: int = 30000
+    sleep_gradient_steps: int = 5000
     """gradient steps of the sleep phase"""
     sleep_batch_size: int = 256
     """transitions from the success set, and as many from the whole buffer, per step"""
@@ -129,7 +129,7 @@ class Args:
     """episodes of each final evaluation (deterministic and sampled actions)"""
     eval_frequency: int = 2000
     """forward-phase environment steps between evaluations of TAMER (curves like Fig. 3)"""
-    sleep_eval_frequency: int = 5000
+    sleep_eval_frequency: int = 1000
     """sleep-phase gradient steps between evaluations of INFORM"""
     periodic_eval_episodes: int = 5
     """episodes of each evaluation during the phases"""
