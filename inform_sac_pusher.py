@@ -594,8 +594,10 @@ def make_run_dir(run_name: str) -> str:
 
 
 def write_json_atomic(path: str, data: dict) -> None:
+    # strict JSON: a metric that does not exist in this run (e.g. no success episodes) is null, not NaN
+    data = {k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in data.items()}
     with open(path + ".tmp", "w") as f:
-        json.dump(data, f, indent=2)
+        json.dump(data, f, indent=2, allow_nan=False)
     os.replace(path + ".tmp", path)
 
 
