@@ -351,3 +351,27 @@ def test_smoke_pusher_v4(tmp_path):
     (run_dir,) = glob.glob(str(tmp_path / "runs" / "*"))
     with open(os.path.join(run_dir, "summary.json")) as f:
         assert json.load(f)["status"] == "completed"
+
+
+def test_oracle_train_pusher_smoke_and_resume(tmp_path):
+    """oracle_train.py writes a checkpoint inform_sac_pusher.py accepts; --resume continues from the saved state."""
+    script = os.path.join(REPO, "oracle_train.py")
+    flags = ["--env-id", "Pusher-v5", "--learning-starts", "200", "--batch-size", "64", "--hidden-size", "32"]
+    flags += ["--eval-frequency", "200", "--eval-episodes", "1", "--final-eval-episodes", "2"]
+    flags += ["--checkpoint-frequency", "200", "--log-frequency", "100", "--output-path", "oracle.pt"]
+    proc = subprocess.run(
+        [sys.executable, script, *flags, "--total-timesteps", "400"], cwd=tmp_path, capture_output=True, text=True
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    ckpt = isp.load_oracle_checkpoint(str(tmp_path / "oracle.pt"), "Pusher-v5", 23, 7)
+    assert ckpt["training_steps"] == 400 and ckpt["evaluation"]["episodes"] == 2
+    (state,) = glob.glob(str(tmp_path / "runs" / "*" / "training_state.pt"))
+    proc = subprocess.run(
+        [sys.executable, script, *flags, "--total-timesteps", "600", "--resume", state],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "resumed from" in proc.stdout
+    assert torch.load(tmp_path / "oracle.pt", weights_only=True)["training_steps"] == 600
