@@ -51,13 +51,16 @@ def completed_runs(runs_dir: str, pattern: str) -> list[str]:
     return [by_seed[s] for s in sorted(by_seed)]
 
 
-def curves(run_dirs: list[str], tag: str) -> tuple[np.ndarray, np.ndarray]:
-    """One scalar tag from several runs on a common step grid: (steps, values[run, step])."""
+def curves(run_dirs: list[str], tag: str, last_step_arg: str) -> tuple[np.ndarray, np.ndarray]:
+    """One scalar tag from several runs on a common step grid: (steps, values[run, step]), up to the phase's
+    budget (the run's args[last_step_arg]); a final value some scripts log past it is left out."""
     series = []
     for run_dir in run_dirs:
+        with open(os.path.join(run_dir, "summary.json")) as f:
+            last_step = json.load(f)["args"][last_step_arg]
         acc = EventAccumulator(run_dir, size_guidance={"scalars": 0})
         acc.Reload()
-        events = {e.step: e.value for e in acc.Scalars(tag)}  # a repeated step keeps its last value
+        events = {e.step: e.value for e in acc.Scalars(tag) if e.step <= last_step}  # a repeated step: the last
         series.append((np.array(sorted(events)), np.array([events[s] for s in sorted(events)])))
     grid = series[0][0]
     return grid, np.stack([np.interp(grid, steps, values) for steps, values in series])
@@ -73,9 +76,9 @@ def fig3(run_dirs: list[str], metric: str, ylabel: str, path: str, title: str) -
     """TAMER against env steps (left), INFORM against sleep steps (right), the oracle as a line in both."""
     fig = Figure(figsize=(11, 4))
     day, night = fig.subplots(1, 2, sharey=True)
-    steps, tamer = curves(run_dirs, f"eval/tamer_{metric}")
+    steps, tamer = curves(run_dirs, f"eval/tamer_{metric}", "tamer_total_timesteps")
     band(day, steps, tamer, "TAMER", COLOURS["tamer"])
-    sleep_steps, inform = curves(run_dirs, f"eval/inform_{metric}")
+    sleep_steps, inform = curves(run_dirs, f"eval/inform_{metric}", "sleep_gradient_steps")
     band(night, sleep_steps, inform, "INFORM", COLOURS["inform"])
     oracle = np.mean([json.load(open(os.path.join(d, "summary.json")))[f"eval/oracle_{metric}"] for d in run_dirs])
     for ax in (day, night):
