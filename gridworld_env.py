@@ -177,12 +177,15 @@ class KnoxStoneMazeEnv(gym.Env):
         return img
 
 
+ENV_IDS = {  # every id this module registers, with its constructor arguments
+    "KnoxStoneMaze-v0": {"variant": "plain"},
+    "KnoxStoneMazeWall-v0": {"variant": "wall"},
+    "KnoxStoneMazeStartSet-v0": {"variant": "plain", "start_cells": START_SET},
+}
+
+
 def register_envs() -> None:
-    for env_id, kwargs in [
-        ("KnoxStoneMaze-v0", {"variant": "plain"}),
-        ("KnoxStoneMazeWall-v0", {"variant": "wall"}),
-        ("KnoxStoneMazeStartSet-v0", {"variant": "plain", "start_cells": START_SET}),
-    ]:
+    for env_id, kwargs in ENV_IDS.items():
         if env_id not in gym.registry:
             gym.register(env_id, entry_point=KnoxStoneMazeEnv, kwargs=kwargs, max_episode_steps=200)
 

@@ -31,7 +31,7 @@ from torch.utils.tensorboard import SummaryWriter
 
 import gridworld_env
 
-MAZE_IDS = ("KnoxStoneMaze-v0", "KnoxStoneMazeWall-v0", "KnoxStoneMazeStartSet-v0")
+MAZE_IDS = tuple(gridworld_env.ENV_IDS)
 POLICIES = ("oracle", "tamer", "inform")
 
 

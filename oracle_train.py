@@ -42,7 +42,7 @@ from torch.utils.tensorboard import SummaryWriter
 import gridworld_env
 
 PUSHER_IDS = ("Pusher-v5", "Pusher-v4")
-MAZE_IDS = ("KnoxStoneMaze-v0", "KnoxStoneMazeWall-v0", "KnoxStoneMazeStartSet-v0")
+MAZE_IDS = tuple(gridworld_env.ENV_IDS)
 SUPPORTED_ENV_IDS = PUSHER_IDS + MAZE_IDS
 METHODS = {"pusher": ("sac",), "maze": ("value-iteration", "q-learning")}
 LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
