@@ -12,6 +12,8 @@ on the environment reward (`--train-oracle`).
 """
 
 import atexit
+import contextlib
+import io
 import json
 import math
 import os
@@ -137,6 +139,9 @@ class Args:
     """episodes per policy on the obstacle variant, all from the run's initial state, sampled actions"""
     log_frequency: int = 1000
     """steps between scalar logs (losses, SPS, feedback)"""
+    evaluate: str | None = None
+    """re-evaluate a saved tamer_actor.pt, inform_actor.pt or oracle checkpoint (plain env and obstacle test,
+    --eval-episodes, --obstacle-episodes), print the metrics as JSON, train and write nothing"""
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -191,7 +196,7 @@ def load_oracle_checkpoint(path: str, env_id: str, obs_dim: int, act_dim: int) -
     return ckpt
 
 
-def check_args(args: Args) -> dict | None:
+def check_args(args: Args, load_oracle: bool = True) -> dict | None:
     """Reject bad flag values before anything is written; returns the oracle checkpoint to use, if any."""
     if args.env_id not in ENV_IDS:
         raise ValueError(f"unknown --env-id {args.env_id!r}; this script trains on one of {', '.join(ENV_IDS)}")
@@ -251,6 +256,8 @@ def check_args(args: Args) -> dict | None:
             f"--tamer-batch-size ({args.tamer_batch_size}) and --sleep-batch-size ({args.sleep_batch_size}) "
             f"must not exceed --tamer-total-timesteps ({args.tamer_total_timesteps}), the size of the buffer"
         )
+    if not load_oracle:
+        return None
     obs_dim, act_dim = env_shapes(args.env_id)
     if args.oracle_path is not None and args.train_oracle:
         raise ValueError("--oracle-path and --train-oracle exclude each other; pass one of them")
@@ -601,6 +608,12 @@ def write_json_atomic(path: str, data: dict) -> None:
     os.replace(path + ".tmp", path)
 
 
+def save_atomic(obj: dict, path: str) -> None:
+    """torch.save to a temporary file, then rename: an interrupted save never leaves a half-written checkpoint."""
+    torch.save(obj, path + ".tmp")
+    os.replace(path + ".tmp", path)
+
+
 def state_dict_cpu(net: nn.Module) -> dict:
     return {k: v.detach().cpu().clone() for k, v in net.state_dict().items()}
 
@@ -609,7 +622,7 @@ def save_actor(path: str, actor: Actor, **extra) -> None:
     kwargs = {"obs_dim": actor.fc1.in_features, "act_dim": actor.fc_mean.out_features, "hidden": actor.fc1.out_features}
     low = (actor.action_bias - actor.action_scale).cpu()
     high = (actor.action_bias + actor.action_scale).cpu()
-    torch.save(
+    save_atomic(
         {"state_dict": state_dict_cpu(actor), "kwargs": kwargs, "action_low": low, "action_high": high, **extra}, path
     )
 
@@ -618,7 +631,7 @@ def save_critic(path: str, q_net: QEnsemble, **extra) -> None:
     fc1 = q_net.fc1.weight
     kwargs = {"obs_dim": None, "act_dim": None, "hidden": fc1.shape[2], "n": q_net.n}
     kwargs.update(extra.pop("dims"))
-    torch.save({"state_dict": state_dict_cpu(q_net), "kwargs": kwargs, **extra}, path)
+    save_atomic({"state_dict": state_dict_cpu(q_net), "kwargs": kwargs, **extra}, path)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -703,99 +716,79 @@ def oracle_from_checkpoint(ckpt: dict, device: torch.device):
 
 
 # ---------------------------------------------------------------------------------------------------------------
+# the phases of Algorithm 1
 
 
-def main(args: Args, oracle_ckpt: dict | None) -> dict:
-    run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
-    run_start = time.time()
-    random.seed(args.seed)
-    np.random.seed(args.seed)
-    torch.manual_seed(args.seed)
-    torch.backends.cudnn.deterministic = args.torch_deterministic
-    if args.torch_deterministic:
-        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # CUDA matmuls refuse determinism without it
-    torch.use_deterministic_algorithms(args.torch_deterministic)
-    torch.set_num_threads(args.num_threads)
-    device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
+class Diverged(Exception):
+    """The sleep loss became NaN or inf."""
 
-    run_dir = make_run_dir(run_name)
-    writer = SummaryWriter(run_dir)
-    writer.add_text(
-        "hyperparameters",
-        "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
-    )
-    print(f"run dir: {run_dir}", flush=True)
-    times = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0, "time/eval_s": 0.0}
-    sps = {}
-    env = make_env(args.env_id, args.seed)
-    eval_env = make_env(args.env_id, args.seed)
-    obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
-    low, high = env.action_space.low, env.action_space.high
-    eval_gen = torch.Generator().manual_seed(args.seed + 12345)
 
-    def fixed_or_random(base: int):
-        # fixed start: every episode resets with the run's seed; random starts: a fresh seed per episode
-        return (lambda ep: args.seed) if not args.random_starts else (lambda ep: base + ep)
+class ReplayBuffer:
+    """Every forward-phase transition (s, a, s', h, terminated), preallocated, and the success tag of its episode."""
 
-    def run_eval(name: str, actor: Actor, step: int, episodes: int, final: bool = False) -> dict:
+    def __init__(self, capacity: int, obs_dim: int, act_dim: int, device: torch.device):
+        self.obs = torch.zeros(capacity, obs_dim, device=device)
+        self.next_obs = torch.zeros(capacity, obs_dim, device=device)
+        self.actions = torch.zeros(capacity, act_dim, device=device)
+        self.feedback = torch.zeros(capacity, device=device)
+        self.terminated = torch.zeros(capacity, device=device)
+        self.success = torch.zeros(capacity, dtype=torch.bool, device=device)
+        self.episodes: list[tuple[int, int, float]] = []  # (first step, end step, final object-goal distance)
+
+    def tag_episode(self, start: int, end: int, distance: float, success_distance: float) -> bool:
+        """Tag the whole trajectory at its end: a success if the object ended within `success_distance`."""
+        self.success[start:end] = distance < success_distance
+        self.episodes.append((start, end, distance))
+        return distance < success_distance
+
+    def expert_indices(self, fallback_fraction: float = 0.1) -> tuple[torch.Tensor, bool]:
+        """The success set's transitions; with no success, those of the episodes that ended closest to the goal."""
+        idx = self.success.nonzero().squeeze(-1)
+        if idx.numel() > 0:
+            return idx, False
+        k = max(1, int(len(self.episodes) * fallback_fraction))
+        closest = sorted(self.episodes, key=lambda e: e[2])[:k]
+        return torch.cat([torch.arange(s, e, device=self.success.device) for s, e, _ in closest]), True
+
+
+class Evaluator:
+    """Evaluates a policy on the plain env with deterministic and sampled actions; logs and keeps eval/{name}_*.
+
+    Initial states follow the run's protocol: the run's seed for every episode (fixed start), or a fresh seed per
+    episode (`--random-starts`), the same episodes at every evaluation."""
+
+    def __init__(self, args: Args, writer: SummaryWriter | None):
+        self.env = make_env(args.env_id, args.seed)
+        self.generator = torch.Generator().manual_seed(args.seed + 12345)  # sampled actions, off the training RNG
+        self.writer, self.seed, self.random_starts = writer, args.seed, args.random_starts
+        self.success_distance = args.success_distance
+        self.seconds = 0.0
+        self.final: dict[str, float] = {}  # the latest value of every tag
+
+    def reset_seed(self, episode: int) -> int:
+        return 1_000_000 + 1000 * self.seed + episode if self.random_starts else self.seed
+
+    def __call__(self, name: str, actor: Actor, step: int, episodes: int) -> dict:
         t = time.time()
         results = {}
         for deterministic, suffix in ((True, ""), (False, "_sampled")):
             res = evaluate(
-                actor,
-                eval_env,
-                episodes,
-                fixed_or_random(1_000_000 + 1000 * args.seed),
-                deterministic,
-                eval_gen,
-                args.success_distance,
+                actor, self.env, episodes, self.reset_seed, deterministic, self.generator, self.success_distance
             )
             for key in ("return", "final_distance", "success_rate"):
-                tag = f"eval/{name}_{key}{suffix}"
-                writer.add_scalar(tag, res[key], step)
-                results[tag] = res[key]
-        times["time/eval_s"] += time.time() - t
+                results[f"eval/{name}_{key}{suffix}"] = res[key]
+        if self.writer is not None:
+            for tag, value in results.items():
+                self.writer.add_scalar(tag, value, step)
+        self.final.update(results)
+        self.seconds += time.time() - t
         return results
 
-    # ---- oracle: the simulated teacher (SPEC section 5)
-    t0 = time.time()
-    if oracle_ckpt is not None:
-        oracle_actor, oracle_qf = oracle_from_checkpoint(oracle_ckpt, device)
-        print(f"[oracle] loaded {oracle_ckpt['path']} ({oracle_ckpt.get('training_steps', '?')} SAC steps)", flush=True)
-    else:
-        print(f"[oracle] training SAC on the env reward for {args.oracle_total_timesteps} steps", flush=True)
-        oracle_actor, oracle_qf, sps["sps/oracle"] = train_oracle(args, writer, device)
-        if args.save_model:
-            torch.save(
-                {
-                    "algorithm": "sac",
-                    "env_id": args.env_id,
-                    "obs_shape": [obs_dim],
-                    "act_shape": [act_dim],
-                    "kwargs": {"obs_dim": obs_dim, "act_dim": act_dim, "hidden": args.hidden_size},
-                    "action_low": torch.as_tensor(low),
-                    "action_high": torch.as_tensor(high),
-                    "actor_state_dict": state_dict_cpu(oracle_actor),
-                    "qf_state_dict": state_dict_cpu(oracle_qf),
-                    "training_steps": args.oracle_total_timesteps,
-                    "training_seed": args.seed,
-                    "random_starts": args.oracle_random_starts,
-                },
-                f"{run_dir}/oracle.pt",
-            )
-    for p in (*oracle_actor.parameters(), *oracle_qf.parameters()):
-        p.requires_grad_(False)
-    times["time/oracle_s"] = time.time() - t0
-    final = run_eval("oracle", oracle_actor, 0, args.periodic_eval_episodes)
 
-    # ---- forward phase ("day"): TAMER with simulated feedback, every transition remembered
-    n = args.tamer_total_timesteps
-    buf_obs, buf_next = torch.zeros(n, obs_dim, device=device), torch.zeros(n, obs_dim, device=device)
-    buf_act, buf_h = torch.zeros(n, act_dim, device=device), torch.zeros(n, device=device)
-    buf_term = torch.zeros(n, device=device)
-    buf_success = torch.zeros(n, dtype=torch.bool, device=device)
-    episode_final_distances, episode_bounds = [], []
-
+def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer, evaluator, writer, device):
+    """The day: SAC-style TAMER (Eq. 1, gamma = 0) on the teacher's yes/no feedback (Eq. 4), all remembered."""
+    obs_dim, act_dim = buffer.obs.shape[1], buffer.actions.shape[1]
+    low, high = env.action_space.low, env.action_space.high
     h_net = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
     tamer_actor = Actor(obs_dim, act_dim, args.hidden_size, low, high).to(device)
     h_opt = torch.optim.Adam(h_net.parameters(), lr=args.tamer_q_lr)
@@ -805,9 +798,9 @@ def main(args: Args, oracle_ckpt: dict | None) -> dict:
     target_entropy = -float(act_dim)
     h_loss = torch.zeros((), device=device)
 
+    n = args.tamer_total_timesteps
+    print(f"[tamer] {n} env steps, feedback alpha {args.feedback_alpha_start} -> {args.feedback_alpha_end}", flush=True)
     progress = Progress("tamer", n)
-    t0 = time.time()
-    eval_before = times["time/eval_s"]
     reset_seed = None if args.random_starts else args.seed
     obs, _ = env.reset(seed=args.seed)
     obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
@@ -824,18 +817,16 @@ def main(args: Args, oracle_ckpt: dict | None) -> dict:
         with torch.no_grad():  # the teacher watches (s, a) and answers (Eq. 4)
             a_star = oracle_actor.get_action(obs_t.unsqueeze(0))[2][0]
             q_star = oracle_qf(obs_t.expand(2, -1), torch.stack([action_t, a_star])).min(0).values
-            buf_h[step] = oracle_feedback(q_star[0], q_star[1], alpha_t)
+            buffer.feedback[step] = oracle_feedback(q_star[0], q_star[1], alpha_t)
         next_obs, reward, terminated, truncated, info = env.step(action_t.cpu().numpy())
         next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
-        buf_obs[step], buf_next[step], buf_act[step], buf_term[step] = obs_t, next_t, action_t, float(terminated)
+        buffer.obs[step], buffer.next_obs[step], buffer.actions[step] = obs_t, next_t, action_t
+        buffer.terminated[step] = float(terminated)
         ep_return += float(reward)
         ep_length += 1
         if terminated or truncated or step == n - 1:
-            # tag the whole trajectory at episode end (a cut-off last episode is judged by where it stands)
-            success = final_distance(info) < args.success_distance
-            buf_success[ep_start : step + 1] = success
-            episode_final_distances.append(final_distance(info))
-            episode_bounds.append((ep_start, step + 1))
+            # a cut-off last episode is judged by where it stands
+            success = buffer.tag_episode(ep_start, step + 1, final_distance(info), args.success_distance)
             writer.add_scalar("charts/episodic_return", ep_return, step + 1)
             writer.add_scalar("charts/episodic_length", ep_length, step + 1)
             writer.add_scalar("charts/final_distance", final_distance(info), step + 1)
@@ -847,12 +838,12 @@ def main(args: Args, oracle_ckpt: dict | None) -> dict:
 
         if step >= args.tamer_learning_starts:
             idx = torch.randint(0, step + 1, (args.tamer_batch_size,), device=device)
-            h_loss = tamer_loss(h_net, buf_obs[idx], buf_act[idx], buf_h[idx])
+            h_loss = tamer_loss(h_net, buffer.obs[idx], buffer.actions[idx], buffer.feedback[idx])
             h_opt.zero_grad(set_to_none=True)
             h_loss.backward()
             h_opt.step()
             if step % args.tamer_policy_frequency == 0:
-                pi_loss, logp = actor_loss(h_net, tamer_actor, buf_obs[idx], log_alpha.detach().exp())
+                pi_loss, logp = actor_loss(h_net, tamer_actor, buffer.obs[idx], log_alpha.detach().exp())
                 pi_opt.zero_grad(set_to_none=True)
                 pi_loss.backward()
                 pi_opt.step()
@@ -862,7 +853,7 @@ def main(args: Args, oracle_ckpt: dict | None) -> dict:
                 alpha_loss.backward()
                 a_opt.step()
         if (step + 1) % args.log_frequency == 0 or step == n - 1:
-            positives = buf_h[: step + 1].sum().item()
+            positives = buffer.feedback[: step + 1].sum().item()
             writer.add_scalar("losses/tamer_loss", h_loss.item(), step + 1)
             writer.add_scalar("losses/tamer_entropy_coef", log_alpha.exp().item(), step + 1)
             writer.add_scalar("feedback/positive", positives, step + 1)
@@ -871,189 +862,348 @@ def main(args: Args, oracle_ckpt: dict | None) -> dict:
             writer.add_scalar("charts/SPS", progress.sps(step + 1), step + 1)
         if (step + 1) % args.eval_frequency == 0 or step == n - 1:
             t_eval = time.time()
-            res = run_eval("tamer", tamer_actor, step + 1, args.periodic_eval_episodes)
+            res = evaluator("tamer", tamer_actor, step + 1, args.periodic_eval_episodes)
             progress.excluded += time.time() - t_eval
             progress(step + 1, **{"return": last_return, "eval return": res["eval/tamer_return"]})
         else:
             progress(step + 1, **{"return": last_return})
-    times["time/tamer_s"] = time.time() - t0 - (times["time/eval_s"] - eval_before)
-    sps["sps/tamer"] = n / max(times["time/tamer_s"], 1e-9)
-    positives = int(buf_h.sum().item())
-    n_success_eps = sum(d < args.success_distance for d in episode_final_distances)
+
+    positives = int(buffer.feedback.sum().item())
+    n_success = sum(d < args.success_distance for _, _, d in buffer.episodes)
     print(
         f"[tamer] feedback +1 on {positives}/{n} steps ({positives / n:.1%}); "
-        f"{n_success_eps}/{len(episode_bounds)} episodes tagged success",
+        f"{n_success}/{len(buffer.episodes)} episodes tagged success",
         flush=True,
     )
+    stats = {
+        "feedback/positive": positives,
+        "feedback/steps": n,
+        "feedback/positive_rate": positives / n,
+        "sleep/success_episodes": int(n_success),
+        "sleep/episodes": len(buffer.episodes),
+    }
+    return h_net, tamer_actor, stats
 
-    # ---- sleep phase ("night"): offline IQ-Learn on the buffer, successful trajectories as the expert set
-    expert_idx = buf_success.nonzero().squeeze(-1)
-    expert_fallback = 0
-    if expert_idx.numel() == 0:
-        # no success at all: fall back to the 10% of episodes that ended closest to the goal (reported in summary)
-        expert_fallback = 1
-        k = max(1, len(episode_bounds) // 10)
-        best = np.argsort(episode_final_distances)[:k]
-        expert_idx = torch.cat([torch.arange(*episode_bounds[i], device=device) for i in best])
-        print(f"[sleep] warning: no successful episode; using the {k} closest episodes as the expert set", flush=True)
+
+def sleep_phase(args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator, writer, device):
+    """The night: offline IQ-Learn (Eq. 2) on the buffer, the successful trajectories as the expert set."""
+    expert_idx, fallback = buffer.expert_indices()
+    if fallback:
+        print(
+            f"[sleep] warning: no successful episode; using the {max(1, len(buffer.episodes) // 10)} episodes that "
+            "ended closest to the goal as the expert set",
+            flush=True,
+        )
+    print(f"[sleep] {expert_idx.numel()} expert transitions, {buffer.obs.shape[0]} in the buffer", flush=True)
+    obs_dim, act_dim = buffer.obs.shape[1], buffer.actions.shape[1]
     q_net = QEnsemble(obs_dim, act_dim, args.hidden_size, n=1).to(device)
     q_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=1).to(device)
     q_target.load_state_dict(q_net.state_dict())
-    inform_actor = Actor(obs_dim, act_dim, args.hidden_size, low, high).to(device)
+    inform_actor = Actor(
+        obs_dim, act_dim, args.hidden_size, tamer_actor.action_bias - tamer_actor.action_scale,
+        tamer_actor.action_bias + tamer_actor.action_scale,
+    ).to(device)  # fmt: skip
     if args.sleep_init_actor_from_tamer:
         inform_actor.load_state_dict(tamer_actor.state_dict())
     q_opt = torch.optim.Adam(q_net.parameters(), lr=args.sleep_q_lr)
     inf_opt = torch.optim.Adam(inform_actor.parameters(), lr=args.sleep_policy_lr)
-    B = args.sleep_batch_size
+
+    n, B, total = buffer.obs.shape[0], args.sleep_batch_size, args.sleep_gradient_steps
     is_expert = torch.cat([torch.zeros(B, dtype=torch.bool), torch.ones(B, dtype=torch.bool)]).to(device)
-    progress = Progress("sleep", args.sleep_gradient_steps)
-    t0 = time.time()
-    eval_before = times["time/eval_s"]
-    iq_terms = {}
-    for step in range(args.sleep_gradient_steps):
+    names = ("losses/iq_loss", "losses/iq_expert_term", "losses/iq_value_term", "losses/iq_chi2_term")
+    names += ("losses/inform_actor_loss",)
+    stats = {"sleep/expert_transitions": int(expert_idx.numel()), "sleep/expert_fallback": int(fallback)}
+    losses: dict[str, float] = {}
+    progress = Progress("sleep", total)
+    for step in range(total):
         replay = torch.randint(0, n, (B,), device=device)
         expert = expert_idx[torch.randint(0, expert_idx.numel(), (B,), device=device)]
         idx = torch.cat([replay, expert])
         loss, expert_term, value_term, chi2_term = iq_loss(
-            q_net,
-            q_target,
-            inform_actor,
-            buf_obs[idx],
-            buf_act[idx],
-            buf_next[idx],
-            buf_term[idx],
-            is_expert,
-            args.sleep_gamma,
-            args.sleep_temperature,
-            args.sleep_chi2_coef,
-        )
+            q_net, q_target, inform_actor, buffer.obs[idx], buffer.actions[idx], buffer.next_obs[idx],
+            buffer.terminated[idx], is_expert, args.sleep_gamma, args.sleep_temperature, args.sleep_chi2_coef,
+        )  # fmt: skip
         q_opt.zero_grad(set_to_none=True)
         loss.backward()
         q_opt.step()
-        pi_loss, _ = actor_loss(q_net, inform_actor, buf_obs[replay], args.sleep_temperature)
+        pi_loss, _ = actor_loss(q_net, inform_actor, buffer.obs[replay], args.sleep_temperature)
         inf_opt.zero_grad(set_to_none=True)
         pi_loss.backward()
         inf_opt.step()
         q_net.zero_grad(set_to_none=True)
         soft_update(q_target, q_net, args.tau)
-        if (step + 1) % args.log_frequency == 0 or step == args.sleep_gradient_steps - 1:
-            iq_terms = {
-                "losses/iq_loss": loss.item(),
-                "losses/iq_expert_term": expert_term.item(),
-                "losses/iq_value_term": value_term.item(),
-                "losses/iq_chi2_term": chi2_term.item(),
-                "losses/inform_actor_loss": pi_loss.item(),
-            }
-            for tag, value in iq_terms.items():
+
+        log_now = (step + 1) % args.log_frequency == 0 or step == total - 1
+        if log_now or (step + 1) % 100 == 0:  # one host sync per 100 steps to catch divergence
+            values = torch.stack([loss, expert_term, value_term, chi2_term, pi_loss.detach()]).tolist()
+            if not all(map(math.isfinite, values)):
+                last = ", ".join(f"{k.split('/')[1]} {v:.4g}" for k, v in losses.items())
+                raise Diverged(
+                    f"the sleep loss diverged (NaN or inf) by gradient step {step + 1}; last finite losses: "
+                    f"{last or 'none yet'}; try a lower --sleep-q-lr or --sleep-policy-lr"
+                )
+            losses = dict(zip(names, values, strict=True))
+        if log_now:
+            for tag, value in losses.items():
                 writer.add_scalar(tag, value, step + 1)
             writer.add_scalar("sleep/SPS", progress.sps(step + 1), step + 1)
-        if (step + 1) % args.sleep_eval_frequency == 0 or step == args.sleep_gradient_steps - 1:
+        if (step + 1) % args.sleep_eval_frequency == 0 or step == total - 1:
             t_eval = time.time()
-            res = run_eval("inform", inform_actor, step + 1, args.periodic_eval_episodes)
+            res = evaluator("inform", inform_actor, step + 1, args.periodic_eval_episodes)
             progress.excluded += time.time() - t_eval
-            progress(step + 1, **{"iq_loss": iq_terms.get("losses/iq_loss"), "eval return": res["eval/inform_return"]})
+            progress(step + 1, **{"iq_loss": losses.get("losses/iq_loss"), "eval return": res["eval/inform_return"]})
         else:
-            progress(step + 1, iq_loss=iq_terms.get("losses/iq_loss", float("nan")))
-    times["time/sleep_s"] = time.time() - t0 - (times["time/eval_s"] - eval_before)
-    sps["sps/sleep"] = args.sleep_gradient_steps / max(times["time/sleep_s"], 1e-9)
+            progress(step + 1, iq_loss=losses.get("losses/iq_loss", float("nan")))
+    return q_net, inform_actor, {**stats, **losses}
 
-    # ---- recover the reward (Eq. 3) on the buffer: mean over success vs failure transitions, for the record
+
+def recovered_reward_stats(args: Args, buffer: ReplayBuffer, q_net: QEnsemble, inform_actor: Actor) -> dict:
+    """Eq. 3 on the buffer: the mean recovered reward of success and of failure transitions, for the record."""
     reward_fn = RecoveredReward(q_net, inform_actor, args.sleep_gamma, args.sleep_temperature, samples=4)
-    r_all = reward_fn(buf_obs.cpu().numpy(), buf_act.cpu().numpy(), buf_next.cpu().numpy(), buf_term.cpu().numpy())
-    succ = buf_success.cpu().numpy()
-    reward_stats = {
+    b = [x.cpu().numpy() for x in (buffer.obs, buffer.actions, buffer.next_obs, buffer.terminated)]
+    r_all, succ = reward_fn(*b), buffer.success.cpu().numpy()
+    return {
         "sleep/recovered_reward_success_mean": float(r_all[succ].mean()) if succ.any() else float("nan"),
         "sleep/recovered_reward_failure_mean": float(r_all[~succ].mean()) if (~succ).any() else float("nan"),
     }
 
-    # ---- final evaluation on the plain env, then the obstacle robustness test
-    policies = {"oracle": oracle_actor, "tamer": tamer_actor, "inform": inform_actor}
-    print("[eval] final evaluation", flush=True)
-    for name, actor in policies.items():
-        final.update(run_eval(name, actor, args.tamer_total_timesteps + args.sleep_gradient_steps, args.eval_episodes))
-    t = time.time()
-    obstacle_env = make_env(args.env_id, args.seed, obstacle=True)
-    obstacle_distances = {}
+
+def obstacle_test(args: Args, policies: dict, generator: torch.Generator) -> tuple[dict, dict]:
+    """The robustness test: every policy on the obstacle variant, all episodes from the run's initial state."""
+    env = make_env(args.env_id, args.seed, obstacle=True)
+    results, distances = {}, {}
     for name, actor in policies.items():
         # the same initial state for every episode (the run's seed); sampled actions give the spread
         res = evaluate(
-            actor, obstacle_env, args.obstacle_episodes, lambda ep: args.seed, False, eval_gen, args.success_distance
+            actor, env, args.obstacle_episodes, lambda ep: args.seed, False, generator, args.success_distance
         )
-        det = evaluate(actor, obstacle_env, 1, lambda ep: args.seed, True, eval_gen, args.success_distance)
-        obstacle_distances[name] = res["distances"]
-        final[f"eval/obstacle/{name}_final_distance"] = res["final_distance"]
-        final[f"eval/obstacle/{name}_final_distance_std"] = res["final_distance_std"]
-        final[f"eval/obstacle/{name}_success_rate"] = res["success_rate"]
-        final[f"eval/obstacle/{name}_return"] = res["return"]
-        final[f"eval/obstacle/{name}_final_distance_deterministic"] = det["final_distance"]
-    obstacle_env.close()
-    for tag in [k for k in final if k.startswith("eval/obstacle/")]:
-        writer.add_scalar(tag, final[tag], args.tamer_total_timesteps + args.sleep_gradient_steps)
-    np.savez(f"{run_dir}/obstacle_distances.npz", **obstacle_distances)
-    times["time/eval_s"] += time.time() - t
+        det = evaluate(actor, env, 1, lambda ep: args.seed, True, generator, args.success_distance)
+        distances[name] = res["distances"]
+        results[f"eval/obstacle/{name}_final_distance"] = res["final_distance"]
+        results[f"eval/obstacle/{name}_final_distance_std"] = res["final_distance_std"]
+        results[f"eval/obstacle/{name}_success_rate"] = res["success_rate"]
+        results[f"eval/obstacle/{name}_return"] = res["return"]
+        results[f"eval/obstacle/{name}_final_distance_deterministic"] = det["final_distance"]
+    env.close()
+    return results, distances
 
-    if args.save_model:
-        dims = {"obs_dim": obs_dim, "act_dim": act_dim}
-        save_actor(f"{run_dir}/tamer_actor.pt", tamer_actor, env_id=args.env_id)
-        save_critic(f"{run_dir}/tamer_h.pt", h_net, dims=dims, env_id=args.env_id)
-        save_actor(f"{run_dir}/inform_actor.pt", inform_actor, env_id=args.env_id)
-        save_critic(
-            f"{run_dir}/inform_critic.pt",
-            q_net,
-            dims=dims,
-            env_id=args.env_id,
-            gamma=args.sleep_gamma,
-            temperature=args.sleep_temperature,
-        )
+
+# ---------------------------------------------------------------------------------------------------------------
+
+
+def main(args: Args, oracle_ckpt: dict | None) -> dict:
+    run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
+    run_start = time.time()
+    random.seed(args.seed)
+    np.random.seed(args.seed)
+    torch.manual_seed(args.seed)
+    torch.backends.cudnn.deterministic = args.torch_deterministic
+    if args.torch_deterministic:
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # CUDA matmuls refuse determinism without it
+    torch.use_deterministic_algorithms(args.torch_deterministic)
+    torch.set_num_threads(args.num_threads)
+    device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
+
+    run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
+    writer = SummaryWriter(run_dir)
+    writer.add_text(
+        "hyperparameters",
+        "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
+    )
+    print(f"run dir: {run_dir}", flush=True)
+    env = make_env(args.env_id, args.seed)
+    evaluator = Evaluator(args, writer)
+    obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
+    dims = {"obs_dim": obs_dim, "act_dim": act_dim}
+    summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
+    end_step = args.tamer_total_timesteps + args.sleep_gradient_steps
+    status, phase = "completed", "oracle"
+    try:
+        # ---- oracle: the simulated teacher (SPEC section 5)
+        t0 = time.time()
+        if oracle_ckpt is not None:
+            oracle_actor, oracle_qf = oracle_from_checkpoint(oracle_ckpt, device)
+            print(
+                f"[oracle] loaded {oracle_ckpt['path']} ({oracle_ckpt.get('training_steps', '?')} SAC steps)",
+                flush=True,
+            )
+        else:
+            print(f"[oracle] training SAC on the env reward for {args.oracle_total_timesteps} steps", flush=True)
+            oracle_actor, oracle_qf, summary["sps/oracle"] = train_oracle(args, writer, device)
+            if args.save_model:
+                save_atomic(
+                    {
+                        "algorithm": "sac",
+                        "env_id": args.env_id,
+                        "obs_shape": [obs_dim],
+                        "act_shape": [act_dim],
+                        "kwargs": {**dims, "hidden": args.hidden_size},
+                        "action_low": torch.as_tensor(env.action_space.low),
+                        "action_high": torch.as_tensor(env.action_space.high),
+                        "actor_state_dict": state_dict_cpu(oracle_actor),
+                        "qf_state_dict": state_dict_cpu(oracle_qf),
+                        "training_steps": args.oracle_total_timesteps,
+                        "training_seed": args.seed,
+                        "random_starts": args.oracle_random_starts,
+                    },
+                    f"{run_dir}/oracle.pt",
+                )
+        for p in (*oracle_actor.parameters(), *oracle_qf.parameters()):
+            p.requires_grad_(False)
+        summary["time/oracle_s"] = time.time() - t0
+        evaluator("oracle", oracle_actor, 0, args.periodic_eval_episodes)
+
+        # ---- forward phase ("day"): TAMER with simulated feedback, every transition remembered
+        phase, t0, eval_s0 = "tamer", time.time(), evaluator.seconds
+        buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, act_dim, device)
+        h_net, tamer_actor, stats = forward_phase(args, env, oracle_actor, oracle_qf, buffer, evaluator, writer, device)
+        summary.update(stats)
+        summary["time/tamer_s"] = time.time() - t0 - (evaluator.seconds - eval_s0)
+        summary["sps/tamer"] = args.tamer_total_timesteps / max(summary["time/tamer_s"], 1e-9)
+        if args.save_model:
+            save_actor(f"{run_dir}/tamer_actor.pt", tamer_actor, env_id=args.env_id)
+            save_critic(f"{run_dir}/tamer_h.pt", h_net, dims=dims, env_id=args.env_id)
+
+        # ---- sleep phase ("night"): offline IQ-Learn on the buffer, no environment steps
+        phase, t0, eval_s0 = "sleep", time.time(), evaluator.seconds
+        q_net, inform_actor, stats = sleep_phase(args, buffer, tamer_actor, evaluator, writer, device)
+        summary.update(stats)
+        summary["time/sleep_s"] = time.time() - t0 - (evaluator.seconds - eval_s0)
+        summary["sps/sleep"] = args.sleep_gradient_steps / max(summary["time/sleep_s"], 1e-9)
+        if args.save_model:
+            save_actor(f"{run_dir}/inform_actor.pt", inform_actor, env_id=args.env_id)
+            save_critic(f"{run_dir}/inform_critic.pt", q_net, dims=dims, env_id=args.env_id,
+                        gamma=args.sleep_gamma, temperature=args.sleep_temperature)  # fmt: skip
+
+        # ---- the recovered reward (Eq. 3), then the final evaluation and the obstacle robustness test
+        phase = "reward"
+        summary.update(recovered_reward_stats(args, buffer, q_net, inform_actor))
+        phase = "eval"
+        policies = {"oracle": oracle_actor, "tamer": tamer_actor, "inform": inform_actor}
+        print("[eval] final evaluation", flush=True)
+        for name, actor in policies.items():
+            evaluator(name, actor, end_step, args.eval_episodes)
+        t = time.time()
+        obstacle, distances = obstacle_test(args, policies, evaluator.generator)
+        for tag, value in obstacle.items():
+            writer.add_scalar(tag, value, end_step)
+        summary.update(obstacle)
+        np.savez(f"{run_dir}/obstacle_distances.npz", **distances)
+        evaluator.seconds += time.time() - t
+    except KeyboardInterrupt:
+        status = "interrupted"
+        print(f"interrupted during the {phase} phase; what finished is saved in {run_dir}", file=sys.stderr)
+    except Diverged as e:
+        status = "diverged"
+        print(f"error: {e}", file=sys.stderr)
 
     summary = {
-        **final,
-        "feedback/positive": positives,
-        "feedback/steps": n,
-        "feedback/positive_rate": positives / n,
-        "sleep/success_episodes": int(n_success_eps),
-        "sleep/episodes": len(episode_bounds),
-        "sleep/expert_transitions": int(expert_idx.numel()),
-        "sleep/expert_fallback": expert_fallback,
-        **reward_stats,
-        **iq_terms,
-        **sps,
-        **times,
+        **evaluator.final,
+        **summary,
+        "time/eval_s": evaluator.seconds,
         "oracle_path": oracle_ckpt["path"] if oracle_ckpt is not None else None,
         "wall_time_s": time.time() - run_start,
         "seed": args.seed,
-        "status": "completed",
+        "status": status,
         "args": asdict(args),
     }
+    if status != "completed":
+        summary["phase"] = phase
     write_json_atomic(f"{run_dir}/summary.json", summary)
     env.close()
-    eval_env.close()
+    evaluator.env.close()
     writer.close()
-    for name in POLICIES:
-        print(
-            f"{name:>6}: return {summary[f'eval/{name}_return']:.2f} "
-            f"(sampled {summary[f'eval/{name}_return_sampled']:.2f})"
-            f" | final distance {summary[f'eval/{name}_final_distance']:.3f} | success "
-            f"{summary[f'eval/{name}_success_rate']:.2f} | obstacle distance "
-            f"{summary[f'eval/obstacle/{name}_final_distance']:.3f} +- "
-            f"{summary[f'eval/obstacle/{name}_final_distance_std']:.3f}",
-            flush=True,
-        )
-    print(
-        " | ".join(f"{k.split('/')[1]} {v:.0f}s" for k, v in times.items())
-        + " | "
-        + " | ".join(f"{k} {v:.0f}" for k, v in sps.items()),
-        flush=True,
-    )
-    print(f"done in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json", flush=True)
+    if status == "completed":
+        for name in POLICIES:
+            print(
+                f"{name:>6}: return {summary[f'eval/{name}_return']:.2f} "
+                f"(sampled {summary[f'eval/{name}_return_sampled']:.2f})"
+                f" | final distance {summary[f'eval/{name}_final_distance']:.3f} | success "
+                f"{summary[f'eval/{name}_success_rate']:.2f} | obstacle distance "
+                f"{summary[f'eval/obstacle/{name}_final_distance']:.3f} +- "
+                f"{summary[f'eval/obstacle/{name}_final_distance_std']:.3f}",
+                flush=True,
+            )
+        print(" | ".join(f"{k} {v:.0f}" for k, v in summary.items() if k.startswith(("time/", "sps/"))), flush=True)
+    print(f"{status} in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json", flush=True)
     return summary
 
 
-if __name__ == "__main__":
-    args = tyro.cli(Args)
+def load_policy(path: str, env_id: str) -> Actor:
+    """A saved actor (tamer_actor.pt, inform_actor.pt, or an oracle checkpoint); ValueError names the file."""
+    if not os.path.isfile(path):
+        raise ValueError(f"--evaluate {path}: no such file")
     try:
+        ckpt = torch.load(path, weights_only=True, map_location="cpu")
+    except Exception as e:
+        raise ValueError(
+            f"--evaluate {path}: cannot be read as a weights-only torch checkpoint ({type(e).__name__})"
+        ) from None
+    if isinstance(ckpt, dict) and "actor_state_dict" in ckpt:  # an oracle checkpoint
+        ckpt = {**ckpt, "state_dict": ckpt["actor_state_dict"]}
+    if not isinstance(ckpt, dict) or any(k not in ckpt for k in ("state_dict", "kwargs", "action_low", "action_high")):
+        raise ValueError(f"--evaluate {path}: not an actor checkpoint (tamer_actor.pt, inform_actor.pt or an oracle)")
+    if ckpt.get("env_id") != env_id:
+        raise ValueError(
+            f"--evaluate {path}: the policy was trained on {ckpt.get('env_id')}, not {env_id}; pass --env-id"
+        )
+    obs_dim, act_dim = env_shapes(env_id)
+    kw = ckpt["kwargs"]
+    if (kw.get("obs_dim"), kw.get("act_dim")) != (obs_dim, act_dim):
+        raise ValueError(
+            f"--evaluate {path}: shapes obs {kw.get('obs_dim')} act {kw.get('act_dim')} do not match {env_id}"
+        )
+    actor = Actor(kw["obs_dim"], kw["act_dim"], kw["hidden"], ckpt["action_low"], ckpt["action_high"])
+    try:
+        actor.load_state_dict(ckpt["state_dict"])
+    except Exception as e:
+        raise ValueError(f"--evaluate {path}: the network does not load ({type(e).__name__})") from None
+    return actor
+
+
+def evaluate_saved(args: Args) -> dict:
+    """Re-evaluate a saved policy with the final evaluation's protocol: --eval-episodes episodes, deterministic and
+    sampled actions, from the run's start (or random starts), plus the obstacle test; writes nothing."""
+    torch.manual_seed(args.seed)
+    torch.set_num_threads(args.num_threads)
+    actor = load_policy(args.evaluate, args.env_id)
+    evaluator = Evaluator(args, writer=None)
+    metrics = evaluator("policy", actor, 0, args.eval_episodes)
+    obstacle, _ = obstacle_test(args, {"policy": actor}, evaluator.generator)
+    evaluator.env.close()
+    return {**metrics, **obstacle}
+
+
+def parse_args() -> Args:
+    """tyro's command line, with tyro's multi-line error box shortened to one line."""
+    captured = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(captured):
+            return tyro.cli(Args)
+    except SystemExit as e:
+        if e.code == 0:  # --help
+            raise
+        message = []
+        for line in captured.getvalue().splitlines()[1:]:  # the first line is the box's title bar
+            text = line.strip().strip("│╰╯").strip()
+            if not text or set(text) <= set("─"):
+                if message:
+                    break
+                continue
+            message.append(text)
+        raise ValueError(" ".join(message) + " (see --help)") from None
+
+
+if __name__ == "__main__":
+    try:
+        args = parse_args()
+        if args.evaluate is not None:
+            check_args(args, load_oracle=False)
+            print(json.dumps(evaluate_saved(args), indent=2))
+            sys.exit(0)
         oracle_ckpt = check_args(args)
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
-    main(args, oracle_ckpt)
+    summary = main(args, oracle_ckpt)
+    sys.exit({"completed": 0, "interrupted": 130, "diverged": 1}[summary["status"]])

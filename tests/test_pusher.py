@@ -193,8 +193,71 @@ def test_smoke_oracle_path_and_determinism(tmp_path):
     (tmp_path / "b").mkdir()
     _, second = check_run(tmp_path / "b", run(tmp_path / "b", *flags))
     for key, value in first.items():
-        if key.startswith(("eval/", "feedback/", "losses/")):
+        if key.startswith(("eval/", "feedback/", "losses/", "sleep/")):
             assert second[key] == value, key
+    # --evaluate re-runs the final evaluation of a saved policy: deterministic actions give the run's numbers
+    (run_dir,) = glob.glob(str(tmp_path / "a" / "runs" / "*"))
+    for policy in ("tamer", "inform"):
+        proc = run(tmp_path / "a", "--evaluate", f"{run_dir}/{policy}_actor.pt", "--eval-episodes", "2",
+                   "--obstacle-episodes", "3")  # fmt: skip
+        assert proc.returncode == 0, proc.stderr
+        metrics = json.loads(proc.stdout)
+        assert metrics["eval/policy_return"] == first[f"eval/{policy}_return"]
+        assert metrics["eval/policy_final_distance"] == first[f"eval/{policy}_final_distance"]
+        det = "eval/obstacle/{}_final_distance_deterministic"
+        assert metrics[det.format("policy")] == first[det.format(policy)]
+    assert len(glob.glob(str(tmp_path / "a" / "runs" / "*"))) == 1  # evaluating writes no run
+
+
+def test_save_load_same_actions(tmp_path):
+    torch.manual_seed(0)
+    actor = isp.Actor(23, 7, 32, action_low=-2 * np.ones(7), action_high=2 * np.ones(7))
+    isp.save_actor(str(tmp_path / "actor.pt"), actor, env_id="Pusher-v5")
+    loaded = isp.load_policy(str(tmp_path / "actor.pt"), "Pusher-v5")
+    obs = torch.randn(16, 23)
+    a1, logp1, mean1 = actor.get_action(obs, torch.Generator().manual_seed(3))
+    a2, logp2, mean2 = loaded.get_action(obs, torch.Generator().manual_seed(3))
+    assert torch.equal(a1, a2) and torch.equal(logp1, logp2) and torch.equal(mean1, mean2)
+    assert not (tmp_path / "actor.pt.tmp").exists()  # written atomically
+    with pytest.raises(ValueError, match="trained on Pusher-v5, not Pusher-v4"):
+        isp.load_policy(str(tmp_path / "actor.pt"), "Pusher-v4")
+
+
+@pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")
+@pytest.mark.parametrize("phase", ["tamer", "sleep"])
+def test_sigint_ends_the_run_cleanly(tmp_path, phase):
+    import signal
+
+    flags = [*TINY, "--tamer-total-timesteps", "100000" if phase == "tamer" else "600"]
+    flags += ["--sleep-gradient-steps", "100000", "--sleep-eval-frequency", "100000"]
+    proc = subprocess.Popen([sys.executable, SCRIPT, *flags], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)  # fmt: skip
+    for line in proc.stdout:
+        if line.startswith(f"[{phase}]"):
+            break
+    proc.send_signal(signal.SIGINT)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and "Traceback" not in stderr, stderr
+    (run_dir,) = glob.glob(str(tmp_path / "runs" / "*"))
+    with open(os.path.join(run_dir, "summary.json")) as f:
+        summary = json.load(f)
+    assert summary["status"] == "interrupted" and summary["phase"] == phase
+    assert os.path.exists(os.path.join(run_dir, "tamer_actor.pt")) == (phase == "sleep")  # what finished is saved
+    assert not os.path.exists(os.path.join(run_dir, "inform_actor.pt"))
+    assert not glob.glob(os.path.join(run_dir, "*.tmp"))
+
+
+@pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")
+def test_divergence_is_reported(tmp_path):
+    proc = run(tmp_path, *TINY, "--sleep-q-lr", "1e10")
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr
+    (line,) = proc.stderr.strip().splitlines()
+    assert "diverged" in line and "gradient step 100" in line
+    (run_dir,) = glob.glob(str(tmp_path / "runs" / "*"))
+    with open(os.path.join(run_dir, "summary.json")) as f:
+        summary = json.load(f)
+    assert summary["status"] == "diverged" and summary["phase"] == "sleep"
+    assert os.path.exists(os.path.join(run_dir, "tamer_actor.pt"))
 
 
 def test_shipped_oracle_checkpoint():
@@ -262,7 +325,9 @@ def test_recovered_reward_ranks_oracle_above_random():
     reward = isp.RecoveredReward(q_net, actor, 0.99, 0.01, samples=4)
     expert_returns = [reward(*t).sum() for t in expert]
     random_returns = [reward(*t).sum() for t in rand]
-    assert min(expert_returns) > max(random_returns), (expert_returns, random_returns)
+    # ranking = the chance that an oracle trajectory outscores a random one (AUC; 0.5 is chance, measured 0.93)
+    auc = np.mean([e > r for e in expert_returns for r in random_returns])
+    assert auc >= 0.85 and np.mean(expert_returns) > np.mean(random_returns), (auc, expert_returns, random_returns)
     env.close()
 
 
