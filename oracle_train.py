@@ -14,21 +14,32 @@ continues an interrupted run.
 
 Maze (`--env-id KnoxStoneMaze-v0` and the other ids of gridworld_env): `--method value-iteration`
 (the default) saves the exact Q*; `--method q-learning` saves the Q-table of a tabular Q-learner
-after `--maze-episodes` episodes, a less than perfect teacher like the authors' half-trained table.
-The checkpoint holds the 30 x 4 `q_table`, which `inform_dqn_gridworld.py --oracle-path` loads.
+after `--maze-episodes` episodes, a less than perfect teacher like the authors' half-trained table;
+`--method dqn` trains a small DQN (CleanRL's dqn.py: an MLP on the one-hot observation, replay buffer,
+target network, linearly decaying epsilon-greedy, Adam) for `--maze-dqn-timesteps` env steps, another
+learned teacher. Every maze checkpoint holds the 30 x 4 `q_table` (for the DQN: the network's Q over the
+30 one-hot states), which `inform_dqn_gridworld.py --oracle-path` loads, plus the env id, the observation
+and action shapes, the training steps and the greedy episode length; the DQN's also holds its state_dict
+and the arguments to rebuild it (`MazeQNetwork(**ckpt["kwargs"])`).
 
 Examples:
     python oracle_train.py --env-id Pusher-v5 --seed 1 --total-timesteps 200000 \
         --output-path oracles/Pusher-v5__sac_oracle.pt
     python oracle_train.py --env-id KnoxStoneMaze-v0 --method q-learning --maze-episodes 50
+    python oracle_train.py --env-id KnoxStoneMaze-v0 --method dqn --maze-dqn-timesteps 20000
 """
 
+import contextlib
+import io
 import json
 import math
 import os
+import pickle
 import random
 import sys
 import time
+import warnings
+import zipfile
 from dataclasses import asdict, dataclass
 
 import gymnasium as gym
@@ -44,9 +55,12 @@ import gridworld_env
 PUSHER_IDS = ("Pusher-v5", "Pusher-v4")
 MAZE_IDS = tuple(gridworld_env.ENV_IDS)
 SUPPORTED_ENV_IDS = PUSHER_IDS + MAZE_IDS
-METHODS = {"pusher": ("sac",), "maze": ("value-iteration", "q-learning")}
+METHODS = {"pusher": ("sac",), "maze": ("value-iteration", "q-learning", "dqn")}
 LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
 SUCCESS_DISTANCE = 0.08
+TRAINING_STATE_KEYS = ("actor", "qf", "qf_target", "q_optimizer", "actor_optimizer", "a_optimizer", "log_alpha",
+                       "buf_n", "buf_obs", "buf_next_obs", "buf_act", "buf_rew", "buf_term", "global_step",
+                       "torch_rng")  # fmt: skip
 
 
 @dataclass
@@ -72,7 +86,7 @@ class Args:
     buffer_size: int = 1000000
     """the replay memory buffer size (capped at total_timesteps)"""
     gamma: float = 0.99
-    """the discount factor gamma"""
+    """the discount factor gamma (SAC, and every maze method)"""
     tau: float = 0.005
     """target smoothing coefficient"""
     batch_size: int = 256
@@ -110,13 +124,40 @@ class Args:
 
     # Maze oracles
     method: str | None = None
-    """sac (Pusher); value-iteration (exact Q*) or q-learning (an imperfect teacher) on the maze; default: the first"""
+    """sac (Pusher); value-iteration (exact Q*), q-learning or dqn (imperfect, learned teachers) on the maze;
+    default: sac or value-iteration"""
     maze_episodes: int = 50
     """episodes of the maze's tabular Q-learning (--method q-learning)"""
     maze_alpha: float = 0.2
     """step size of the maze's tabular Q-learning"""
     maze_epsilon: float = 0.1
     """exploration rate of the maze's tabular Q-learning"""
+    maze_dqn_timesteps: int = 20000
+    """environment steps of the maze DQN (--method dqn)"""
+    maze_dqn_learning_rate: float = 1e-3
+    """Adam learning rate of the maze DQN"""
+    maze_dqn_hidden: int = 64
+    """width of the maze DQN's two hidden layers"""
+    maze_dqn_buffer_size: int = 10000
+    """replay memory size of the maze DQN"""
+    maze_dqn_batch_size: int = 128
+    """batch size of the maze DQN"""
+    maze_dqn_learning_starts: int = 1000
+    """environment steps before the maze DQN's first gradient step"""
+    maze_dqn_train_frequency: int = 2
+    """environment steps between the maze DQN's gradient steps"""
+    maze_dqn_target_network_frequency: int = 100
+    """environment steps between copies of the maze DQN into its target network"""
+    maze_dqn_start_e: float = 1.0
+    """starting epsilon of the maze DQN's exploration"""
+    maze_dqn_end_e: float = 0.05
+    """final epsilon of the maze DQN's exploration"""
+    maze_dqn_exploration_fraction: float = 0.5
+    """fraction of --maze-dqn-timesteps over which epsilon decays from start to end"""
+
+
+class InputError(Exception):
+    """Bad input from the user (a flag value, a file): reported as one line, before anything is written."""
 
 
 def validate_args(args: Args) -> str | None:
@@ -126,8 +167,21 @@ def validate_args(args: Args) -> str | None:
     methods = METHODS["pusher" if args.env_id in PUSHER_IDS else "maze"]
     if args.method is not None and args.method not in methods:
         return f"--method {args.method} does not apply to {args.env_id}; choose one of {', '.join(methods)}"
+    if not 0 <= args.seed < 2**32:
+        return f"--seed must be in [0, 2**32), got {args.seed}"
+    if args.num_threads < 1 or args.hidden_size < 1:
+        return f"--num-threads ({args.num_threads}) and --hidden-size ({args.hidden_size}) must be positive"
+    if not (args.policy_lr > 0.0 and args.q_lr > 0.0 and args.alpha > 0.0):
+        return "--policy-lr, --q-lr and --alpha must be > 0"
+    if args.output_path is not None and (not args.output_path or os.path.isdir(args.output_path)):
+        return f"--output-path {args.output_path!r} must name a file (it is empty or a directory)"
+    if args.resume is not None and args.env_id not in PUSHER_IDS:
+        return "--resume continues a SAC (Pusher) run; the maze methods train in seconds and have no training state"
     if args.maze_episodes < 1 or not 0.0 < args.maze_alpha <= 1.0 or not 0.0 <= args.maze_epsilon <= 1.0:
         return "--maze-episodes must be >= 1, --maze-alpha in (0, 1] and --maze-epsilon in [0, 1]"
+    error = validate_maze_dqn_args(args)
+    if error is not None:
+        return error
     if args.env_id == "Pusher-v4":
         import mujoco
 
@@ -144,10 +198,37 @@ def validate_args(args: Args) -> str | None:
             return f"--{name.replace('_', '-')} must be positive (got {getattr(args, name)})"
     if args.batch_size > args.total_timesteps:
         return f"--batch-size {args.batch_size} is larger than --total-timesteps {args.total_timesteps}"
-    if not (0.0 < args.tau <= 1.0) or not (0.0 <= args.gamma <= 1.0):
-        return "--tau must be in (0, 1] and --gamma in [0, 1]"
+    if not 0.0 < args.tau <= 1.0:
+        return f"--tau must be in (0, 1], got {args.tau}"
+    if not 0.0 <= args.gamma <= 1.0:
+        return f"--gamma must be in [0, 1], got {args.gamma}"
     if args.resume is not None and not os.path.isfile(args.resume):
         return f"--resume {args.resume}: no such file"
+    return None
+
+
+def validate_maze_dqn_args(args: Args) -> str | None:
+    """The --maze-dqn-* flags; a one-line error message, or None."""
+    for name in ("timesteps", "hidden", "buffer_size", "batch_size", "train_frequency", "target_network_frequency"):
+        value = getattr(args, f"maze_dqn_{name}")
+        if value < 1:
+            return f"--maze-dqn-{name.replace('_', '-')} must be a positive integer (got {value})"
+    if args.maze_dqn_learning_starts < 0:
+        return f"--maze-dqn-learning-starts must be >= 0 (got {args.maze_dqn_learning_starts})"
+    if not args.maze_dqn_learning_rate > 0.0 or not args.maze_dqn_exploration_fraction > 0.0:
+        return "--maze-dqn-learning-rate and --maze-dqn-exploration-fraction must be > 0"
+    if not 0.0 <= args.maze_dqn_end_e <= 1.0 or not 0.0 <= args.maze_dqn_start_e <= 1.0:
+        return "--maze-dqn-start-e and --maze-dqn-end-e must be in [0, 1]"
+    if args.maze_dqn_batch_size > args.maze_dqn_timesteps:
+        return (
+            f"--maze-dqn-batch-size {args.maze_dqn_batch_size} is larger than "
+            f"--maze-dqn-timesteps {args.maze_dqn_timesteps}"
+        )
+    if args.maze_dqn_learning_starts >= args.maze_dqn_timesteps:
+        return (
+            f"--maze-dqn-learning-starts ({args.maze_dqn_learning_starts}) must be below --maze-dqn-timesteps "
+            f"({args.maze_dqn_timesteps}), or the DQN never learns"
+        )
     return None
 
 
@@ -276,7 +357,30 @@ def oracle_checkpoint(actor, qf, args: Args, obs_dim, act_dim, action_low, actio
     }
 
 
-def train_sac(args: Args) -> None:
+def read_training_state(path: str) -> dict:
+    """torch.load(path, weights_only=True) of a training_state.pt; every way it can fail is one InputError."""
+    if not zipfile.is_zipfile(path):  # torch.save writes a zip archive; a truncated one has lost its directory
+        raise InputError(f"--resume {path}: not a torch checkpoint, or a truncated one (not a complete zip archive)")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            state = torch.load(path, weights_only=True, map_location="cpu")
+    except pickle.UnpicklingError as e:
+        unsupported = [line.strip() for line in str(e).splitlines() if "unsupported" in line.lower()]
+        raise InputError(f"--resume {path}: refused, it holds more than tensors and plain values (it could run "
+                         f"code): {(unsupported or [type(e).__name__])[0][:160]}") from None  # fmt: skip
+    except Exception as e:  # a damaged archive: torch raises RuntimeError, EOFError, ...
+        first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
+        raise InputError(f"--resume {path}: corrupt checkpoint: {first}") from None
+    missing = [k for k in TRAINING_STATE_KEYS if not isinstance(state, dict) or k not in state]
+    if missing:
+        more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
+        raise InputError(f"--resume {path}: not a training_state.pt of oracle_train.py "
+                         f"(missing {', '.join(missing[:3])}{more})")  # fmt: skip
+    return state
+
+
+def train_sac(args: Args, resume_state: dict | None = None) -> None:
     torch.set_num_threads(args.num_threads)
     device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
     random.seed(args.seed)
@@ -314,24 +418,27 @@ def train_sac(args: Args) -> None:
     start_step = 0
 
     if args.resume is not None:
-        state = torch.load(args.resume, weights_only=True)
         run_dir = os.path.dirname(os.path.abspath(args.resume))
-        actor.load_state_dict(state["actor"])
-        qf.load_state_dict(state["qf"])
-        qf_target.load_state_dict(state["qf_target"])
-        q_optimizer.load_state_dict(state["q_optimizer"])
-        actor_optimizer.load_state_dict(state["actor_optimizer"])
-        a_optimizer.load_state_dict(state["a_optimizer"])
-        log_alpha.data.copy_(state["log_alpha"])
-        buf_n = int(state["buf_n"])
-        n = min(buf_n, size)
-        buf_obs[:n] = state["buf_obs"][:n]
-        buf_next_obs[:n] = state["buf_next_obs"][:n]
-        buf_act[:n] = state["buf_act"][:n]
-        buf_rew[:n] = state["buf_rew"][:n]
-        buf_term[:n] = state["buf_term"][:n]
-        start_step = int(state["global_step"])
-        torch.set_rng_state(state["torch_rng"])
+        try:
+            actor.load_state_dict(resume_state["actor"])
+            qf.load_state_dict(resume_state["qf"])
+            qf_target.load_state_dict(resume_state["qf_target"])
+            q_optimizer.load_state_dict(resume_state["q_optimizer"])
+            actor_optimizer.load_state_dict(resume_state["actor_optimizer"])
+            a_optimizer.load_state_dict(resume_state["a_optimizer"])
+            log_alpha.data.copy_(resume_state["log_alpha"])
+            buf_n = int(resume_state["buf_n"])
+            n = min(buf_n, size)
+            buf_obs[:n] = resume_state["buf_obs"][:n]
+            buf_next_obs[:n] = resume_state["buf_next_obs"][:n]
+            buf_act[:n] = resume_state["buf_act"][:n]
+            buf_rew[:n] = resume_state["buf_rew"][:n]
+            buf_term[:n] = resume_state["buf_term"][:n]
+            start_step = int(resume_state["global_step"])
+            torch.set_rng_state(resume_state["torch_rng"])
+        except (RuntimeError, ValueError, TypeError, KeyError, IndexError) as e:  # nothing is written before this
+            first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
+            raise InputError(f"--resume {args.resume}: does not fit this run ({type(e).__name__}: {first})") from None
         np.random.seed(args.seed + start_step)
         env.action_space.seed(args.seed + start_step)
         print(f"resumed from {args.resume} at step {start_step}", flush=True)
@@ -524,26 +631,120 @@ def maze_q_learning(env: gym.Env, args: Args) -> tuple[np.ndarray, int]:
     return q, steps
 
 
+class MazeQNetwork(nn.Module):
+    """CleanRL dqn.py's Q network, sized for the maze: one-hot observation -> one Q value per action."""
+
+    def __init__(self, obs_dim: int, n_actions: int, hidden: int = 64):
+        super().__init__()
+        self.network = nn.Sequential(
+            nn.Linear(obs_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, n_actions)
+        )
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.network(x)
+
+
+def maze_q_table(q_network: MazeQNetwork) -> np.ndarray:
+    """The network's Q over every one-hot state: a (30, 4) table, row s = Q(one_hot(s), .)."""
+    with torch.no_grad():
+        return q_network(torch.eye(gridworld_env.N_CELLS)).double().numpy()
+
+
+def linear_schedule(start_e: float, end_e: float, duration: int, t: int) -> float:
+    return start_e + (end_e - start_e) * min(t / duration, 1.0)
+
+
+def maze_dqn(env: gym.Env, args: Args) -> tuple[MazeQNetwork, int]:
+    """DQN (CleanRL's dqn.py) on the maze's own reward; truncation bootstraps. Returns (Q network, env steps)."""
+    torch.set_num_threads(args.num_threads)
+    random.seed(args.seed)
+    np.random.seed(args.seed)
+    torch.manual_seed(args.seed)
+    obs_dim, n_actions = gridworld_env.N_CELLS, gridworld_env.N_ACTIONS
+    q_network = MazeQNetwork(obs_dim, n_actions, args.maze_dqn_hidden)
+    target_network = MazeQNetwork(obs_dim, n_actions, args.maze_dqn_hidden)
+    target_network.load_state_dict(q_network.state_dict())
+    optimizer = torch.optim.Adam(q_network.parameters(), lr=args.maze_dqn_learning_rate, fused=True)
+    size = min(args.maze_dqn_buffer_size, args.maze_dqn_timesteps)
+    # one-hot observations are stored as cell indices; torch.eye turns a batch back into observations
+    buf_s = torch.zeros(size, dtype=torch.long)
+    buf_a = torch.zeros(size, dtype=torch.long)
+    buf_r = torch.zeros(size)
+    buf_s_next = torch.zeros(size, dtype=torch.long)
+    buf_term = torch.zeros(size)
+    eye = torch.eye(obs_dim)
+    rng = np.random.default_rng(args.seed)
+    env.action_space.seed(args.seed)
+    obs, _ = env.reset(seed=args.seed)
+    s = int(obs.argmax())
+    decay_steps = max(1, int(args.maze_dqn_exploration_fraction * args.maze_dqn_timesteps))
+    for global_step in range(args.maze_dqn_timesteps):
+        epsilon = linear_schedule(args.maze_dqn_start_e, args.maze_dqn_end_e, decay_steps, global_step)
+        if rng.random() < epsilon:
+            action = int(env.action_space.sample())
+        else:
+            with torch.no_grad():
+                action = int(q_network(eye[s]).argmax())
+        obs, reward, terminated, truncated, _ = env.step(action)
+        s_next = int(obs.argmax())
+        i = global_step % size
+        buf_s[i], buf_a[i], buf_r[i], buf_s_next[i], buf_term[i] = s, action, float(reward), s_next, float(terminated)
+        s = s_next
+        if terminated or truncated:
+            obs, _ = env.reset()
+            s = int(obs.argmax())
+
+        if global_step >= args.maze_dqn_learning_starts and global_step % args.maze_dqn_train_frequency == 0:
+            idx = torch.randint(min(global_step + 1, size), (args.maze_dqn_batch_size,))
+            with torch.no_grad():
+                target_max = target_network(eye[buf_s_next[idx]]).max(1).values
+                td_target = buf_r[idx] + args.gamma * target_max * (1.0 - buf_term[idx])
+            old_val = q_network(eye[buf_s[idx]]).gather(1, buf_a[idx, None]).squeeze(1)
+            loss = F.mse_loss(td_target, old_val)
+            optimizer.zero_grad()
+            loss.backward()
+            optimizer.step()
+        if global_step % args.maze_dqn_target_network_frequency == 0:
+            target_network.load_state_dict(q_network.state_dict())
+    return q_network, args.maze_dqn_timesteps
+
+
 def train_maze(args: Args) -> None:
-    """A maze teacher: exact Q* by value iteration, or a tabular Q-learner's table; saved as a 30 x 4 q_table."""
+    """A maze teacher: exact Q* by value iteration, a tabular Q-learner's table or a DQN's Q over the 30 cells;
+    saved as a 30 x 4 q_table (and, for the DQN, the network's state_dict with the kwargs to rebuild it)."""
     env = gym.make(args.env_id)
     variant = env.unwrapped.variant
     start = time.time()
+    extra = {}
     if args.method == "q-learning":
         q, steps = maze_q_learning(env, args)
+    elif args.method == "dqn":
+        q_network, steps = maze_dqn(env, args)
+        q = maze_q_table(q_network)
+        extra = {
+            "kwargs": {
+                "obs_dim": gridworld_env.N_CELLS,
+                "n_actions": gridworld_env.N_ACTIONS,
+                "hidden": args.maze_dqn_hidden,
+            },
+            "state_dict": {k: v.detach().cpu().clone() for k, v in q_network.state_dict().items()},
+        }
     else:
         q, steps = gridworld_env.optimal_q(variant, args.gamma), 0
+    env.close()
     length = gridworld_env.greedy_episode_length(q.argmax(1), variant)
     ckpt = {
         "algorithm": args.method,
         "env_id": args.env_id,
         "obs_shape": [gridworld_env.N_CELLS],
+        "act_shape": [gridworld_env.N_ACTIONS],  # discrete: one Q value per action, the q_table's columns
         "n_actions": gridworld_env.N_ACTIONS,
         "q_table": torch.tensor(q),
         "gamma": args.gamma,
         "training_steps": steps,
         "training_seed": args.seed,
         "evaluation": {"episode_length": float(length)},
+        **extra,
     }
     print(f"[oracle] {args.method} on {args.env_id}: {steps} env steps, greedy episode length {length} "
           f"({time.time() - start:.1f}s)", flush=True)  # fmt: skip
@@ -553,19 +754,42 @@ def train_maze(args: Args) -> None:
         print(f"oracle written to {args.output_path}", flush=True)
 
 
+def parse_args() -> Args:
+    """tyro's command line, with tyro's multi-line error box shortened to one line (an InputError)."""
+    captured = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(captured):
+            return tyro.cli(Args)
+    except SystemExit as e:
+        if e.code == 0:  # --help
+            raise
+        message = []
+        for line in captured.getvalue().splitlines()[1:]:  # the first line is the box's title bar
+            text = line.strip().strip("│╰╯").strip()
+            if not text or set(text) <= set("─"):
+                if message:
+                    break
+                continue
+            message.append(text)
+        raise InputError(" ".join(message or ["cannot parse the command line"]) + " (see --help)") from None
+
+
 def main() -> None:
-    args = tyro.cli(Args)
-    error = validate_args(args)
-    if error is not None:
-        print(f"error: {error}", file=sys.stderr)
+    try:
+        args = parse_args()
+        error = validate_args(args)
+        if error is not None:
+            raise InputError(error)
+        is_pusher = args.env_id in PUSHER_IDS
+        args.method = args.method or ("sac" if is_pusher else "value-iteration")
+        args.output_path = args.output_path or os.path.join("oracles", f"{args.env_id}__{args.method}_oracle.pt")
+        if is_pusher:
+            train_sac(args, read_training_state(args.resume) if args.resume is not None else None)
+        else:
+            train_maze(args)
+    except InputError as e:
+        print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
-    is_pusher = args.env_id in PUSHER_IDS
-    args.method = args.method or ("sac" if is_pusher else "value-iteration")
-    args.output_path = args.output_path or os.path.join("oracles", f"{args.env_id}__{args.method}_oracle.pt")
-    if is_pusher:
-        train_sac(args)
-    else:
-        train_maze(args)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,105 @@
+"""Bad input across the scripts: each case must be refused with a non-zero exit code and exactly one line on
+stderr that names the problem, with no traceback and nothing written (no run directory, no output file).
+
+Every case runs in a fresh working directory holding the same inputs: a maze oracle, a checkpoint with a pickle
+payload that would run code (weights_only loading must refuse it, and it must not have run), random bytes, a text
+file, a Pusher oracle of the wrong shapes and a Pusher run directory whose summary.json lacks its args. A case a
+script still fails stays in the table as a strict xfail, with what goes wrong as the reason.
+"""
+
+import json
+import os
+import random
+import shlex
+
+import numpy as np
+import pytest
+import torch
+
+import oracle_train as ot
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+PUSHER_ORACLE = os.path.join(REPO, "oracles", "Pusher-v5__sac_oracle.pt")
+PWNED = "PWNED"  # the file the pickle payload would create if it were ever unpickled
+
+
+class RunsCode:
+    """Unpickling this calls os.system; weights_only loading must refuse it before it runs."""
+
+    def __reduce__(self):
+        return (os.system, (f"touch {PWNED}",))
+
+
+def make_inputs(cwd) -> None:
+    """Write every input file a case may name into the working directory."""
+    ot.train_maze(ot.Args(env_id="KnoxStoneMazeWall-v0", output_path=str(cwd / "maze_oracle.pt")))
+    torch.save({"q_table": RunsCode(), "env_id": "KnoxStoneMaze-v0"}, cwd / "evil.pt")
+    (cwd / "random.pt").write_bytes(random.Random(0).randbytes(4096))
+    (cwd / "notes.txt").write_text("this is not a checkpoint\n")
+    bad_shape = {"env_id": "Pusher-v5", "kwargs": {"obs_dim": 5, "act_dim": 7, "hidden": 8}}  # obs 5, not 23
+    bad_shape.update(dict.fromkeys(["actor_state_dict", "qf_state_dict"], {}))
+    bad_shape.update(action_low=-torch.ones(7), action_high=torch.ones(7))
+    torch.save(bad_shape, cwd / "bad_shape.pt")
+    run_dir = cwd / "pusher_run"  # a Pusher run whose summary.json lacks the args block
+    run_dir.mkdir()
+    np.savez(run_dir / "obstacle_distances.npz", tamer=np.ones(3), inform=np.ones(3))
+    (run_dir / "summary.json").write_text(json.dumps({"seed": 1, "status": "completed"}))
+
+
+def case(id: str, script: str, flags: str, phrase: str, xfail: str | None = None):
+    """One bad input: the script, its flags (shell words), the phrase its one-line error must contain."""
+    marks = [pytest.mark.xfail(strict=True, reason=xfail)] if xfail else []
+    return pytest.param(script, shlex.split(flags), phrase, id=id, marks=marks)
+
+
+CASES = [
+    case("oracle_train-seed-not-an-int", "oracle_train.py", "--seed abc", "Error parsing --seed"),
+    case("oracle_train-gamma-out-of-range", "oracle_train.py", "--env-id KnoxStoneMaze-v0 --gamma 1.5",
+         "--gamma must be in [0, 1], got 1.5"),
+    case("oracle_train-dqn-budget-below-a-batch", "oracle_train.py",
+         "--env-id KnoxStoneMaze-v0 --method dqn --maze-dqn-timesteps 50",
+         "--maze-dqn-batch-size 128 is larger than --maze-dqn-timesteps 50"),
+    case("oracle_train-resume-pickle-with-code", "oracle_train.py", "--resume evil.pt", "refused"),
+    case("oracle_train-resume-random-bytes", "oracle_train.py", "--resume random.pt",
+         "random.pt: not a torch checkpoint"),
+    case("gridworld-text-file-as-oracle", "inform_dqn_gridworld.py", "--oracle-path notes.txt",
+         "notes.txt: not a torch checkpoint"),
+    case("gridworld-pusher-oracle", "inform_dqn_gridworld.py", f"--oracle-path {shlex.quote(PUSHER_ORACLE)}",
+         "not a maze oracle checkpoint"),
+    case("gridworld-negative-seed", "inform_dqn_gridworld.py", "--seed -1", "--seed",
+         xfail="np.random.seed(-1) in main() raises ValueError: a traceback, exit 1"),
+    case("pusher-maze-oracle", "inform_sac_pusher.py", "--oracle-path maze_oracle.pt", "not an oracle checkpoint"),
+    case("pusher-oracle-wrong-shapes", "inform_sac_pusher.py", "--oracle-path bad_shape.pt",
+         "shapes obs 5 act 7 do not match Pusher-v5 (obs 23, act 7)"),
+    case("qlearning-reward-pickle-with-code", "q_learning_recovered_reward.py", "--reward-path evil.pt",
+         "cannot read reward table evil.pt as a torch checkpoint (UnpicklingError"),
+    case("run_seeds-zero-workers", "run_seeds.py", "--workers 0", "--workers must be >= 1"),
+    case("run_seeds-missing-script", "run_seeds.py", "--script nope.py", "nope.py: no such script"),
+    case("run_seeds-seed-not-an-int", "run_seeds.py", "--seeds x", "--seeds",
+         xfail="tyro.cli's parse error is a 9-line box on stderr"),
+    case("plot_results-missing-runs-dir", "plot_results.py", "--runs-dir nope", "nope",
+         xfail="exits 0 ('wrote nothing') and leaves an empty docs/figures behind"),
+    case("obstacle-missing-run", "pusher_obstacle_stats.py", "nope_dir", "nope_dir: no obstacle_distances.npz"),
+    case("obstacle-summary-without-args", "pusher_obstacle_stats.py", "pusher_run", "summary.json",
+         xfail="summary['args'] raises KeyError outside the ValueError handler: a traceback, exit 1"),
+]  # fmt: skip
+
+
+def snapshot(root) -> set[str]:
+    return {os.path.relpath(os.path.join(d, name), root) for d, dirs, files in os.walk(root) for name in dirs + files}
+
+
+@pytest.mark.parametrize(("script", "flags", "phrase"), CASES)
+def test_bad_input_is_refused_in_one_line(run_script, script, flags, phrase):
+    cwd = run_script.cwd
+    make_inputs(cwd)
+    before = snapshot(cwd)
+    result = run_script(script, *flags, timeout=120)
+    lines = result.stderr.splitlines()
+    assert result.returncode != 0, f"exit 0 on bad input; stdout: {result.stdout[-500:]}"
+    assert "Traceback" not in result.stderr, result.stderr[-2000:]
+    assert len(lines) == 1 and lines[0].strip(), f"expected one line on stderr, got {len(lines)}: {result.stderr!r}"
+    assert lines[0].startswith("error: ") and phrase in lines[0], lines[0]
+    assert not (cwd / PWNED).exists()  # the pickle payload never ran
+    assert not any((cwd / "runs").glob("*")), "a run directory was left behind"
+    assert snapshot(cwd) == before, f"files written: {sorted(snapshot(cwd) - before)}"
