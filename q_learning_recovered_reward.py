@@ -23,6 +23,8 @@ Choices the paper leaves open, fixed here:
   (null when none did). No censored value is imputed.
 """
 
+import contextlib
+import io
 import json
 import os
 import sys
@@ -355,6 +357,28 @@ def write_json_atomic(path: str, data: dict) -> None:
     os.replace(path + ".tmp", path)
 
 
+def run_arm(args: Args, arm: str, seeds: list, source: dict, variant: str, optimum: int, runs: list, writer) -> None:
+    """Q-learning for every seed of one arm (the recovered reward, or the env's); finished runs are appended."""
+    for i, seed in enumerate(seeds):
+        env = gym.make(args.env_id)
+        t_seed = time.time()
+        run = q_learning(env, source["table"] if arm == "recovered" else None, args, seed, variant)
+        env.close()
+        run["seconds"] = time.time() - t_seed
+        runs.append(run)
+        m = run_metrics(run, optimum, args.final_window)
+        for length, greedy, step in zip(run["lengths"], run["greedy"], run["steps"], strict=True):
+            writer.add_scalar(f"qlearning/{arm}/seed_{seed}/episode_length", length, step)
+            writer.add_scalar(f"qlearning/{arm}/seed_{seed}/greedy_episode_length", greedy, step)
+        print(
+            f"[{arm}] seed {seed} ({i + 1}/{len(seeds)}): {args.num_episodes} episodes | "
+            f"{int(run['steps'][-1]):,} env steps | greedy {int(run['greedy'][-1])} | "
+            f"steps to optimum {m['steps_to_optimum']:,.0f} | episodes to optimum {m['episodes_to_optimum']:.0f} | "
+            f"{run['seconds']:.1f}s",
+            flush=True,
+        )
+
+
 def main(args: Args, source: dict) -> dict:
     run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
     run_start = time.time()
@@ -392,26 +416,24 @@ def main(args: Args, source: dict) -> dict:
     # Q-learning, both arms on the same seeds
     runs = {arm: [] for arm in ARMS}
     times = {}
-    for arm in ARMS:
-        t0 = time.time()
-        for i, seed in enumerate(seeds):
-            env = gym.make(args.env_id)
-            t_seed = time.time()
-            run = q_learning(env, source["table"] if arm == "recovered" else None, args, seed, variant)
-            env.close()
-            runs[arm].append(run)
-            m = run_metrics(run, optimum, args.final_window)
-            for length, greedy, step in zip(run["lengths"], run["greedy"], run["steps"], strict=True):
-                writer.add_scalar(f"qlearning/{arm}/seed_{seed}/episode_length", length, step)
-                writer.add_scalar(f"qlearning/{arm}/seed_{seed}/greedy_episode_length", greedy, step)
-            print(
-                f"[{arm}] seed {seed} ({i + 1}/{len(seeds)}): {args.num_episodes} episodes | "
-                f"{int(run['steps'][-1]):,} env steps | greedy {int(run['greedy'][-1])} | "
-                f"steps to optimum {m['steps_to_optimum']:,.0f} | episodes to optimum {m['episodes_to_optimum']:.0f} | "
-                f"{time.time() - t_seed:.1f}s",
-                flush=True,
-            )
-        times[f"time/{arm}_s"] = time.time() - t0
+    try:
+        for arm in ARMS:
+            run_arm(args, arm, seeds, source, variant, optimum, runs[arm], writer)
+            times[f"time/{arm}_s"] = sum(run["seconds"] for run in runs[arm])
+    except KeyboardInterrupt:
+        # what finished is kept: the summary records the seeds done per arm and no figure is drawn
+        print(f"interrupted during the {arm} arm; the summary in {run_dir} says what finished", file=sys.stderr)
+        summary = {
+            **{f"qlearning/{a}/seeds_done": len(runs[a]) for a in ARMS},
+            "wall_time_s": time.time() - run_start,
+            "seed": args.seed,
+            "status": "interrupted",
+            "phase": arm,
+            "args": asdict(args),
+        }
+        write_json_atomic(f"{run_dir}/summary.json", summary)
+        writer.close()
+        return summary
 
     # Curves on a common env-step grid per arm, the mean to TensorBoard, mean and spread to fig6.png
     curves = {}
@@ -470,12 +492,33 @@ def main(args: Args, source: dict) -> dict:
     return summary
 
 
-if __name__ == "__main__":
-    args = tyro.cli(Args)
+def parse_args() -> Args:
+    """tyro's command line, with tyro's multi-line error box shortened to one line."""
+    captured = io.StringIO()
     try:
+        with contextlib.redirect_stderr(captured):
+            return tyro.cli(Args)
+    except SystemExit as e:
+        if e.code == 0:  # --help
+            raise
+        message = []
+        for line in captured.getvalue().splitlines()[1:]:  # the first line is the box's title bar
+            text = line.strip().strip("│╰╯").strip()
+            if not text or set(text) <= set("─"):
+                if message:
+                    break
+                continue
+            message.append(text)
+        raise ValueError(" ".join(message) + " (see --help)") from None
+
+
+if __name__ == "__main__":
+    try:
+        args = parse_args()
         check_args(args)
         source = resolve_source(args)
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
-    main(args, source)
+    summary = main(args, source)
+    sys.exit(130 if summary["status"] == "interrupted" else 0)

@@ -118,6 +118,28 @@ def test_main_is_deterministic_and_never_reuses_a_run_dir(tmp_path, monkeypatch)
     assert summaries[0]["seeds"] == [4, 5] and summaries[0]["eval/wall/tamer_episode_length"] is None
 
 
+def test_ctrl_c_keeps_what_finished(tmp_path, monkeypatch):
+    """Ctrl-C (KeyboardInterrupt) during the second arm: summary says interrupted, with the arm and seeds done."""
+    monkeypatch.chdir(tmp_path)
+    save_table(tmp_path / "r.pt", shaped_reward_table("plain"))
+    args = args_for(reward_path=str(tmp_path / "r.pt"), num_episodes=10, num_seeds=2, seed=1)
+    real, calls = qrr.q_learning, []
+
+    def q_learning_then_ctrl_c(*a, **kw):
+        calls.append(1)
+        if len(calls) == 3:  # the first seed of the second arm
+            raise KeyboardInterrupt
+        return real(*a, **kw)
+
+    monkeypatch.setattr(qrr, "q_learning", q_learning_then_ctrl_c)
+    summary = qrr.main(args, qrr.resolve_source(args))
+    (path,) = glob.glob("runs/*/summary.json")
+    assert json.load(open(path)) == summary
+    assert summary["status"] == "interrupted" and summary["phase"] == qrr.ARMS[1]
+    assert summary[f"qlearning/{qrr.ARMS[0]}/seeds_done"] == 2 and summary[f"qlearning/{qrr.ARMS[1]}/seeds_done"] == 0
+    assert not glob.glob("runs/*/fig6.png")
+
+
 # the script end to end --------------------------------------------------------------------------------------------
 SUMMARY_KEYS = [f"qlearning/{arm}/{m}_{s}" for arm in qrr.ARMS for m in qrr.METRICS for s in ("mean", "std")] + [
     f"qlearning/{arm}/n_reached" for arm in qrr.ARMS
