@@ -117,6 +117,8 @@ class Diverged(Exception):
 
 def check_args(args: Args) -> None:
     """Reject bad flag values before anything is written; each message says what is wrong and how to fix it."""
+    if args.seed < 0:
+        raise InputError(f"--seed must be >= 0 (numpy refuses negative seeds), got {args.seed}")
     positive_ints = [
         "num_threads",
         "tamer_total_timesteps",

@@ -205,6 +205,8 @@ def check_args(args: Args, load_oracle: bool = True) -> dict | None:
             "Pusher-v4 needs mujoco<3 (Gymnasium issue 950); use --env-id Pusher-v5, or run in a separate venv "
             "with `pip install mujoco==2.3.7`"
         )
+    if args.seed < 0:
+        raise ValueError(f"--seed must be >= 0 (numpy refuses negative seeds), got {args.seed}")
     positive_ints = [
         "num_threads",
         "oracle_total_timesteps",

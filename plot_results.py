@@ -10,9 +10,12 @@ Writes, each only when its runs exist:
 - recovered_reward.png: the recovered reward of one maze run, drawn over the maze.
 """
 
+import contextlib
 import glob
+import io
 import json
 import os
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -134,6 +137,8 @@ def fig6(run_dir: str, path: str) -> None:
 
 
 def main(args: Args) -> None:
+    if not os.path.isdir(args.runs_dir):
+        raise ValueError(f"--runs-dir {args.runs_dir}: no such directory (run the experiments first, see README)")
     os.makedirs(args.out, exist_ok=True)
     written = []
     maze = completed_runs(args.runs_dir, f"KnoxStoneMaze-v0__{args.maze_exp}__*")
@@ -157,5 +162,29 @@ def main(args: Args) -> None:
     print(f"wrote {', '.join(written) or 'nothing (no finished runs found)'} to {args.out}")
 
 
+def parse_args() -> Args:
+    """tyro's command line, with tyro's multi-line error box shortened to one line."""
+    captured = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(captured):
+            return tyro.cli(Args)
+    except SystemExit as e:
+        if e.code == 0:  # --help
+            raise
+        message = []
+        for line in captured.getvalue().splitlines()[1:]:  # the first line is the box's title bar
+            text = line.strip().strip("│╰╯").strip()
+            if not text or set(text) <= set("─"):
+                if message:
+                    break
+                continue
+            message.append(text)
+        raise ValueError(" ".join(message) + " (see --help)") from None
+
+
 if __name__ == "__main__":
-    main(tyro.cli(Args))
+    try:
+        main(parse_args())
+    except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(2)

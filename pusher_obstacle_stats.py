@@ -9,6 +9,8 @@ episodes and on the per-seed means.
         runs/Pusher-v5__inform_sac_pusher__3__*
 """
 
+import contextlib
+import io
 import json
 import os
 import sys
@@ -31,10 +33,17 @@ def load_run(run_dir: str) -> dict:
     path = os.path.join(run_dir, "obstacle_distances.npz")
     if not os.path.isfile(path) or not os.path.isfile(os.path.join(run_dir, "summary.json")):
         raise ValueError(f"{run_dir}: no obstacle_distances.npz and summary.json (did the run finish?)")
-    with open(os.path.join(run_dir, "summary.json")) as f:
-        summary = json.load(f)
-    with np.load(path) as data:
-        distances = {k: data[k] for k in data.files}
+    try:
+        with open(os.path.join(run_dir, "summary.json")) as f:
+            summary = json.load(f)
+        with np.load(path) as data:
+            distances = {k: data[k] for k in data.files}
+    except (OSError, ValueError) as e:  # JSONDecodeError is a ValueError; so is a pickled or corrupt .npz
+        raise ValueError(
+            f"{run_dir}: cannot read its summary.json or obstacle_distances.npz ({type(e).__name__})"
+        ) from None
+    if not isinstance(summary, dict) or "success_distance" not in summary.get("args", {}):
+        raise ValueError(f"{run_dir}/summary.json: not a summary of inform_sac_pusher.py (no args.success_distance)")
     if "tamer" not in distances or "inform" not in distances:
         raise ValueError(f"{path}: needs 'tamer' and 'inform' arrays")
     return {
@@ -91,9 +100,29 @@ def main(args: Args) -> dict:
     return out
 
 
-if __name__ == "__main__":
-    args = tyro.cli(Args)
+def parse_args() -> Args:
+    """tyro's command line, with tyro's multi-line error box shortened to one line."""
+    captured = io.StringIO()
     try:
+        with contextlib.redirect_stderr(captured):
+            return tyro.cli(Args)
+    except SystemExit as e:
+        if e.code == 0:  # --help
+            raise
+        message = []
+        for line in captured.getvalue().splitlines()[1:]:  # the first line is the box's title bar
+            text = line.strip().strip("│╰╯").strip()
+            if not text or set(text) <= set("─"):
+                if message:
+                    break
+                continue
+            message.append(text)
+        raise ValueError(" ".join(message) + " (see --help)") from None
+
+
+if __name__ == "__main__":
+    try:
+        args = parse_args()
         if not args.run_dirs:
             raise ValueError("pass at least one run directory")
         main(args)

@@ -7,7 +7,9 @@ In the spirit of CleanRL's benchmark utility.
     python run_seeds.py --script inform_sac_pusher.py --exp-name fig3 --seeds 1 2 3 -- --random-starts
 """
 
+import contextlib
 import glob
+import io
 import json
 import math
 import os
@@ -116,12 +118,34 @@ def main(args: Args) -> dict:
     return table
 
 
+def parse_args() -> Args:
+    """tyro's command line, with tyro's multi-line error box shortened to one line."""
+    captured = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(captured):
+            return tyro.cli(Args)
+    except SystemExit as e:
+        if e.code == 0:  # --help
+            raise
+        message = []
+        for line in captured.getvalue().splitlines()[1:]:  # the first line is the box's title bar
+            text = line.strip().strip("│╰╯").strip()
+            if not text or set(text) <= set("─"):
+                if message:
+                    break
+                continue
+            message.append(text)
+        raise ValueError(" ".join(message) + " (see --help)") from None
+
+
 if __name__ == "__main__":
-    args = tyro.cli(Args)
-    if args.workers < 1 or args.threads < 0 or not args.seeds:
-        print("error: --workers must be >= 1, --threads >= 0, and --seeds non-empty", file=sys.stderr)
-        sys.exit(2)
-    if not os.path.isfile(args.script):
-        print(f"error: {args.script}: no such script", file=sys.stderr)
+    try:
+        args = parse_args()
+        if args.workers < 1 or args.threads < 0 or not args.seeds:
+            raise ValueError("--workers must be >= 1, --threads >= 0, and --seeds non-empty")
+        if not os.path.isfile(args.script):
+            raise ValueError(f"{args.script}: no such script")
+    except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
     main(args)
