@@ -790,6 +790,14 @@ def main() -> None:
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
+    except KeyboardInterrupt:
+        # nothing half-written: every file is saved atomically; SAC's state is saved every --checkpoint-frequency steps
+        print(
+            "interrupted; no oracle checkpoint was written. SAC training continues from its last saved state with "
+            "--resume <run dir>/training_state.pt",
+            file=sys.stderr,
+        )
+        sys.exit(130)
 
 
 if __name__ == "__main__":

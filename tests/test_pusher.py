@@ -6,6 +6,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 
 import gymnasium as gym
 import numpy as np
@@ -440,3 +441,24 @@ def test_oracle_train_pusher_smoke_and_resume(tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "resumed from" in proc.stdout
     assert torch.load(tmp_path / "oracle.pt", weights_only=True)["training_steps"] == 600
+
+
+def test_oracle_train_ctrl_c_keeps_the_last_training_state(tmp_path):
+    import signal
+
+    flags = ["--env-id", "Pusher-v5", "--learning-starts", "100", "--batch-size", "32", "--hidden-size", "32"]
+    flags += ["--checkpoint-frequency", "150", "--log-frequency", "50", "--total-timesteps", "100000"]
+    flags += ["--eval-frequency", "100000", "--output-path", "oracle.pt"]
+    proc = subprocess.Popen([sys.executable, os.path.join(REPO, "oracle_train.py"), *flags], cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    run_dir = next(line for line in proc.stdout if line.startswith("run dir:")).split(":", 1)[1].strip()
+    state = tmp_path / run_dir / "training_state.pt"
+    deadline = time.time() + 120
+    while not state.exists() and time.time() < deadline:  # the first state is saved at step 150
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGINT)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and "Traceback" not in stderr, stderr
+    assert len(stderr.strip().splitlines()) == 1 and "--resume" in stderr
+    assert not (tmp_path / "oracle.pt").exists()
+    assert torch.load(state, weights_only=True)["global_step"] >= 150
