@@ -165,16 +165,21 @@ def env_shapes(env_id: str) -> tuple[int, int]:
     return shapes
 
 
-def load_oracle_checkpoint(path: str, env_id: str, obs_dim: int, act_dim: int) -> dict:
-    """Read an oracle_train.py checkpoint with weights_only=True and check it fits; ValueError names the file."""
+def read_checkpoint(path: str, flag: str, missing_hint: str = "") -> object:
+    """torch.load(weights_only=True): tensors and plain values only, never code; ValueError names flag and file."""
     if not os.path.isfile(path):
-        raise ValueError(f"--oracle-path {path}: no such file (train one with oracle_train.py)")
+        raise ValueError(f"{flag} {path}: no such file{missing_hint}")
     try:
-        ckpt = torch.load(path, weights_only=True, map_location="cpu")
+        return torch.load(path, weights_only=True, map_location="cpu")
     except Exception as e:
         raise ValueError(
-            f"--oracle-path {path}: cannot be read as a weights-only torch checkpoint ({type(e).__name__})"
+            f"{flag} {path}: cannot be read as a weights-only torch checkpoint ({type(e).__name__})"
         ) from None
+
+
+def load_oracle_checkpoint(path: str, env_id: str, obs_dim: int, act_dim: int) -> dict:
+    """Read an oracle_train.py checkpoint and check it fits this env; ValueError names the file."""
+    ckpt = read_checkpoint(path, "--oracle-path", " (train one with oracle_train.py)")
     required = ("env_id", "kwargs", "actor_state_dict", "qf_state_dict", "action_low", "action_high")
     if not isinstance(ckpt, dict) or any(k not in ckpt for k in required):
         raise ValueError(f"--oracle-path {path}: not an oracle checkpoint (needs keys {', '.join(required)})")
@@ -1133,14 +1138,7 @@ def main(args: Args, oracle_ckpt: dict | None) -> dict:
 
 def load_policy(path: str, env_id: str) -> Actor:
     """A saved actor (tamer_actor.pt, inform_actor.pt, or an oracle checkpoint); ValueError names the file."""
-    if not os.path.isfile(path):
-        raise ValueError(f"--evaluate {path}: no such file")
-    try:
-        ckpt = torch.load(path, weights_only=True, map_location="cpu")
-    except Exception as e:
-        raise ValueError(
-            f"--evaluate {path}: cannot be read as a weights-only torch checkpoint ({type(e).__name__})"
-        ) from None
+    ckpt = read_checkpoint(path, "--evaluate")
     if isinstance(ckpt, dict) and "actor_state_dict" in ckpt:  # an oracle checkpoint
         ckpt = {**ckpt, "state_dict": ckpt["actor_state_dict"]}
     if not isinstance(ckpt, dict) or any(k not in ckpt for k in ("state_dict", "kwargs", "action_low", "action_high")):
