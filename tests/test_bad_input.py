@@ -71,6 +71,8 @@ CASES = [
     case("pusher-evaluate-missing-file", "inform_sac_pusher.py", "--evaluate nope.pt",
          "--evaluate nope.pt: no such file"),
     case("pusher-unknown-env-id", "inform_sac_pusher.py", "--env-id Pusher-v9", "unknown --env-id 'Pusher-v9'"),
+    case("pusher-oracle-pickle-with-code", "inform_sac_pusher.py", "--oracle-path evil.pt",
+         "--oracle-path evil.pt: cannot be read as a weights-only torch checkpoint (UnpicklingError)"),
     case("pusher-maze-oracle", "inform_sac_pusher.py", "--oracle-path maze_oracle.pt", "not an oracle checkpoint"),
     case("pusher-oracle-wrong-shapes", "inform_sac_pusher.py", "--oracle-path bad_shape.pt",
          "shapes obs 5 act 7 do not match Pusher-v5 (obs 23, act 7)"),
