@@ -10,6 +10,7 @@ Fig. 3 (episode length of TAMER, INFORM and the expert). See SPEC.md sections 1-
 import contextlib
 import io
 import json
+import math
 import os
 import pickle
 import random
@@ -139,12 +140,12 @@ def check_args(args: Args) -> None:
             raise InputError(f"--{name.replace('_', '-')} must be in [0, 1], got {getattr(args, name)}")
     positive_floats = ["tamer_learning_rate", "sleep_learning_rate", "sleep_temperature", "exploration_fraction"]
     for name in positive_floats:
-        if not getattr(args, name) > 0.0:
-            raise InputError(f"--{name.replace('_', '-')} must be > 0, got {getattr(args, name)}")
+        if not 0.0 < getattr(args, name) < math.inf:
+            raise InputError(f"--{name.replace('_', '-')} must be a finite number > 0, got {getattr(args, name)}")
     if not 0.0 < args.sleep_tau <= 1.0:
         raise InputError(f"--sleep-tau must be in (0, 1], got {args.sleep_tau}")
-    if args.sleep_chi2_coef < 0.0:
-        raise InputError(f"--sleep-chi2-coef must be >= 0 (0 turns it off), got {args.sleep_chi2_coef}")
+    if not 0.0 <= args.sleep_chi2_coef < math.inf:
+        raise InputError(f"--sleep-chi2-coef must be a finite number >= 0 (0 turns it off), got {args.sleep_chi2_coef}")
     if args.oracle_gamma >= 1.0:
         raise InputError("--oracle-gamma must be below 1 for value iteration to converge")
     if args.tamer_learning_starts < args.tamer_batch_size:
@@ -632,7 +633,7 @@ def main(args: Args) -> dict:
 
     summary.update(evaluator.final)
     summary.update({"time/eval_s": evaluator.seconds, "wall_time_s": time.time() - run_start, "seed": args.seed,
-                    "status": status, "args": asdict(args)})  # fmt: skip
+                    "script": os.path.basename(__file__), "status": status, "args": asdict(args)})  # fmt: skip
     if status != "completed":
         summary["phase"] = phase
     write_json_atomic(f"{run_dir}/summary.json", summary)

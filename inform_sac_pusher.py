@@ -181,7 +181,7 @@ def load_oracle_checkpoint(path: str, env_id: str, obs_dim: int, act_dim: int) -
     """Read an oracle_train.py checkpoint and check it fits this env; ValueError names the file."""
     ckpt = read_checkpoint(path, "--oracle-path", " (train one with oracle_train.py)")
     required = ("env_id", "kwargs", "actor_state_dict", "qf_state_dict", "action_low", "action_high")
-    if not isinstance(ckpt, dict) or any(k not in ckpt for k in required):
+    if not isinstance(ckpt, dict) or any(k not in ckpt for k in required) or not isinstance(ckpt["kwargs"], dict):
         raise ValueError(f"--oracle-path {path}: not an oracle checkpoint (needs keys {', '.join(required)})")
     if ckpt["env_id"] != env_id:
         raise ValueError(f"--oracle-path {path}: oracle was trained on {ckpt['env_id']}, this run uses {env_id}")
@@ -247,12 +247,12 @@ def check_args(args: Args, load_oracle: bool = True) -> dict | None:
         "success_distance",
     ]
     for name in positive_floats:
-        if not getattr(args, name) > 0.0:
-            raise ValueError(f"--{name.replace('_', '-')} must be > 0, got {getattr(args, name)}")
+        if not 0.0 < getattr(args, name) < math.inf:
+            raise ValueError(f"--{name.replace('_', '-')} must be a finite number > 0, got {getattr(args, name)}")
     if not 0.0 < args.tau <= 1.0:
         raise ValueError(f"--tau must be in (0, 1], got {args.tau}")
-    if args.sleep_chi2_coef < 0.0:
-        raise ValueError(f"--sleep-chi2-coef must be >= 0 (0 turns it off), got {args.sleep_chi2_coef}")
+    if not 0.0 <= args.sleep_chi2_coef < math.inf:
+        raise ValueError(f"--sleep-chi2-coef must be a finite number >= 0 (0 turns it off), got {args.sleep_chi2_coef}")
     if not 1 <= args.tamer_learning_starts < args.tamer_total_timesteps:
         raise ValueError(
             f"--tamer-learning-starts ({args.tamer_learning_starts}) must be >= 1 and below "
@@ -1111,6 +1111,7 @@ def main(args: Args, oracle_ckpt: dict | None) -> dict:
         "oracle_path": oracle_ckpt["path"] if oracle_ckpt is not None else None,
         "wall_time_s": time.time() - run_start,
         "seed": args.seed,
+        "script": os.path.basename(__file__),
         "status": status,
         "args": asdict(args),
     }
@@ -1141,7 +1142,8 @@ def load_policy(path: str, env_id: str) -> Actor:
     ckpt = read_checkpoint(path, "--evaluate")
     if isinstance(ckpt, dict) and "actor_state_dict" in ckpt:  # an oracle checkpoint
         ckpt = {**ckpt, "state_dict": ckpt["actor_state_dict"]}
-    if not isinstance(ckpt, dict) or any(k not in ckpt for k in ("state_dict", "kwargs", "action_low", "action_high")):
+    required = ("state_dict", "kwargs", "action_low", "action_high")
+    if not isinstance(ckpt, dict) or any(k not in ckpt for k in required) or not isinstance(ckpt["kwargs"], dict):
         raise ValueError(f"--evaluate {path}: not an actor checkpoint (tamer_actor.pt, inform_actor.pt or an oracle)")
     if ckpt.get("env_id") != env_id:
         raise ValueError(
@@ -1153,8 +1155,8 @@ def load_policy(path: str, env_id: str) -> Actor:
         raise ValueError(
             f"--evaluate {path}: shapes obs {kw.get('obs_dim')} act {kw.get('act_dim')} do not match {env_id}"
         )
-    actor = Actor(kw["obs_dim"], kw["act_dim"], kw["hidden"], ckpt["action_low"], ckpt["action_high"])
     try:
+        actor = Actor(kw["obs_dim"], kw["act_dim"], kw["hidden"], ckpt["action_low"], ckpt["action_high"])
         actor.load_state_dict(ckpt["state_dict"])
     except Exception as e:
         raise ValueError(f"--evaluate {path}: the network does not load ({type(e).__name__})") from None
@@ -1199,7 +1201,10 @@ if __name__ == "__main__":
         args = parse_args()
         if args.evaluate is not None:
             check_args(args, load_oracle=False)
-            print(json.dumps(evaluate_saved(args), indent=2))
+            try:
+                print(json.dumps(evaluate_saved(args), indent=2))
+            except KeyboardInterrupt:
+                sys.exit(130)  # evaluating writes nothing, so there is nothing to keep
             sys.exit(0)
         oracle_ckpt = check_args(args)
     except ValueError as e:

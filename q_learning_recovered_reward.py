@@ -416,6 +416,7 @@ def main(args: Args, source: dict) -> dict:
     # Q-learning, both arms on the same seeds
     runs = {arm: [] for arm in ARMS}
     times = {}
+    arm = ARMS[0]
     try:
         for arm in ARMS:
             run_arm(args, arm, seeds, source, variant, optimum, runs[arm], writer)
@@ -427,6 +428,7 @@ def main(args: Args, source: dict) -> dict:
             **{f"qlearning/{a}/seeds_done": len(runs[a]) for a in ARMS},
             "wall_time_s": time.time() - run_start,
             "seed": args.seed,
+            "script": os.path.basename(__file__),
             "status": "interrupted",
             "phase": arm,
             "args": asdict(args),
@@ -472,6 +474,7 @@ def main(args: Args, source: dict) -> dict:
             **times,
             "wall_time_s": time.time() - run_start,
             "seed": args.seed,
+            "script": os.path.basename(__file__),
             "status": "completed",
             "args": asdict(args),
         }

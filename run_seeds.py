@@ -43,13 +43,15 @@ class Args:
     """extra flags for every run, after a `--`"""
 
 
-def finished_summary(runs_dir: str, exp_name: str, seed: int) -> str | None:
-    """The newest summary.json of a completed run of this experiment and seed, if there is one."""
+def finished_summary(runs_dir: str, exp_name: str, seed: int, script: str) -> str | None:
+    """The newest summary.json of a completed run of this script, experiment and seed, if there is one (two
+    scripts may share an experiment name: each summary.json names the script that wrote it)."""
     paths = sorted(glob.glob(os.path.join(runs_dir, f"*__{exp_name}__{seed}__*", "summary.json")), key=os.path.getmtime)
     for path in reversed(paths):
         with open(path) as f:
-            if json.load(f).get("status") == "completed":
-                return path
+            summary = json.load(f)
+        if summary.get("status") == "completed" and summary.get("script") == os.path.basename(script):
+            return path
     return None
 
 
@@ -83,7 +85,7 @@ def aggregate(summaries: list[dict]) -> dict[str, dict]:
 
 
 def main(args: Args) -> dict:
-    todo = [s for s in args.seeds if finished_summary(args.runs_dir, args.exp_name, s) is None]
+    todo = [s for s in args.seeds if finished_summary(args.runs_dir, args.exp_name, s, args.script) is None]
     done = sorted(set(args.seeds) - set(todo))
     if done:
         print(f"already finished, not run again: seeds {done}", flush=True)
@@ -93,7 +95,7 @@ def main(args: Args) -> dict:
         with ThreadPoolExecutor(args.workers) as pool:
             list(pool.map(lambda seed: run_one(args, seed, threads), todo))
 
-    paths = {s: finished_summary(args.runs_dir, args.exp_name, s) for s in args.seeds}
+    paths = {s: finished_summary(args.runs_dir, args.exp_name, s, args.script) for s in args.seeds}
     missing = [s for s, p in paths.items() if p is None]
     summaries = []
     for path in filter(None, paths.values()):

@@ -13,7 +13,8 @@ with open("calls.txt", "a") as f:
     f.write(f"{seed}\\n")
 d = f"runs/Fake-v0__{exp}__{seed}__{time.time_ns()}"
 os.makedirs(d)
-json.dump({"status": "completed", "seed": seed, "eval/x": seed * 2.0, "args": {}}, open(f"{d}/summary.json", "w"))
+json.dump({"status": "completed", "script": os.path.basename(sys.argv[0]), "seed": seed, "eval/x": seed * 2.0,
+           "args": {}}, open(f"{d}/summary.json", "w"))
 """
 
 
@@ -34,3 +35,13 @@ def test_runs_seeds_once_and_resumes(tmp_path, monkeypatch):
     assert calls == [1, 2, 3, 4]  # finished seeds were not run again
     saved = json.load(open(os.path.join("runs", "t__table.json")))
     assert saved["table"]["eval/x"]["n"] == 4
+
+
+def test_a_run_of_another_script_with_the_same_exp_name_does_not_count(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "fake.py").write_text(FAKE_SCRIPT)
+    (tmp_path / "other.py").write_text(FAKE_SCRIPT)
+    run_seeds.main(run_seeds.Args(script="other.py", exp_name="t", seeds=[1], workers=1))
+    table = run_seeds.main(run_seeds.Args(script="fake.py", exp_name="t", seeds=[1], workers=1))
+    assert (tmp_path / "calls.txt").read_text().split() == ["1", "1"]  # fake.py ran although other.py had seed 1
+    assert table["eval/x"]["n"] == 1
