@@ -76,6 +76,10 @@ def aggregate(runs: list[dict]) -> dict:
 
 def main(args: Args) -> dict:
     runs = [load_run(d) for d in args.run_dirs]
+    seeds = [r["seed"] for r in runs]
+    if len(set(seeds)) < len(seeds):  # the samples of a t-test must be independent: one run per seed
+        twice = sorted({s for s in seeds if seeds.count(s) > 1})
+        raise ValueError(f"seed {', '.join(map(str, twice))} given more than once: pass one run directory per seed")
     out = aggregate(runs)
     print(f"obstacle test: {len(runs)} seeds {out['seeds']}, {out['episodes_per_seed']} episodes per policy and seed")
     for p in ("oracle", "tamer", "inform"):

@@ -44,6 +44,10 @@ def make_inputs(cwd) -> None:
     run_dir.mkdir()
     np.savez(run_dir / "obstacle_distances.npz", tamer=np.ones(3), inform=np.ones(3))
     (run_dir / "summary.json").write_text(json.dumps({"seed": 1, "status": "completed"}))
+    for name in ("seed1_a", "seed1_b"):  # two complete runs of the same seed
+        (cwd / name).mkdir()
+        np.savez(cwd / name / "obstacle_distances.npz", tamer=np.ones(3), inform=np.zeros(3))
+        (cwd / name / "summary.json").write_text(json.dumps({"seed": 1, "args": {"success_distance": 0.08}}))
 
 
 def case(id: str, script: str, flags: str, phrase: str, xfail: str | None = None):
@@ -83,6 +87,7 @@ CASES = [
     case("run_seeds-seed-not-an-int", "run_seeds.py", "--seeds x", "Error parsing --seeds"),
     case("plot_results-missing-runs-dir", "plot_results.py", "--runs-dir nope", "--runs-dir nope: no such directory"),
     case("obstacle-missing-run", "pusher_obstacle_stats.py", "nope_dir", "nope_dir: no obstacle_distances.npz"),
+    case("obstacle-same-seed-twice", "pusher_obstacle_stats.py", "seed1_a seed1_b", "seed 1 given more than once"),
     case("obstacle-summary-without-args", "pusher_obstacle_stats.py", "pusher_run",
          "not a summary of inform_sac_pusher.py"),
 ]  # fmt: skip
