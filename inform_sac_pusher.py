@@ -748,14 +748,15 @@ class ReplayBuffer:
         self.episodes.append((start, end, distance))
         return distance < success_distance
 
-    def expert_indices(self, fallback_fraction: float = 0.1) -> tuple[torch.Tensor, bool]:
-        """The success set's transitions; with no success, those of the episodes that ended closest to the goal."""
+    def expert_indices(self, fallback_fraction: float = 0.1) -> tuple[torch.Tensor, int]:
+        """The success set's transitions and 0; with no success, the transitions of the episodes that ended closest
+        to the goal and how many episodes those are."""
         idx = self.success.nonzero().squeeze(-1)
         if idx.numel() > 0:
-            return idx, False
+            return idx, 0
         k = max(1, int(len(self.episodes) * fallback_fraction))
         closest = sorted(self.episodes, key=lambda e: e[2])[:k]
-        return torch.cat([torch.arange(s, e, device=self.success.device) for s, e, _ in closest]), True
+        return torch.cat([torch.arange(s, e, device=self.success.device) for s, e, _ in closest]), k
 
 
 class Evaluator:
@@ -894,11 +895,11 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer
 
 def sleep_phase(args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator, writer, device):
     """The night: offline IQ-Learn (Eq. 2) on the buffer, the successful trajectories as the expert set."""
-    expert_idx, fallback = buffer.expert_indices()
-    if fallback:
+    expert_idx, fallback_episodes = buffer.expert_indices()
+    if fallback_episodes:
         print(
-            f"[sleep] warning: no successful episode; using the {max(1, len(buffer.episodes) // 10)} episodes that "
-            "ended closest to the goal as the expert set",
+            f"[sleep] warning: no successful episode; using the {fallback_episodes} episodes that ended closest to "
+            "the goal as the expert set",
             flush=True,
         )
     print(f"[sleep] {expert_idx.numel()} expert transitions, {buffer.obs.shape[0]} in the buffer", flush=True)
@@ -919,7 +920,7 @@ def sleep_phase(args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator,
     is_expert = torch.cat([torch.zeros(B, dtype=torch.bool), torch.ones(B, dtype=torch.bool)]).to(device)
     names = ("losses/iq_loss", "losses/iq_expert_term", "losses/iq_value_term", "losses/iq_chi2_term")
     names += ("losses/inform_actor_loss",)
-    stats = {"sleep/expert_transitions": int(expert_idx.numel()), "sleep/expert_fallback": int(fallback)}
+    stats = {"sleep/expert_transitions": int(expert_idx.numel()), "sleep/expert_fallback": int(fallback_episodes > 0)}
     losses: dict[str, float] = {}
     progress = Progress("sleep", total)
     for step in range(total):
