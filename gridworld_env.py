@@ -83,6 +83,36 @@ def optimal_q(variant: str = "plain", gamma: float = 0.99, tol: float = 1e-10) -
         q = new_q
 
 
+ARROWS = "^v<>"  # up, down, left, right, as drawn by draw_maze
+
+
+def draw_maze(variant: str = "plain", agent: int | None = None, arrows: dict[int, int] | None = None) -> str:
+    """The maze as text (the env's ansi render): A the agent, G the goal, ## blocked cells; `arrows` maps cells to
+    actions drawn as ^ v < > (the agent's cell shows "A" and its arrow, e.g. "A<")."""
+    walls = VARIANT_WALLS[variant]
+    arrows = arrows or {}
+
+    def open_between(a, b):
+        return a in CELL_INDEX and b in CELL_INDEX and frozenset({a, b}) not in walls
+
+    def content(i):
+        if i is None:
+            return "##"
+        if i == agent:
+            return "A" + ARROWS[arrows[i]] if i in arrows else " A"
+        return " G" if i == GOAL else " " + ARROWS[arrows[i]] if i in arrows else "  "
+
+    lines = ["+--" * COLS + "+"]
+    for r in range(ROWS):
+        row = "|"
+        for c in range(COLS):
+            row += content(CELL_INDEX.get((r, c)))
+            row += " " if c + 1 < COLS and open_between((r, c), (r, c + 1)) else "|"
+        lines.append(row)
+        lines.append("+" + "+".join("  " if open_between((r, c), (r + 1, c)) else "--" for c in range(COLS)) + "+")
+    return "\n".join(lines) + "\n"
+
+
 def greedy_episode_length(policy: np.ndarray, variant: str = "plain", start: int = START, max_steps: int = 200) -> int:
     """Steps a deterministic table policy (one action per cell) takes from `start` to G; max_steps if it never does."""
     next_cell = transition_table(variant)
@@ -138,21 +168,7 @@ class KnoxStoneMazeEnv(gym.Env):
         return None
 
     def _render_text(self) -> str:
-        walls = VARIANT_WALLS[self.variant]
-
-        def open_between(a, b):
-            return a in CELL_INDEX and b in CELL_INDEX and frozenset({a, b}) not in walls
-
-        lines = ["+--" * COLS + "+"]
-        for r in range(ROWS):
-            row = "|"
-            for c in range(COLS):
-                i = CELL_INDEX.get((r, c))
-                row += "##" if i is None else " A" if i == self.cell else " G" if i == GOAL else "  "
-                row += " " if c + 1 < COLS and open_between((r, c), (r, c + 1)) else "|"
-            lines.append(row)
-            lines.append("+" + "+".join("  " if open_between((r, c), (r + 1, c)) else "--" for c in range(COLS)) + "+")
-        return "\n".join(lines) + "\n"
+        return draw_maze(self.variant, agent=self.cell)
 
     def _render_rgb(self, cell_px: int = 32) -> np.ndarray:
         img = np.full((ROWS * cell_px, COLS * cell_px, 3), 255, dtype=np.uint8)

@@ -5,8 +5,11 @@ Reproduces the gridworld experiment of Tarakli & Di Nuovo, "Learning while Sleep
 Fig. 3 (episode length of TAMER, INFORM and the expert). See SPEC.md sections 1-3 and 9.
 
     python inform_dqn_gridworld.py --seed 1
+    python inform_dqn_gridworld.py --teacher-noise 0.2 --teacher-delay 1 --credit-window 2   # a human-like teacher
+    python inform_dqn_gridworld.py --teacher human --tamer-learning-starts 32   # teach it yourself (SPEC section 10)
 """
 
+import collections
 import contextlib
 import io
 import json
@@ -14,10 +17,12 @@ import math
 import os
 import pickle
 import random
+import signal
 import sys
 import time
 import zipfile
 from dataclasses import asdict, dataclass
+from typing import Literal
 
 import gymnasium as gym
 import matplotlib
@@ -34,6 +39,8 @@ import gridworld_env
 
 MAZE_IDS = tuple(gridworld_env.ENV_IDS)
 POLICIES = ("oracle", "tamer", "inform")
+ALL_STARTS = tuple(cell for cell in range(gridworld_env.N_CELLS) if cell != gridworld_env.GOAL)  # the 29 others
+OPTIMUM = gridworld_env.greedy_episode_length(gridworld_env.optimal_q("plain").argmax(1))  # 19 steps from S
 
 
 @dataclass
@@ -82,6 +89,22 @@ class Args:
     """alpha of Eq. 4 at the end of the forward phase (alpha rises linearly: the teacher gets stricter)"""
     success_max_steps: int = 30
     """an episode is tagged success if it reaches the goal in fewer than this many steps"""
+
+    # The teacher as a person (SPEC section 10); the defaults are the paper's perfect, instant, tireless teacher
+    teacher: Literal["oracle", "human"] = "oracle"
+    """who answers: "oracle" (Eq. 4, distorted by the flags below) or "human" (you, in the terminal: y, Enter, q)"""
+    teacher_noise: float = 0.0
+    """probability that the teacher's judgement is flipped (+1 <-> no feedback)"""
+    teacher_sparsity: float = 1.0
+    """probability that a +1 judgement is actually given (otherwise no feedback)"""
+    teacher_delay: int = 0
+    """env steps between a transition and the arrival of its signal (which labels the later transition)"""
+    credit_window: int = 1
+    """each arriving signal labels this many most recent transitions (teacher_delay + 1 covers the right one)"""
+    feedback_budget: int | None = None
+    """the teacher leaves after this many +1 signals (None: never); then H and the TAMER policy are frozen"""
+    budget_ends_forward_phase: bool = False
+    """when the budget is spent, end the forward phase and sleep (otherwise keep acting, without feedback)"""
 
     # Sleep phase: offline IQ-Learn (Eq. 2), no environment steps
     sleep_gradient_steps: int = 3000
@@ -160,6 +183,22 @@ def check_args(args: Args) -> None:
         )
     if args.env_id not in MAZE_IDS:
         raise InputError(f"unknown --env-id {args.env_id!r}; this script trains on one of {', '.join(MAZE_IDS)}")
+    for name in ("teacher_noise", "teacher_sparsity"):
+        if not 0.0 <= getattr(args, name) <= 1.0:
+            raise InputError(f"--{name.replace('_', '-')} is a probability, in [0, 1]; got {getattr(args, name)}")
+    if args.teacher_delay < 0:
+        raise InputError(f"--teacher-delay must be >= 0 env steps, got {args.teacher_delay}")
+    if args.credit_window < 1:
+        raise InputError(f"--credit-window must be >= 1 (1 labels only the transition a signal arrives on), "
+                         f"got {args.credit_window}")  # fmt: skip
+    if args.feedback_budget is not None and args.feedback_budget < 0:
+        raise InputError(f"--feedback-budget must be >= 0 positive signals (or None: unlimited), "
+                         f"got {args.feedback_budget}")  # fmt: skip
+    distortions = {"teacher_noise": 0.0, "teacher_sparsity": 1.0, "teacher_delay": 0, "credit_window": 1}
+    changed = [f"--{k.replace('_', '-')}" for k, v in distortions.items() if getattr(args, k) != v]
+    if args.teacher == "human" and changed:
+        raise InputError(f"--teacher human takes your answers as they are; drop {', '.join(changed)} "
+                         f"(they distort the simulated teacher only)")  # fmt: skip
 
 
 class QNetwork(nn.Module):
@@ -209,6 +248,49 @@ def linear_schedule(start: float, end: float, duration: int, t: int) -> float:
 def oracle_feedback(q_star_sa, q_star_best, alpha):  # Eq. 4, sign-safe
     """h = 1 if Q*(s, a) >= Q*(s, a*) - (1 - alpha) |Q*(s, a*)|, else 0 (no feedback)."""
     return (q_star_sa >= q_star_best - (1.0 - alpha) * abs(q_star_best)) * 1.0
+
+
+# ALGO LOGIC: the teacher (SPEC section 10). Eq. 4 says what a perfect teacher would answer; a person distorts it.
+# Copy this class verbatim into both INFORM scripts (CleanRL style: repeated across files, never within one).
+class Teacher:
+    """A simulated person between Eq. 4 and the learner: noisy, sparse, late and limited (SPEC section 10).
+
+    Each call hands over the perfect teacher's answer h* (0 or 1) about the transition at buffer index `step` and
+    returns the buffer indices that receive h = 1 now. In order: the judgement is flipped with probability
+    `noise`; a +1 is then clicked only with probability `sparsity`; a click about step t arrives at step t + `delay`
+    and labels that later transition and the `credit_window` - 1 before it (Deep TAMER's remedy; a window of
+    delay + 1 covers the step it was about). The teacher leaves after `budget` delivered +1 signals (None: never).
+    Its randomness is its own generator, so the defaults (0, 1, 0, 1, None) reproduce the perfect teacher exactly
+    and leave every other random stream untouched. Signals still on their way when the phase ends are lost.
+    """
+
+    def __init__(self, noise=0.0, sparsity=1.0, delay=0, credit_window=1, budget=None, seed=0):
+        self.noise, self.sparsity, self.delay, self.credit_window, self.budget = (
+            noise, sparsity, delay, credit_window, budget,
+        )  # fmt: skip
+        self.rng = np.random.default_rng(seed)
+        self.in_flight = collections.deque()  # clicks on their way, oldest first
+        self.positives = 0  # +1 signals delivered
+        self.perfect_positives = 0  # +1 answers of the perfect teacher (Eq. 4), for the record
+
+    @property
+    def gone(self) -> bool:
+        """The budget is spent: no more feedback from now on."""
+        return self.budget is not None and self.positives >= self.budget
+
+    def __call__(self, step: int, h_star: float) -> list[int]:
+        self.perfect_positives += int(h_star > 0)
+        flip, click = self.rng.random(2)  # always two draws: the stream does not depend on the answers
+        h = 1.0 - h_star if flip < self.noise else h_star
+        h = h if click < self.sparsity else 0.0
+        self.in_flight.append(h)
+        if len(self.in_flight) <= self.delay:
+            return []
+        h = self.in_flight.popleft()
+        if h <= 0 or self.gone:
+            return []
+        self.positives += 1
+        return list(range(max(0, step - self.credit_window + 1), step + 1))
 
 
 def tamer_loss(h_net, obs, actions, feedback):  # Eq. 1: E[(H(s, a) - h)^2], gamma = 0, no bootstrapping
@@ -272,7 +354,7 @@ def evaluate(env: gym.Env, policy: np.ndarray, start_cells, success_max_steps: i
 
 
 class Evaluator:
-    """Greedy evaluation of a policy on the plain maze, the wall maze and the start set; logs eval/ tags."""
+    """Greedy evaluation on the plain maze, the wall maze, the start set and all 29 starts; logs eval/ tags."""
 
     def __init__(self, writer: SummaryWriter | None, success_max_steps: int):
         self.writer = writer
@@ -295,11 +377,13 @@ class Evaluator:
         set_length, set_success = evaluate(
             self.envs["start_set"], policy, gridworld_env.START_SET, self.success_max_steps
         )
+        _, all_success = evaluate(self.envs["plain"], policy, ALL_STARTS, self.success_max_steps)
         metrics = {
             f"eval/{name}_episode_length": length,
             f"eval/wall/{name}_episode_length": wall_length,
             f"eval/start_set/{name}_episode_length": set_length,
             f"eval/start_set/{name}_success_rate": set_success,
+            f"eval/all_starts/{name}_success_rate": all_success,
         }
         for tag, value in metrics.items():
             if self.writer is not None:
@@ -311,6 +395,57 @@ class Evaluator:
     def close(self):
         for env in self.envs.values():
             env.close()
+
+
+class HumanTeacher:
+    """You as the teacher (SPEC section 10). The maze is drawn with the agent and its move; you answer on standard
+    input: y (+1), Enter (no feedback) or q (stop teaching: the sleep starts). The end of the input counts as q, so
+    a pipe or a file of answers works as well as a keyboard."""
+
+    def __init__(self, variant: str):
+        self.variant = variant
+        self.answers = self.agreement = 0  # answers given, and how many Eq. 4 (the oracle) would have given too
+        self.echo = not sys.stdin.isatty()  # piped answers are not echoed by a terminal: print them
+        print("You are the teacher. The agent A must reach G by the shortest path (19 steps from its start).\n"
+              "For each move answer: y = good (+1), Enter = no feedback, q = stop teaching (the sleep starts).",
+              flush=True)  # fmt: skip
+
+    def __call__(self, cell: int, action: int, explore: bool, step: int, positives: int, h_oracle: float):
+        """Your answer about the move `action` from `cell`: 1.0, 0.0, or None to stop teaching."""
+        how = " (exploring: a random move)" if explore else ""
+        print(f"\nstep {step} | steps taught {step - 1} | positives given {positives}\n"
+              + gridworld_env.draw_maze(self.variant, agent=cell, arrows={cell: action})
+              + f"the agent moves {gridworld_env.ACTION_NAMES[action]}{how}", flush=True)  # fmt: skip
+        while True:
+            print("good move? [y / Enter / q] ", end="", flush=True)
+            line = sys.stdin.readline()
+            answer = line.strip().lower() if line else "q"
+            if self.echo:
+                print(answer or "(Enter)", flush=True)
+            if answer == "q":
+                return None
+            if answer in ("y", ""):
+                h = float(answer == "y")
+                self.answers += 1
+                self.agreement += int(h == h_oracle)
+                return h
+            print(f"{answer!r}? type y for +1, press Enter for no feedback, or type q to stop teaching", flush=True)
+
+    def finish(self, steps: int, positives: int):
+        print(f"\nthank you: {steps} steps taught, {positives} positives given ({self.agreement} of "
+              f"{self.answers} answers as the oracle's, Eq. 4); now the agent sleeps", flush=True)  # fmt: skip
+
+
+def draw_greedy_path(policy: np.ndarray, variant: str) -> str:
+    """A greedy table policy's path from S drawn on the maze, and where it ends."""
+    next_cell = gridworld_env.transition_table(variant)
+    cell, arrows = gridworld_env.START, {}
+    while cell != gridworld_env.GOAL and cell not in arrows:  # a deterministic path either ends in G or loops
+        arrows[cell] = int(policy[cell])
+        cell = int(next_cell[cell, policy[cell]])
+    ending = (f"reaches G in {len(arrows)} steps" if cell == gridworld_env.GOAL
+              else "never reaches G: it goes round in a loop or bumps into a wall")  # fmt: skip
+    return gridworld_env.draw_maze(variant, agent=gridworld_env.START, arrows=arrows) + ending
 
 
 class Progress:
@@ -419,30 +554,46 @@ def load_q_network(path: str) -> QNetwork:
 
 
 def forward_phase(args, env, q_star, h_net, buffer, evaluator, writer, device) -> dict:
-    """TAMER ("day"): act on H, get feedback by Eq. 4, fit H by Eq. 1, remember and tag every transition."""
+    """TAMER ("day"): act on H, get the teacher's feedback (Eq. 4 through Teacher, or a person), fit H by Eq. 1,
+    remember and tag every transition."""
     h_optimizer = torch.optim.Adam(h_net.parameters(), lr=args.tamer_learning_rate, fused=True)
     progress = Progress("tamer", args.tamer_total_timesteps)
-    positives = episode_positives = episode_length = episode_start = 0
+    teacher = Teacher(args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window,
+                      args.feedback_budget, seed=args.seed + 7919)  # fmt: skip
+    human = HumanTeacher(env.unwrapped.variant) if args.teacher == "human" else None
+    episode_positives = episode_length = episode_start = steps_run = 0
+    optimum_at = None  # (step, +1 signals) at the first evaluation where TAMER's greedy path is the shortest
+    evaluated_at = -1
     start_time = time.time()
     obs, _ = env.reset(seed=args.seed)
     for global_step in range(1, args.tamer_total_timesteps + 1):
         epsilon = linear_schedule(args.start_e, args.end_e, int(args.exploration_fraction * args.tamer_total_timesteps),
                                   global_step - 1)  # fmt: skip
-        if random.random() < epsilon:
+        explore = random.random() < epsilon
+        if explore:
             action = env.action_space.sample()
         else:
             with torch.no_grad():
                 action = int(h_net(torch.as_tensor(obs, device=device)).argmax())
-        next_obs, _, terminated, truncated, _ = env.step(action)
 
+        # the teacher watches (s, a): the perfect answer (Eq. 4) or a person's; once it has left, H stays frozen
+        taught = not teacher.gone
         alpha = linear_schedule(args.feedback_alpha_start, args.feedback_alpha_end, args.tamer_total_timesteps,
                                 global_step - 1)  # fmt: skip
         q_star_s = q_star[int(obs.argmax())]
-        h = oracle_feedback(q_star_s[action], q_star_s.max(), alpha)
-        buffer.add(obs, action, next_obs, h, terminated)
-        positives += int(h)
-        episode_positives += int(h)
+        h_star = oracle_feedback(q_star_s[action], q_star_s.max(), alpha)
+        if human is not None and taught:
+            h_star = human(int(obs.argmax()), action, explore, global_step, teacher.positives, h_star)
+            if h_star is None:  # q or the end of the input: stop teaching, the sleep starts
+                break
+        next_obs, _, terminated, truncated, _ = env.step(action)
+        buffer.add(obs, action, next_obs, 0.0, terminated)
+        if taught:
+            labelled = teacher(buffer.size - 1, h_star)
+            buffer.feedback[labelled] = 1.0
+            episode_positives += int(bool(labelled))
         episode_length += 1
+        steps_run = global_step
 
         obs = next_obs
         if terminated or truncated:
@@ -453,7 +604,7 @@ def forward_phase(args, env, q_star, h_net, buffer, evaluator, writer, device) -
             episode_start, episode_positives, episode_length = buffer.size, 0, 0
             obs, _ = env.reset()
 
-        if global_step > args.tamer_learning_starts and global_step % args.tamer_train_frequency == 0:
+        if taught and global_step > args.tamer_learning_starts and global_step % args.tamer_train_frequency == 0:
             idx = torch.randint(buffer.size, (args.tamer_batch_size,), device=device)
             b_obs, b_actions, _, b_feedback, _ = buffer.batch(idx)
             loss = tamer_loss(h_net, b_obs, b_actions, b_feedback)
@@ -464,20 +615,35 @@ def forward_phase(args, env, q_star, h_net, buffer, evaluator, writer, device) -
                 writer.add_scalar("losses/tamer_loss", loss.item(), global_step)
 
         if global_step % 100 == 0:
-            writer.add_scalar("feedback/positive", positives, global_step)
+            writer.add_scalar("feedback/positive", teacher.positives, global_step)
             writer.add_scalar("feedback/alpha", alpha, global_step)
             writer.add_scalar("charts/epsilon", epsilon, global_step)
         if global_step % 1000 == 0:
             writer.add_scalar("charts/SPS", int(global_step / (time.time() - start_time)), global_step)
-        if global_step % args.eval_frequency == 0 or global_step == args.tamer_total_timesteps:
-            metrics = evaluator("tamer", greedy_actions(h_net, device), global_step)
-            progress(global_step, positives=positives, eval_length=metrics["eval/tamer_episode_length"])
+        phase_ends = teacher.gone and args.budget_ends_forward_phase
+        if global_step % args.eval_frequency == 0 or global_step == args.tamer_total_timesteps or phase_ends:
+            metrics, evaluated_at = evaluator("tamer", greedy_actions(h_net, device), global_step), global_step
+            progress(global_step, positives=teacher.positives, eval_length=metrics["eval/tamer_episode_length"])
+            if optimum_at is None and metrics["eval/tamer_episode_length"] == OPTIMUM:
+                optimum_at = (global_step, teacher.positives)
+        if phase_ends:
+            break
     # an episode cut off by the end of the phase never reached the goal: it stays untagged (failure)
-    return {
-        "feedback/positive": positives,
-        "feedback/steps": args.tamer_total_timesteps,
-        "feedback/positive_rate": positives / args.tamer_total_timesteps,
+    if evaluated_at != steps_run:  # the person stopped between two evaluations
+        evaluator("tamer", greedy_actions(h_net, device), steps_run)
+    if human is not None:
+        human.finish(steps_run, teacher.positives)
+    stats = {
+        "feedback/positive": teacher.positives,
+        "feedback/perfect_positive": teacher.perfect_positives,
+        "feedback/steps": steps_run,
+        "feedback/positive_rate": teacher.positives / max(steps_run, 1),
+        "feedback/step_to_tamer_optimum": None if optimum_at is None else optimum_at[0],
+        "feedback/positive_to_tamer_optimum": None if optimum_at is None else optimum_at[1],
     }
+    if human is not None:
+        stats["feedback/oracle_agreement"] = human.agreement / max(human.answers, 1)
+    return stats
 
 
 def sleep_phase(args, buffer, q_net, target_net, evaluator, writer, device) -> dict:
@@ -519,6 +685,8 @@ def sleep_phase(args, buffer, q_net, target_net, evaluator, writer, device) -> d
         if sleep_step % args.sleep_eval_frequency == 0 or sleep_step == args.sleep_gradient_steps:
             metrics = evaluator("inform", greedy_actions(q_net, device), sleep_step)
             progress(sleep_step, iq_loss=stats["losses/iq_loss"], eval_length=metrics["eval/inform_episode_length"])
+            if "sleep/step_to_inform_optimum" not in stats and metrics["eval/inform_episode_length"] == OPTIMUM:
+                stats["sleep/step_to_inform_optimum"] = sleep_step
     return stats
 
 
@@ -576,6 +744,17 @@ def main(args: Args) -> dict:
         q_star = gridworld_env.optimal_q(env.unwrapped.variant, args.oracle_gamma)
     summary = {"time/oracle_s": time.time() - t0}
 
+    received = []  # SIGTERM (kill, Slurm's cancel and time limit) stops the run as Ctrl-C does
+
+    def stop(signum, frame):
+        received.append(signal.Signals(signum).name)
+        raise KeyboardInterrupt
+
+    previous_handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    signal.signal(signal.SIGTERM, stop)
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # an ignored SIGINT (nohup, &) stays ignored
+        signal.signal(signal.SIGINT, stop)
+
     run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
     writer = SummaryWriter(run_dir)
     writer.add_text(
@@ -621,12 +800,18 @@ def main(args: Args) -> dict:
 
         # Final evaluation of the three policies
         phase = "eval"
-        evaluator("oracle", q_star.argmax(1), args.tamer_total_timesteps)
-        evaluator("tamer", greedy_actions(h_net, device), args.tamer_total_timesteps)
+        evaluator("oracle", q_star.argmax(1), summary["feedback/steps"])
+        evaluator("tamer", greedy_actions(h_net, device), summary["feedback/steps"])
         evaluator("inform", greedy_actions(q_net, device), args.sleep_gradient_steps)
+        if args.teacher == "human":
+            for name, net in (("TAMER (what you taught)", h_net), ("INFORM (after the sleep)", q_net)):
+                print(
+                    f"\n{name}, greedy from S:\n" + draw_greedy_path(greedy_actions(net, device), env.unwrapped.variant)
+                )
     except KeyboardInterrupt:
         status = "interrupted"
-        print(f"interrupted during the {phase} phase; what finished is saved in {run_dir}", file=sys.stderr)
+        print(f"interrupted ({(received or ['SIGINT'])[0]}) during the {phase} phase; what finished is saved in "
+              f"{run_dir}", file=sys.stderr)  # fmt: skip
     except Diverged as e:
         status = "diverged"
         print(f"error: {e}", file=sys.stderr)
@@ -636,7 +821,11 @@ def main(args: Args) -> dict:
                     "script": os.path.basename(__file__), "status": status, "args": asdict(args)})  # fmt: skip
     if status != "completed":
         summary["phase"] = phase
+    if status == "interrupted":
+        summary["signal"] = (received or ["SIGINT"])[0]
     write_json_atomic(f"{run_dir}/summary.json", summary)
+    for sig, handler in previous_handlers.items():
+        signal.signal(sig, handler)
     evaluator.close()
     env.close()
     writer.close()
@@ -685,4 +874,8 @@ if __name__ == "__main__":
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
-    sys.exit({"completed": 0, "interrupted": 130, "diverged": 1}[summary["status"]])
+    sys.exit(
+        {"completed": 0, "interrupted": 143 if summary.get("signal") == "SIGTERM" else 130, "diverged": 1}[
+            summary["status"]
+        ]
+    )
