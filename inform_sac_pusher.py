@@ -12,6 +12,7 @@ on the environment reward (`--train-oracle`).
 """
 
 import atexit
+import collections
 import contextlib
 import io
 import json
@@ -19,6 +20,7 @@ import math
 import os
 import random
 import shutil
+import signal
 import sys
 import tempfile
 import time
@@ -39,8 +41,10 @@ LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
 REPO_DIR = os.path.dirname(os.path.abspath(__file__))
 # the robustness test's three 3 cm cubes on the table (SPEC section 4)
 OBSTACLE_HALF_SIZE = 0.015
-OBSTACLE_POSITIONS = ((0.32, -0.20), (0.35, -0.23), (0.38, -0.26))
+OBSTACLE_POSITIONS = ((0.32, -0.20), (0.35, -0.23), (0.38, -0.26))  # the paper's (layout "paper")
+OBSTACLE_SPACING = 0.0424  # the paper's distance between neighbouring boxes, kept in the bisector layout
 OBSTACLE_Z = -0.325
+OBSTACLE_LAYOUTS = ("bisector", "paper")
 
 
 @dataclass
@@ -108,6 +112,20 @@ class Args:
     feedback_alpha_end: float = 0.992
     """alpha of Eq. 4 at the end of the forward phase (alpha rises linearly: the teacher gets stricter)"""
 
+    # The teacher as a person (SPEC section 10); the defaults are the paper's perfect, instant, tireless teacher
+    teacher_noise: float = 0.0
+    """probability that the teacher's judgement is flipped (+1 <-> no feedback)"""
+    teacher_sparsity: float = 1.0
+    """probability that a +1 judgement is actually given (otherwise no feedback)"""
+    teacher_delay: int = 0
+    """env steps between a transition and the arrival of its signal (which labels the later transition)"""
+    credit_window: int = 1
+    """each arriving signal labels this many most recent transitions (teacher_delay + 1 covers the right one)"""
+    feedback_budget: int | None = None
+    """the teacher leaves after this many +1 signals (None: never); then TAMER stops learning"""
+    budget_ends_forward_phase: bool = False
+    """when the budget is spent, end the forward phase and sleep (otherwise keep acting, without feedback)"""
+
     # Sleep phase: offline IQ-Learn (Eq. 2), no environment steps
     sleep_gradient_steps: int = 5000
     """gradient steps of the sleep phase"""
@@ -137,6 +155,11 @@ class Args:
     """episodes of each evaluation during the phases"""
     obstacle_episodes: int = 100
     """episodes per policy on the obstacle variant, all from the run's initial state, sampled actions"""
+    obstacle_layout: str = "bisector"
+    """bisector: the boxes on the perpendicular bisector of the run's object start and the goal, the middle one
+    on the straight path (SPEC section 4); paper: the paper's three fixed coordinates (on the path for reset seed 0)"""
+    authors_test_episodes: int = 100
+    """episodes of the authors' test: sampled actions from the run's initial state (eval/authors_test/...)"""
     log_frequency: int = 1000
     """steps between scalar logs (losses, SPS, feedback)"""
     evaluate: str | None = None
@@ -228,6 +251,8 @@ def check_args(args: Args, load_oracle: bool = True) -> dict | None:
         "sleep_eval_frequency",
         "periodic_eval_episodes",
         "obstacle_episodes",
+        "authors_test_episodes",
+        "credit_window",
         "log_frequency",
     ]
     for name in positive_ints:
@@ -251,6 +276,15 @@ def check_args(args: Args, load_oracle: bool = True) -> dict | None:
             raise ValueError(f"--{name.replace('_', '-')} must be a finite number > 0, got {getattr(args, name)}")
     if not 0.0 < args.tau <= 1.0:
         raise ValueError(f"--tau must be in (0, 1], got {args.tau}")
+    for name in ("teacher_noise", "teacher_sparsity"):
+        if not 0.0 <= getattr(args, name) <= 1.0:
+            raise ValueError(f"--{name.replace('_', '-')} is a probability, in [0, 1]; got {getattr(args, name)}")
+    if args.teacher_delay < 0 or (args.feedback_budget is not None and args.feedback_budget < 0):
+        raise ValueError(
+            f"--teacher-delay ({args.teacher_delay}) and --feedback-budget ({args.feedback_budget}) must be >= 0"
+        )
+    if args.obstacle_layout not in OBSTACLE_LAYOUTS:
+        raise ValueError(f"--obstacle-layout must be one of {', '.join(OBSTACLE_LAYOUTS)}; got {args.obstacle_layout}")
     if not 0.0 <= args.sleep_chi2_coef < math.inf:
         raise ValueError(f"--sleep-chi2-coef must be a finite number >= 0 (0 turns it off), got {args.sleep_chi2_coef}")
     if not 1 <= args.tamer_learning_starts < args.tamer_total_timesteps:
@@ -300,12 +334,36 @@ def pusher_xml_path(env_id: str) -> str:
     return os.path.join(os.path.dirname(gym_mujoco.__file__), "assets", name)
 
 
-def obstacle_xml(env_id: str, directory: str) -> str:
+def start_and_goal(env_id: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """The object's and the goal's xy after a reset with `seed` (obs[17:19] and obs[20:22])."""
+    env = gym.make(env_id)
+    obs, _ = env.reset(seed=seed)
+    env.close()
+    return obs[17:19].copy(), obs[20:22].copy()
+
+
+def obstacle_positions(layout: str, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
+    """The three box centres (3 x 2): the paper's coordinates, or the middle box at the midpoint of the object's start
+    and the goal and the other two OBSTACLE_SPACING either side of it along the perpendicular bisector."""
+    if layout == "paper":
+        return np.array(OBSTACLE_POSITIONS)
+    middle, along = (start + goal) / 2, (goal - start) / np.linalg.norm(goal - start)
+    across = np.array([-along[1], along[0]])
+    return np.stack([middle - OBSTACLE_SPACING * across, middle, middle + OBSTACLE_SPACING * across])
+
+
+def distance_to_segment(point: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """Euclidean distance from `point` to the segment a-b."""
+    t = np.clip(np.dot(point - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+    return float(np.linalg.norm(point - (a + t * (b - a))))
+
+
+def obstacle_xml(env_id: str, directory: str, positions) -> str:
     """Write Pusher's own model plus the three boxes of the robustness test to `directory`; return the path."""
     tree = ET.parse(pusher_xml_path(env_id))
     worldbody = tree.getroot().find("worldbody")
     h = OBSTACLE_HALF_SIZE
-    for i, (x, y) in enumerate(OBSTACLE_POSITIONS):
+    for i, (x, y) in enumerate(positions):
         ET.SubElement(
             worldbody,
             "geom",
@@ -313,15 +371,16 @@ def obstacle_xml(env_id: str, directory: str) -> str:
                 "name": f"obstacle_{i}",
                 "type": "box",
                 "size": f"{h} {h} {h}",
-                "pos": f"{x} {y} {OBSTACLE_Z}",
+                "pos": f"{x:.6f} {y:.6f} {OBSTACLE_Z}",
                 "contype": "1",
                 "conaffinity": "1",
                 "rgba": "0.2 0.2 0.8 1",
             },
         )
-    path = os.path.join(directory, f"{env_id.lower().replace('-', '_')}_obstacle.xml")
-    tree.write(path)
-    return path
+    path = tempfile.mkstemp(prefix=f"{env_id.lower().replace('-', '_')}_obstacle_", suffix=".xml", dir=directory)
+    os.close(path[0])
+    tree.write(path[1])
+    return path[1]
 
 
 _OBSTACLE_DIR: list[str] = []
@@ -334,12 +393,12 @@ def _obstacle_dir() -> str:
     return _OBSTACLE_DIR[0]
 
 
-def make_env(env_id: str, seed: int, obstacle: bool = False) -> gym.Env:
-    """Plain Pusher, or the obstacle variant built at run time from the installed model."""
-    if obstacle:
+def make_env(env_id: str, seed: int, obstacles=None) -> gym.Env:
+    """Plain Pusher, or with boxes at the xy `obstacles` (built at run time from the installed model)."""
+    if obstacles is not None:
         # the model file must outlive construction (EzPickle re-creates the env from it), so it stays in a
         # per-process temporary directory removed at exit
-        xml = obstacle_xml(env_id, _obstacle_dir())
+        xml = obstacle_xml(env_id, _obstacle_dir(), obstacles)
         if env_id == "Pusher-v5":
             env = gym.make(env_id, xml_file=xml)
         else:  # Pusher-v4 has no xml_file argument: same class, model file swapped at construction
@@ -447,6 +506,48 @@ def oracle_feedback(q_star_sa: torch.Tensor, q_star_best: torch.Tensor, alpha: f
     return (q_star_sa >= q_star_best - (1.0 - alpha) * q_star_best.abs()).float()
 
 
+# ALGO LOGIC: the teacher. Eq. 4 is what a perfect teacher would answer; Teacher makes it a person (SPEC 10).
+class Teacher:
+    """A simulated person between Eq. 4 and the learner: noisy, sparse, late and limited (SPEC section 10).
+
+    Each call hands over the perfect teacher's answer h* (0 or 1) about the transition at buffer index `step` and
+    returns the buffer indices that receive h = 1 now. In order: the judgement is flipped with probability
+    `noise`; a +1 is then clicked only with probability `sparsity`; a click about step t arrives at step t + `delay`
+    and labels that later transition and the `credit_window` - 1 before it (Deep TAMER's remedy; a window of
+    delay + 1 covers the step it was about). The teacher leaves after `budget` delivered +1 signals (None: never).
+    Its randomness is its own generator, so the defaults (0, 1, 0, 1, None) reproduce the perfect teacher exactly
+    and leave every other random stream untouched. Signals still on their way when the phase ends are lost.
+    """
+
+    def __init__(self, noise=0.0, sparsity=1.0, delay=0, credit_window=1, budget=None, seed=0):
+        self.noise, self.sparsity, self.delay, self.credit_window, self.budget = (
+            noise, sparsity, delay, credit_window, budget,
+        )  # fmt: skip
+        self.rng = np.random.default_rng(seed)
+        self.in_flight = collections.deque()  # clicks on their way, oldest first
+        self.positives = 0  # +1 signals delivered
+        self.perfect_positives = 0  # +1 answers of the perfect teacher (Eq. 4), for the record
+
+    @property
+    def gone(self) -> bool:
+        """The budget is spent: no more feedback from now on."""
+        return self.budget is not None and self.positives >= self.budget
+
+    def __call__(self, step: int, h_star: float) -> list[int]:
+        self.perfect_positives += int(h_star > 0)
+        flip, click = self.rng.random(2)  # always two draws: the stream does not depend on the answers
+        h = 1.0 - h_star if flip < self.noise else h_star
+        h = h if click < self.sparsity else 0.0
+        self.in_flight.append(h)
+        if len(self.in_flight) <= self.delay:
+            return []
+        h = self.in_flight.popleft()
+        if h <= 0 or self.gone:
+            return []
+        self.positives += 1
+        return list(range(max(0, step - self.credit_window + 1), step + 1))
+
+
 def tamer_loss(h_net: QEnsemble, obs: torch.Tensor, actions: torch.Tensor, feedback: torch.Tensor) -> torch.Tensor:
     # Eq. 1: E[(H(s, a) - h)^2], gamma = 0: no bootstrapping, no target network; summed over the twin H models
     return (h_net(obs, actions) - feedback.unsqueeze(0)).pow(2).mean(-1).sum()
@@ -544,18 +645,20 @@ class RecoveredRewardWrapper(gym.Wrapper):
 @torch.no_grad()
 def evaluate(actor: Actor, env: gym.Env, episodes: int, reset_seed, deterministic: bool, generator, success_dist):
     """Run `episodes` episodes; reset_seed(ep) gives each episode's reset seed. Returns means and per-episode data."""
-    returns, distances = [], []
+    returns, distances, paths = [], [], []
     for ep in range(episodes):
         obs, _ = env.reset(seed=reset_seed(ep))
-        done, ep_return, info = False, 0.0, {}
+        done, ep_return, info, path = False, 0.0, {}, [obs[17:19]]
         while not done:
             sampled, _, mean = actor.get_action(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0), generator)
             action = (mean if deterministic else sampled)[0].numpy()
             obs, reward, terminated, truncated, info = env.step(action)
             ep_return += float(reward)
             done = terminated or truncated
+            path.append(obs[17:19])
         returns.append(ep_return)
         distances.append(final_distance(info))
+        paths.append(np.array(path))
     distances = np.asarray(distances)
     return {
         "return": float(np.mean(returns)),
@@ -564,6 +667,7 @@ def evaluate(actor: Actor, env: gym.Env, episodes: int, reset_seed, deterministi
         "success_rate": float((distances < success_dist).mean()),
         "distances": distances,
         "returns": np.asarray(returns),
+        "paths": paths,  # the object's xy at every step of each episode
     }
 
 
@@ -741,6 +845,7 @@ class ReplayBuffer:
         self.terminated = torch.zeros(capacity, device=device)
         self.success = torch.zeros(capacity, dtype=torch.bool, device=device)
         self.episodes: list[tuple[int, int, float]] = []  # (first step, end step, final object-goal distance)
+        self.size = 0  # transitions stored (fewer than the capacity when the teacher's budget ends the day early)
 
     def tag_episode(self, start: int, end: int, distance: float, success_distance: float) -> bool:
         """Tag the whole trajectory at its end: a success if the object ended within `success_distance`."""
@@ -808,6 +913,8 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer
 
     n = args.tamer_total_timesteps
     print(f"[tamer] {n} env steps, feedback alpha {args.feedback_alpha_start} -> {args.feedback_alpha_end}", flush=True)
+    teacher = Teacher(args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window,
+                      args.feedback_budget, seed=args.seed + 7919)  # fmt: skip
     progress = Progress("tamer", n)
     reset_seed = None if args.random_starts else args.seed
     obs, _ = env.reset(seed=args.seed)
@@ -822,17 +929,20 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer
         else:
             with torch.no_grad():
                 action_t = tamer_actor.get_action(obs_t.unsqueeze(0))[0][0]
-        with torch.no_grad():  # the teacher watches (s, a) and answers (Eq. 4)
+        taught = not teacher.gone  # after the budget is spent, TAMER has nothing to learn from
+        with torch.no_grad():  # the teacher watches (s, a): the perfect answer (Eq. 4), then the person's
             a_star = oracle_actor.get_action(obs_t.unsqueeze(0))[2][0]
             q_star = oracle_qf(obs_t.expand(2, -1), torch.stack([action_t, a_star])).min(0).values
-            buffer.feedback[step] = oracle_feedback(q_star[0], q_star[1], alpha_t)
+            h_star = oracle_feedback(q_star[0], q_star[1], alpha_t).item() if taught else 0.0
+            buffer.feedback[teacher(step, h_star)] = 1.0
         next_obs, reward, terminated, truncated, info = env.step(action_t.cpu().numpy())
         next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
         buffer.obs[step], buffer.next_obs[step], buffer.actions[step] = obs_t, next_t, action_t
-        buffer.terminated[step] = float(terminated)
+        buffer.terminated[step], buffer.size = float(terminated), step + 1
         ep_return += float(reward)
         ep_length += 1
-        if terminated or truncated or step == n - 1:
+        last_step = step == n - 1 or (teacher.gone and args.budget_ends_forward_phase)
+        if terminated or truncated or last_step:
             # a cut-off last episode is judged by where it stands
             success = buffer.tag_episode(ep_start, step + 1, final_distance(info), args.success_distance)
             writer.add_scalar("charts/episodic_return", ep_return, step + 1)
@@ -844,7 +954,7 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer
             next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
         obs_t = next_t
 
-        if step >= args.tamer_learning_starts:
+        if step >= args.tamer_learning_starts and taught:
             idx = torch.randint(0, step + 1, (args.tamer_batch_size,), device=device)
             h_loss = tamer_loss(h_net, buffer.obs[idx], buffer.actions[idx], buffer.feedback[idx])
             h_opt.zero_grad(set_to_none=True)
@@ -860,23 +970,25 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer
                 a_opt.zero_grad(set_to_none=True)
                 alpha_loss.backward()
                 a_opt.step()
-        if (step + 1) % args.log_frequency == 0 or step == n - 1:
-            positives = buffer.feedback[: step + 1].sum().item()
+        if (step + 1) % args.log_frequency == 0 or last_step:
+            positives = teacher.positives
             writer.add_scalar("losses/tamer_loss", h_loss.item(), step + 1)
             writer.add_scalar("losses/tamer_entropy_coef", log_alpha.exp().item(), step + 1)
             writer.add_scalar("feedback/positive", positives, step + 1)
             writer.add_scalar("feedback/positive_rate", positives / (step + 1), step + 1)
             writer.add_scalar("feedback/alpha", alpha_t, step + 1)
             writer.add_scalar("charts/SPS", progress.sps(step + 1), step + 1)
-        if (step + 1) % args.eval_frequency == 0 or step == n - 1:
+        if (step + 1) % args.eval_frequency == 0 or last_step:
             t_eval = time.time()
             res = evaluator("tamer", tamer_actor, step + 1, args.periodic_eval_episodes)
             progress.excluded += time.time() - t_eval
             progress(step + 1, **{"return": last_return, "eval return": res["eval/tamer_return"]})
         else:
             progress(step + 1, **{"return": last_return})
+        if last_step:
+            break
 
-    positives = int(buffer.feedback.sum().item())
+    positives, n = teacher.positives, buffer.size
     n_success = sum(d < args.success_distance for _, _, d in buffer.episodes)
     print(
         f"[tamer] feedback +1 on {positives}/{n} steps ({positives / n:.1%}); "
@@ -885,6 +997,7 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer
     )
     stats = {
         "feedback/positive": positives,
+        "feedback/perfect_positive": teacher.perfect_positives,
         "feedback/steps": n,
         "feedback/positive_rate": positives / n,
         "sleep/success_episodes": int(n_success),
@@ -902,7 +1015,7 @@ def sleep_phase(args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator,
             "the goal as the expert set",
             flush=True,
         )
-    print(f"[sleep] {expert_idx.numel()} expert transitions, {buffer.obs.shape[0]} in the buffer", flush=True)
+    print(f"[sleep] {expert_idx.numel()} expert transitions, {buffer.size} in the buffer", flush=True)
     obs_dim, act_dim = buffer.obs.shape[1], buffer.actions.shape[1]
     q_net = QEnsemble(obs_dim, act_dim, args.hidden_size, n=1).to(device)
     q_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=1).to(device)
@@ -916,7 +1029,7 @@ def sleep_phase(args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator,
     q_opt = torch.optim.Adam(q_net.parameters(), lr=args.sleep_q_lr)
     inf_opt = torch.optim.Adam(inform_actor.parameters(), lr=args.sleep_policy_lr)
 
-    n, B, total = buffer.obs.shape[0], args.sleep_batch_size, args.sleep_gradient_steps
+    n, B, total = buffer.size, args.sleep_batch_size, args.sleep_gradient_steps
     is_expert = torch.cat([torch.zeros(B, dtype=torch.bool), torch.ones(B, dtype=torch.bool)]).to(device)
     names = ("losses/iq_loss", "losses/iq_expert_term", "losses/iq_value_term", "losses/iq_chi2_term")
     names += ("losses/inform_actor_loss",)
@@ -968,24 +1081,35 @@ def sleep_phase(args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator,
 def recovered_reward_stats(args: Args, buffer: ReplayBuffer, q_net: QEnsemble, inform_actor: Actor) -> dict:
     """Eq. 3 on the buffer: the mean recovered reward of success and of failure transitions, for the record."""
     reward_fn = RecoveredReward(q_net, inform_actor, args.sleep_gamma, args.sleep_temperature, samples=4)
-    b = [x.cpu().numpy() for x in (buffer.obs, buffer.actions, buffer.next_obs, buffer.terminated)]
-    r_all, succ = reward_fn(*b), buffer.success.cpu().numpy()
+    b = [x[: buffer.size].cpu().numpy() for x in (buffer.obs, buffer.actions, buffer.next_obs, buffer.terminated)]
+    r_all, succ = reward_fn(*b), buffer.success[: buffer.size].cpu().numpy()
     return {
         "sleep/recovered_reward_success_mean": float(r_all[succ].mean()) if succ.any() else float("nan"),
         "sleep/recovered_reward_failure_mean": float(r_all[~succ].mean()) if (~succ).any() else float("nan"),
     }
 
 
-def obstacle_test(args: Args, policies: dict, generator: torch.Generator) -> tuple[dict, dict]:
-    """The robustness test: every policy on the obstacle variant, all episodes from the run's initial state."""
-    env = make_env(args.env_id, args.seed, obstacle=True)
-    results, distances = {}, {}
+def obstacle_test(args: Args, policies: dict, generator: torch.Generator) -> tuple[dict, dict, dict]:
+    """The robustness test: every policy on the obstacle variant, all episodes from the run's initial state.
+
+    Returns the metrics, the per-episode final distances, and the object's xy path of one deterministic episode per
+    policy with and without the boxes (Fig. 5a)."""
+    start, goal = start_and_goal(args.env_id, args.seed)
+    boxes = obstacle_positions(args.obstacle_layout, start, goal)
+    results = {
+        "obstacle/box_positions": boxes.round(4).tolist(),
+        "obstacle/min_box_distance_to_path": min(distance_to_segment(b, start, goal) for b in boxes),
+    }
+    distances, paths = {}, {"boxes": boxes, "start": start, "goal": goal}
+    env, plain = make_env(args.env_id, args.seed, obstacles=boxes), make_env(args.env_id, args.seed)
     for name, actor in policies.items():
         # the same initial state for every episode (the run's seed); sampled actions give the spread
         res = evaluate(
             actor, env, args.obstacle_episodes, lambda ep: args.seed, False, generator, args.success_distance
         )
         det = evaluate(actor, env, 1, lambda ep: args.seed, True, generator, args.success_distance)
+        det_plain = evaluate(actor, plain, 1, lambda ep: args.seed, True, torch.Generator(), args.success_distance)
+        paths[f"{name}_obstacle"], paths[f"{name}_plain"] = det["paths"][0], det_plain["paths"][0]
         distances[name] = res["distances"]
         results[f"eval/obstacle/{name}_final_distance"] = res["final_distance"]
         results[f"eval/obstacle/{name}_final_distance_std"] = res["final_distance_std"]
@@ -993,7 +1117,21 @@ def obstacle_test(args: Args, policies: dict, generator: torch.Generator) -> tup
         results[f"eval/obstacle/{name}_return"] = res["return"]
         results[f"eval/obstacle/{name}_final_distance_deterministic"] = det["final_distance"]
     env.close()
-    return results, distances
+    plain.close()
+    return results, distances, paths
+
+
+def authors_test(args: Args, policies: dict, generator: torch.Generator) -> dict:
+    """The authors' test: sampled actions, every episode from the run's initial state, on the plain env."""
+    env, results = make_env(args.env_id, args.seed), {}
+    for name, actor in policies.items():
+        res = evaluate(
+            actor, env, args.authors_test_episodes, lambda ep: args.seed, False, generator, args.success_distance
+        )
+        for key in ("return", "final_distance", "success_rate"):
+            results[f"eval/authors_test/{name}_{key}"] = res[key]
+    env.close()
+    return results
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -1012,6 +1150,15 @@ def main(args: Args, oracle_ckpt: dict | None) -> dict:
     torch.set_num_threads(args.num_threads)
     device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
 
+    received = []  # SIGTERM (Slurm's cancel and time limit, kill) stops the run as Ctrl-C does
+
+    def stop(signum, frame):
+        received.append(signal.Signals(signum).name)
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, stop)
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # an ignored SIGINT (nohup, &) stays ignored
+        signal.signal(signal.SIGINT, stop)
     run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
     writer = SummaryWriter(run_dir)
     writer.add_text(
@@ -1067,7 +1214,7 @@ def main(args: Args, oracle_ckpt: dict | None) -> dict:
         h_net, tamer_actor, stats = forward_phase(args, env, oracle_actor, oracle_qf, buffer, evaluator, writer, device)
         summary.update(stats)
         summary["time/tamer_s"] = time.time() - t0 - (evaluator.seconds - eval_s0)
-        summary["sps/tamer"] = args.tamer_total_timesteps / max(summary["time/tamer_s"], 1e-9)
+        summary["sps/tamer"] = summary["feedback/steps"] / max(summary["time/tamer_s"], 1e-9)
         if args.save_model:
             save_actor(f"{run_dir}/tamer_actor.pt", tamer_actor, env_id=args.env_id)
             save_critic(f"{run_dir}/tamer_h.pt", h_net, dims=dims, env_id=args.env_id)
@@ -1092,15 +1239,22 @@ def main(args: Args, oracle_ckpt: dict | None) -> dict:
         for name, actor in policies.items():
             evaluator(name, actor, end_step, args.eval_episodes)
         t = time.time()
-        obstacle, distances = obstacle_test(args, policies, evaluator.generator)
-        for tag, value in obstacle.items():
-            writer.add_scalar(tag, value, end_step)
+        obstacle, distances, paths = obstacle_test(args, policies, evaluator.generator)
         summary.update(obstacle)
         np.savez(f"{run_dir}/obstacle_distances.npz", **distances)
+        np.savez(f"{run_dir}/obstacle_paths.npz", **paths)
+        summary.update(authors_test(args, policies, evaluator.generator))
+        for tag, value in summary.items():
+            if tag.startswith(("eval/obstacle/", "eval/authors_test/", "obstacle/min")):
+                writer.add_scalar(tag, value, end_step)
         evaluator.seconds += time.time() - t
     except KeyboardInterrupt:
         status = "interrupted"
-        print(f"interrupted during the {phase} phase; what finished is saved in {run_dir}", file=sys.stderr)
+        received.append("SIGINT")  # KeyboardInterrupt without our handler is Ctrl-C
+        print(
+            f"interrupted ({received[0]}) during the {phase} phase; what finished is saved in {run_dir}",
+            file=sys.stderr,
+        )
     except Diverged as e:
         status = "diverged"
         print(f"error: {e}", file=sys.stderr)
@@ -1118,6 +1272,8 @@ def main(args: Args, oracle_ckpt: dict | None) -> dict:
     }
     if status != "completed":
         summary["phase"] = phase
+    if status == "interrupted":
+        summary["signal"] = received[0]
     write_json_atomic(f"{run_dir}/summary.json", summary)
     env.close()
     evaluator.env.close()
@@ -1172,7 +1328,7 @@ def evaluate_saved(args: Args) -> dict:
     actor = load_policy(args.evaluate, args.env_id)
     evaluator = Evaluator(args, writer=None)
     metrics = evaluator("policy", actor, 0, args.eval_episodes)
-    obstacle, _ = obstacle_test(args, {"policy": actor}, evaluator.generator)
+    obstacle, _, _ = obstacle_test(args, {"policy": actor}, evaluator.generator)
     evaluator.env.close()
     return {**metrics, **obstacle}
 
@@ -1212,4 +1368,8 @@ if __name__ == "__main__":
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
     summary = main(args, oracle_ckpt)
-    sys.exit({"completed": 0, "interrupted": 130, "diverged": 1}[summary["status"]])
+    sys.exit(
+        {"completed": 0, "interrupted": 143 if summary.get("signal") == "SIGTERM" else 130, "diverged": 1}[
+            summary["status"]
+        ]
+    )

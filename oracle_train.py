@@ -36,6 +36,7 @@ import math
 import os
 import pickle
 import random
+import signal
 import sys
 import time
 import warnings
@@ -117,6 +118,8 @@ class Args:
     """log losses and SPS every this many steps"""
     checkpoint_frequency: int = 10000
     """write the resumable training state every this many steps"""
+    snapshot_frequency: int = 50000
+    """keep a copy of the oracle checkpoint (oracle_step{N}.pt in the run dir) every this many steps"""
     resume: str | None = None
     """path of a training_state.pt to continue from (same run directory)"""
     output_path: str | None = None
@@ -583,6 +586,11 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
                 oracle_checkpoint(actor, qf, args, obs_dim, act_dim, low, high, step, last_eval or {}),
                 os.path.join(run_dir, "oracle_latest.pt"),
             )
+            if step % args.snapshot_frequency == 0:  # kept, so the teacher can be chosen by a longer evaluation later
+                atomic_save(
+                    oracle_checkpoint(actor, qf, args, obs_dim, act_dim, low, high, step, last_eval or {}),
+                    os.path.join(run_dir, f"oracle_step{step:07d}.pt"),
+                )
         t_last, step_last = (time.time(), step) if step % args.log_frequency == 0 else (t_last, step_last)
 
     train_time = time.time() - t0
@@ -775,6 +783,13 @@ def parse_args() -> Args:
 
 
 def main() -> None:
+    received = []  # SIGTERM (Slurm's cancel and time limit, kill) stops training as Ctrl-C does
+
+    def stop(signum, frame):
+        received.append(signal.Signals(signum).name)
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, stop)
     try:
         args = parse_args()
         error = validate_args(args)
@@ -793,11 +808,11 @@ def main() -> None:
     except KeyboardInterrupt:
         # nothing half-written: every file is saved atomically; SAC's state is saved every --checkpoint-frequency steps
         print(
-            "interrupted; no oracle checkpoint was written. SAC training continues from its last saved state with "
-            "--resume <run dir>/training_state.pt",
+            f"interrupted ({(received or ['SIGINT'])[0]}); no oracle checkpoint was written. SAC training continues "
+            "from its last saved state with --resume <run dir>/training_state.pt",
             file=sys.stderr,
         )
-        sys.exit(130)
+        sys.exit(143 if received else 130)
 
 
 if __name__ == "__main__":

@@ -4,8 +4,11 @@ reward, bad input. Smoke runs use tiny budgets and run with cwd in a pytest tmp_
 import glob
 import json
 import os
+import queue
+import signal
 import subprocess
 import sys
+import threading
 import time
 
 import gymnasium as gym
@@ -34,12 +37,65 @@ TINY = [
     "--eval-episodes", "2",
     "--periodic-eval-episodes", "1",
     "--obstacle-episodes", "3",
+    "--authors-test-episodes", "3",
     "--log-frequency", "100",
 ]  # fmt: skip
 
 
 def run(cwd, *flags, timeout=120):
     return subprocess.run([sys.executable, SCRIPT, *flags], cwd=cwd, capture_output=True, text=True, timeout=timeout)
+
+
+def default_signals():
+    # a child of a shell that ignores SIGINT (a background job) would inherit the ignored signal: restore both
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+class Child:
+    """A script run as a child process whose output is read on a thread, so every wait is bounded."""
+
+    def __init__(self, argv, cwd):
+        self.proc = subprocess.Popen(argv, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                     preexec_fn=default_signals)  # fmt: skip
+        self.lines, self.err = queue.Queue(), []
+        self.out = []
+        threading.Thread(target=self._pump, args=(self.proc.stdout, self.out, self.lines), daemon=True).start()
+        threading.Thread(target=self._pump, args=(self.proc.stderr, self.err, None), daemon=True).start()
+
+    @staticmethod
+    def _pump(stream, store, lines):
+        for line in stream:
+            store.append(line)
+            if lines is not None:
+                lines.put(line)
+
+    def wait_for(self, predicate, timeout=120.0) -> str:
+        deadline = time.time() + timeout
+        while time.time() < deadline:
+            try:
+                line = self.lines.get(timeout=0.5)
+            except queue.Empty:
+                if self.proc.poll() is not None and self.lines.empty():
+                    break
+                continue
+            if predicate(line):
+                return line
+        self.fail("the awaited output never came")
+
+    def finish(self, timeout=120.0) -> tuple[int, str]:
+        try:
+            self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.fail(f"did not exit within {timeout:.0f}s")
+        time.sleep(0.2)  # let the pumps drain
+        return self.proc.returncode, "".join(self.err)
+
+    def fail(self, why):
+        self.proc.kill()
+        self.proc.wait()
+        time.sleep(0.2)
+        pytest.fail(f"{why}\n--- stdout ---\n{''.join(self.out)[-3000:]}\n--- stderr ---\n{''.join(self.err)[-3000:]}")
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -121,14 +177,16 @@ def test_recover_reward_eq3_with_terminal():
 # obstacle variant
 
 
-def test_obstacle_env_check_env_and_boxes():
+@pytest.mark.parametrize("layout", isp.OBSTACLE_LAYOUTS)
+def test_obstacle_env_check_env_and_boxes(layout):
     from gymnasium.utils.env_checker import check_env
 
-    env = isp.make_env("Pusher-v5", seed=0, obstacle=True)
+    boxes = isp.obstacle_positions(layout, *isp.start_and_goal("Pusher-v5", 2))
+    env = isp.make_env("Pusher-v5", seed=0, obstacles=boxes)
     check_env(env.unwrapped, skip_render_check=True)
     env.reset(seed=0)
     model, data = env.unwrapped.model, env.unwrapped.data
-    for i, (x, y) in enumerate(isp.OBSTACLE_POSITIONS):
+    for i, (x, y) in enumerate(boxes):
         geom = model.geom(f"obstacle_{i}")
         assert np.allclose(data.geom(f"obstacle_{i}").xpos, [x, y, -0.325])
         assert np.allclose(geom.size, [0.015, 0.015, 0.015])
@@ -138,6 +196,35 @@ def test_obstacle_env_check_env_and_boxes():
     assert plain.unwrapped.model.ngeom == model.ngeom - 3
     env.close()
     plain.close()
+
+
+def test_distance_to_segment_by_hand():
+    a, b = np.array([0.0, 0.0]), np.array([1.0, 0.0])
+    assert isp.distance_to_segment(np.array([0.5, 0.3]), a, b) == pytest.approx(0.3)
+    assert isp.distance_to_segment(np.array([-0.3, 0.4]), a, b) == pytest.approx(0.5)  # beyond an end: to the end
+    assert isp.distance_to_segment(np.array([1.0, 0.0]), a, b) == pytest.approx(0.0)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3, 7, 11])
+def test_bisector_boxes_sit_on_the_path_for_every_start(seed):
+    start, goal = isp.start_and_goal("Pusher-v5", seed)
+    assert np.allclose(goal, [0.45, -0.05], atol=1e-6)
+    boxes = isp.obstacle_positions("bisector", start, goal)
+    assert np.allclose(boxes[1], (start + goal) / 2)  # the middle box on the straight path, halfway
+    assert isp.distance_to_segment(boxes[1], start, goal) < 1e-9
+    for box in (boxes[0], boxes[2]):  # the others on the perpendicular bisector, the paper's spacing away
+        assert np.linalg.norm(box - boxes[1]) == pytest.approx(0.0424)
+        assert np.dot(box - boxes[1], goal - start) == pytest.approx(0.0, abs=1e-9)
+        assert np.linalg.norm(box - start) == pytest.approx(np.linalg.norm(box - goal))
+
+
+def test_paper_boxes_are_on_the_path_only_for_the_authors_start():
+    start, goal = isp.start_and_goal("Pusher-v5", 0)
+    assert np.allclose(start, [0.257, -0.338], atol=1e-3)  # the authors' reset seed 0 (SPEC section 4)
+    paper = isp.obstacle_positions("paper", start, goal)
+    assert isp.distance_to_segment(paper[1], start, goal) == pytest.approx(0.017, abs=1e-3)
+    start, goal = isp.start_and_goal("Pusher-v5", 1)
+    assert min(isp.distance_to_segment(b, start, goal) for b in paper) > 0.19  # seed 1: far off the path
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -169,6 +256,14 @@ def check_run(tmp_path, proc):
         assert "state_dict" in ckpt and "kwargs" in ckpt and ckpt["env_id"] == "Pusher-v5"
     with np.load(os.path.join(run_dir, "obstacle_distances.npz")) as d:
         assert d["tamer"].shape == (3,) and d["inform"].shape == (3,)
+    with np.load(os.path.join(run_dir, "obstacle_paths.npz")) as d:  # Fig. 5a: 100 steps, the reset state first
+        assert d["boxes"].shape == (3, 2) and d["inform_obstacle"].shape == (101, 2)
+        assert np.allclose(d["tamer_plain"][0], d["start"]) and np.allclose(d["oracle_obstacle"][0], d["start"])
+    assert len(summary["obstacle/box_positions"]) == 3
+    assert summary["obstacle/min_box_distance_to_path"] < 1e-6  # the default bisector layout: on the path
+    for p in isp.POLICIES:
+        assert 0.0 <= summary[f"eval/authors_test/{p}_success_rate"] <= 1.0
+        assert np.isfinite(summary[f"eval/authors_test/{p}_return"])
     # the recovered reward loads from the run directory and drives a wrapped env
     env = isp.RecoveredRewardWrapper(gym.make("Pusher-v5"), isp.RecoveredReward.load(run_dir))
     env.reset(seed=0)
@@ -210,6 +305,19 @@ def test_smoke_oracle_path_and_determinism(tmp_path):
     assert len(glob.glob(str(tmp_path / "a" / "runs" / "*"))) == 1  # evaluating writes no run
 
 
+@pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")
+def test_feedback_budget_ends_the_day_after_exactly_n_positives(tmp_path):
+    flags = [*TINY, "--feedback-budget", "5", "--budget-ends-forward-phase", "--teacher-delay", "2"]
+    proc = run(tmp_path, *flags, "--credit-window", "3")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    (run_dir,) = glob.glob(str(tmp_path / "runs" / "*"))
+    with open(os.path.join(run_dir, "summary.json")) as f:
+        summary = json.load(f)
+    assert summary["status"] == "completed" and summary["feedback/positive"] == 5
+    assert summary["feedback/perfect_positive"] >= 5 and summary["feedback/steps"] < 600
+    assert summary["args"]["teacher_delay"] == 2 and summary["args"]["credit_window"] == 3
+
+
 def test_save_load_same_actions(tmp_path):
     torch.manual_seed(0)
     actor = isp.Actor(23, 7, 32, action_low=-2 * np.ones(7), action_high=2 * np.ones(7))
@@ -225,27 +333,39 @@ def test_save_load_same_actions(tmp_path):
 
 
 @pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")
-@pytest.mark.parametrize("phase", ["tamer", "sleep"])
-def test_sigint_ends_the_run_cleanly(tmp_path, phase):
-    import signal
-
+@pytest.mark.parametrize(("phase", "sig"), [("tamer", "SIGINT"), ("sleep", "SIGINT"), ("sleep", "SIGTERM")])
+def test_signal_ends_the_run_cleanly(tmp_path, phase, sig):
     flags = [*TINY, "--tamer-total-timesteps", "100000" if phase == "tamer" else "600"]
     flags += ["--sleep-gradient-steps", "100000", "--sleep-eval-frequency", "100000"]
-    proc = subprocess.Popen([sys.executable, SCRIPT, *flags], cwd=tmp_path, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)  # fmt: skip
-    for line in proc.stdout:
-        if line.startswith(f"[{phase}]"):
-            break
-    proc.send_signal(signal.SIGINT)
-    _, stderr = proc.communicate(timeout=60)
-    assert proc.returncode == 130 and "Traceback" not in stderr, stderr
+    child = Child([sys.executable, SCRIPT, *flags], tmp_path)
+    child.wait_for(lambda line: line.startswith(f"[{phase}]"))
+    child.proc.send_signal(getattr(signal, sig))
+    returncode, stderr = child.finish()
+    assert returncode == {"SIGINT": 130, "SIGTERM": 143}[sig] and "Traceback" not in stderr, stderr
     (run_dir,) = glob.glob(str(tmp_path / "runs" / "*"))
     with open(os.path.join(run_dir, "summary.json")) as f:
         summary = json.load(f)
-    assert summary["status"] == "interrupted" and summary["phase"] == phase
+    assert summary["status"] == "interrupted" and summary["phase"] == phase and summary["signal"] == sig
     assert os.path.exists(os.path.join(run_dir, "tamer_actor.pt")) == (phase == "sleep")  # what finished is saved
     assert not os.path.exists(os.path.join(run_dir, "inform_actor.pt"))
     assert not glob.glob(os.path.join(run_dir, "*.tmp"))
+
+
+@pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")
+def test_sigterm_stops_a_run_started_in_the_background(tmp_path):
+    # a background job of a non-interactive shell ignores SIGINT; SIGTERM (kill, Slurm) must still stop it cleanly
+    flags = [*TINY, "--sleep-gradient-steps", "100000", "--sleep-eval-frequency", "100000"]
+    shell = 'trap "" INT; "$0" "$@" & echo "pid $!"; wait $!'
+    child = Child(["bash", "-c", shell, sys.executable, SCRIPT, *flags], tmp_path)
+    pid = int(child.wait_for(lambda line: line.startswith("pid ")).split()[1])
+    child.wait_for(lambda line: line.startswith("[sleep]"))
+    os.kill(pid, signal.SIGTERM)
+    returncode, stderr = child.finish()
+    assert returncode == 143 and "Traceback" not in stderr, stderr
+    (run_dir,) = glob.glob(str(tmp_path / "runs" / "*"))
+    with open(os.path.join(run_dir, "summary.json")) as f:
+        summary = json.load(f)
+    assert (summary["status"], summary["phase"], summary["signal"]) == ("interrupted", "sleep", "SIGTERM")
 
 
 @pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")
@@ -362,6 +482,12 @@ BAD_FLAGS = [
     (["--oracle-path", "{wrong_shape}"], "wrong_shape.pt"),
     (["--oracle-path", "{wrong_weights}"], "wrong_weights.pt"),
     (["--train-oracle", "--oracle-total-timesteps", "100", "--oracle-batch-size", "256"], "oracle-batch-size"),
+    (["--teacher-noise", "1.5"], "teacher-noise"),
+    (["--teacher-sparsity", "-0.1"], "teacher-sparsity"),
+    (["--teacher-delay", "-1"], "teacher-delay"),
+    (["--credit-window", "0"], "credit-window"),
+    (["--feedback-budget", "-3"], "feedback-budget"),
+    (["--obstacle-layout", "diagonal"], "obstacle-layout"),
 ]
 
 
@@ -443,22 +569,20 @@ def test_oracle_train_pusher_smoke_and_resume(tmp_path):
     assert torch.load(tmp_path / "oracle.pt", weights_only=True)["training_steps"] == 600
 
 
-def test_oracle_train_ctrl_c_keeps_the_last_training_state(tmp_path):
-    import signal
-
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_oracle_train_signal_keeps_the_last_training_state(tmp_path, sig):
     flags = ["--env-id", "Pusher-v5", "--learning-starts", "100", "--batch-size", "32", "--hidden-size", "32"]
     flags += ["--checkpoint-frequency", "150", "--log-frequency", "50", "--total-timesteps", "100000"]
     flags += ["--eval-frequency", "100000", "--output-path", "oracle.pt"]
-    proc = subprocess.Popen([sys.executable, os.path.join(REPO, "oracle_train.py"), *flags], cwd=tmp_path,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
-    run_dir = next(line for line in proc.stdout if line.startswith("run dir:")).split(":", 1)[1].strip()
+    child = Child([sys.executable, os.path.join(REPO, "oracle_train.py"), *flags], tmp_path)
+    run_dir = child.wait_for(lambda line: line.startswith("run dir:")).split(":", 1)[1].strip()
     state = tmp_path / run_dir / "training_state.pt"
     deadline = time.time() + 120
     while not state.exists() and time.time() < deadline:  # the first state is saved at step 150
         time.sleep(0.2)
-    proc.send_signal(signal.SIGINT)
-    _, stderr = proc.communicate(timeout=60)
-    assert proc.returncode == 130 and "Traceback" not in stderr, stderr
+    child.proc.send_signal(getattr(signal, sig))
+    returncode, stderr = child.finish()
+    assert returncode == {"SIGINT": 130, "SIGTERM": 143}[sig] and "Traceback" not in stderr, stderr
     assert len(stderr.strip().splitlines()) == 1 and "--resume" in stderr
     assert not (tmp_path / "oracle.pt").exists()
     assert torch.load(state, weights_only=True)["global_step"] >= 150
