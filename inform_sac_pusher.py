@@ -177,8 +177,10 @@ def mujoco_major() -> int:
     return int(mujoco.__version__.split(".")[0])
 
 
-def shipped_oracle_path(env_id: str) -> str:
-    return os.path.join(REPO_DIR, "oracles", f"{env_id}__sac_oracle.pt")
+def shipped_oracle_paths(env_id: str) -> list[str]:
+    """Where the shipped teacher may be: beside the script (a clone) and under the working directory (a copy)."""
+    name = os.path.join("oracles", f"{env_id}__sac_oracle.pt")
+    return list(dict.fromkeys([os.path.join(REPO_DIR, name), os.path.abspath(name)]))
 
 
 def env_shapes(env_id: str) -> tuple[int, int]:
@@ -303,8 +305,18 @@ def check_args(args: Args, load_oracle: bool = True) -> dict | None:
     if args.oracle_path is not None and args.train_oracle:
         raise ValueError("--oracle-path and --train-oracle exclude each other; pass one of them")
     path = args.oracle_path
-    if path is None and not args.train_oracle and os.path.isfile(shipped_oracle_path(args.env_id)):
-        path = shipped_oracle_path(args.env_id)
+    if path is None and not args.train_oracle:
+        path = next((p for p in shipped_oracle_paths(args.env_id) if os.path.isfile(p)), None)
+        if path is None:  # a copied script: say so before an hour of training starts
+            print(
+                f"[oracle] no shipped teacher found (looked for {' and '.join(shipped_oracle_paths(args.env_id))}); "
+                f"training one here for {args.oracle_total_timesteps} env steps, about "
+                f"{args.oracle_total_timesteps / 100 / 60:.0f} min on one core at ~100 steps/s. To skip this, pass "
+                "--oracle-path PATH (a checkpoint of oracle_train.py, e.g. the repo's oracles/), or --train-oracle to "
+                "silence this note",
+                file=sys.stderr,
+                flush=True,
+            )
     if path is not None:
         ckpt = load_oracle_checkpoint(path, args.env_id, obs_dim, act_dim)
         ckpt["path"] = path

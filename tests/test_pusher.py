@@ -318,6 +318,29 @@ def test_feedback_budget_ends_the_day_after_exactly_n_positives(tmp_path):
     assert summary["args"]["teacher_delay"] == 2 and summary["args"]["credit_window"] == 3
 
 
+@pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")
+def test_a_copied_script_finds_the_teacher_or_says_where_it_looked(tmp_path):
+    import shutil
+
+    copy = tmp_path / "elsewhere" / "my_inform.py"
+    copy.parent.mkdir()
+    shutil.copy(SCRIPT, copy)
+    (tmp_path / "a").mkdir()  # no oracles/ here either: a note names both places, then a tiny oracle is trained
+    proc = subprocess.run([sys.executable, str(copy), "--oracle-total-timesteps", "400", "--oracle-learning-starts",
+                           "200", *TINY], cwd=tmp_path / "a", capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "no shipped teacher found" in proc.stderr and "--oracle-path" in proc.stderr
+    assert str(copy.parent / "oracles") in proc.stderr and str(tmp_path / "a" / "oracles") in proc.stderr
+    (tmp_path / "b" / "oracles").mkdir(parents=True)  # the teacher under the working directory is found
+    shutil.copy(SHIPPED, tmp_path / "b" / "oracles")
+    proc = subprocess.run([sys.executable, str(copy), *TINY], cwd=tmp_path / "b", capture_output=True, text=True,
+                          timeout=300)  # fmt: skip
+    assert proc.returncode == 0 and "no shipped teacher" not in proc.stderr, proc.stderr[-2000:]
+    (run_dir,) = glob.glob(str(tmp_path / "b" / "runs" / "*"))
+    with open(os.path.join(run_dir, "summary.json")) as f:
+        assert json.load(f)["oracle_path"] == str(tmp_path / "b" / "oracles" / "Pusher-v5__sac_oracle.pt")
+
+
 def test_save_load_same_actions(tmp_path):
     torch.manual_seed(0)
     actor = isp.Actor(23, 7, 32, action_low=-2 * np.ones(7), action_high=2 * np.ones(7))
