@@ -1,24 +1,38 @@
-"""Run one of the INFORM scripts for several seeds in parallel worker processes, then gather their summary.json
-files into one table (mean, std, n per key). Resumable: a seed whose run already finished is not run again.
+"""Run one of the INFORM scripts for several seeds (and a grid of flags), locally in parallel worker processes or
+on a Slurm cluster as a job array through submitit, then gather their summary.json files into one table per grid
+point (mean, std, n per key). Resumable: a run whose summary.json says completed, for the same script, seed and
+flags, is not run again; an interrupted, failed or timed-out run is.
 
 In the spirit of CleanRL's benchmark utility.
 
     python run_seeds.py --script inform_dqn_gridworld.py --exp-name fig3 --seeds 1 2 3 4 5 --workers 2
     python run_seeds.py --script inform_sac_pusher.py --exp-name fig3 --seeds 1 2 3 -- --random-starts
+    python run_seeds.py --exp-name noise --grid teacher-noise=0,0.1,0.2 --launcher slurm --slurm-time 30
+
+Stopping: SIGINT or SIGTERM (Ctrl-C, kill, a scheduler) is passed on to the runs, which save what finished and
+write summary.json with status interrupted; run_seeds then reports them and exits 130 / 143. With --launcher slurm
+it cancels the jobs it submitted (Slurm sends them SIGTERM), so the same command later resumes the sweep instead of
+racing jobs still running. A second signal kills the local runs outright.
 """
 
 import contextlib
 import glob
 import io
+import itertools
 import json
 import math
 import os
+import re
 import shlex
+import shutil
+import signal
 import subprocess
 import sys
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from typing import Literal
 
 import tyro
 
@@ -31,43 +45,407 @@ class Args:
     """the experiment name: runs are runs/{env_id}__{exp_name}__{seed}__{time}; it is how finished runs are found"""
     seeds: list[int] = field(default_factory=lambda: [1, 2, 3, 4, 5])
     """the seeds to run"""
+    grid: tyro.conf.UseAppendAction[list[str]] = field(default_factory=list)
+    """a flag of the script and the values to try, e.g. teacher-noise=0,0.1,0.2; repeat --grid for several flags
+    (every combination is run for every seed, and tabulated on its own)"""
+    launcher: Literal["local", "slurm"] = "local"
+    """local: worker processes on this machine; slurm: one Slurm job per run, submitted as a job array"""
     workers: int = 2
-    """runs side by side"""
+    """runs side by side (local launcher)"""
     threads: int = 0
-    """torch threads per run (0: the machine's cores divided among the workers)"""
+    """torch threads per run (0: local, the machine's cores divided among the workers; slurm, --slurm-cpus-per-task)"""
+    slurm_partition: str | None = None
+    """Slurm partition (default: the cluster's default partition)"""
+    slurm_time: int = 120
+    """minutes per run (Slurm's --time); a run still going then is stopped, saves what finished, reported timed out"""
+    slurm_cpus_per_task: int = 1
+    """CPUs per run (Slurm's --cpus-per-task)"""
+    slurm_mem: str | None = None
+    """memory per run in Slurm's syntax, e.g. 4G or 500M (default: the partition's default)"""
+    poll_seconds: float = 5.0
+    """seconds between two looks at the Slurm queue"""
     runs_dir: str = "runs"
     """where the script writes its runs (relative to the working directory)"""
     logs_dir: str = "runs/logs"
-    """where each run's stdout and stderr go"""
+    """where each run's stdout and stderr go (Slurm: {logs_dir}/slurm, named by job id)"""
     script_args: tyro.conf.Positional[list[str]] = field(default_factory=list)
     """extra flags for every run, after a `--`"""
 
 
-def finished_summary(runs_dir: str, exp_name: str, seed: int, script: str) -> str | None:
-    """The newest summary.json of a completed run of this script, experiment and seed, if there is one (two
-    scripts may share an experiment name: each summary.json names the script that wrote it)."""
-    paths = sorted(glob.glob(os.path.join(runs_dir, f"*__{exp_name}__{seed}__*", "summary.json")), key=os.path.getmtime)
-    for path in reversed(paths):
+# A grid point: the (flag, value) pairs of one combination of --grid values, () without a grid.
+Point = tuple[tuple[str, str], ...]
+
+
+@dataclass(frozen=True)
+class Run:
+    seed: int
+    point: Point
+
+    @property
+    def label(self) -> str:
+        return ",".join(f"{k}={v}" for k, v in self.point)
+
+    def __str__(self) -> str:
+        return f"seed {self.seed}" + (f" ({self.label})" if self.point else "")
+
+
+@dataclass
+class Outcome:
+    status: str  # completed | interrupted | timeout | cancelled | failed | not started
+    detail: str = ""
+    stderr_path: str = ""
+
+
+def grid_points(grid: list[str], script_args: list[str]) -> list[Point]:
+    """The cartesian product of the --grid flags' values, in the order given."""
+    axes, names = [], set()
+    for spec in grid:
+        name, sep, values = spec.partition("=")
+        name = name.strip().removeprefix("--").replace("_", "-")
+        choices = [v.strip() for v in values.split(",")]
+        if not sep or not name or not all(choices):
+            raise ValueError(f"--grid {spec!r}: expected FLAG=VALUE,VALUE,... (e.g. teacher-noise=0,0.1,0.2)")
+        if name in {"seed", "exp-name", "num-threads"}:
+            raise ValueError(f"--grid {spec!r}: --{name} is set by run_seeds itself")
+        if name in names:
+            raise ValueError(f"--grid {name} given twice")
+        if name in flag_values(script_args):
+            raise ValueError(f"--grid {name} is also among the script's flags after --")
+        names.add(name)
+        axes.append([(name, v) for v in choices])
+    return list(itertools.product(*axes))
+
+
+def flag_values(tokens: list[str]) -> dict[str, list[str] | bool]:
+    """The script's flags as tyro reads them: --name v [v ...] -> values, --name -> True, --no-name -> False
+    (names with dashes)."""
+    flags: dict[str, list[str] | bool] = {}
+    name = None
+    for token in tokens:
+        if token.startswith("--"):
+            name, sep, value = token[2:].partition("=")
+            name = name.replace("_", "-")
+            flags[name] = [value] if sep else True
+            name = None if sep else name
+        elif name is not None:
+            flags[name] = [*(flags[name] if isinstance(flags[name], list) else []), token]
+    for name in [n for n, v in flags.items() if v is True and n.startswith("no-")]:
+        del flags[name]
+        flags[name.removeprefix("no-")] = False
+    return flags
+
+
+def same_value(recorded, wanted: str) -> bool:
+    if recorded is None or isinstance(recorded, str):
+        return str(recorded) == wanted
+    if isinstance(recorded, bool):
+        return wanted.lower() in ({"true", "1"} if recorded else {"false", "0"})
+    try:
+        return math.isclose(float(wanted), recorded, rel_tol=1e-12, abs_tol=0.0)
+    except (TypeError, ValueError):
+        return False
+
+
+def ran_with(recorded_args: dict, flags: dict[str, list[str] | bool]) -> bool:
+    """Whether a run's recorded Args (summary.json "args") agree with these command-line flags."""
+    for name, wanted in flags.items():
+        key = name.replace("-", "_")
+        if key not in recorded_args:
+            return False
+        value = recorded_args[key]
+        if isinstance(wanted, bool):
+            ok = value is wanted
+        elif isinstance(value, list | tuple):
+            ok = len(value) == len(wanted) and all(same_value(v, w) for v, w in zip(value, wanted, strict=True))
+        else:
+            ok = len(wanted) == 1 and same_value(value, wanted[0])
+        if not ok:
+            return False
+    return True
+
+
+def run_flags(args: Args, run: Run) -> dict[str, list[str] | bool]:
+    return {**flag_values(args.script_args), **{name: [value] for name, value in run.point}}
+
+
+def newest_summary(args: Args, run: Run, completed: bool = True, since: float = 0.0) -> tuple[str, dict] | None:
+    """The newest summary.json of this script, experiment, seed and flags (completed only, unless told otherwise;
+    two scripts may share an experiment name: each summary.json names the script that wrote it)."""
+    pattern = os.path.join(args.runs_dir, f"*__{args.exp_name}__{run.seed}__*", "summary.json")
+    flags = run_flags(args, run)
+    for path in sorted(glob.glob(pattern), key=os.path.getmtime, reverse=True):
+        if os.path.getmtime(path) < since:
+            break
         with open(path) as f:
             summary = json.load(f)
-        if summary.get("status") == "completed" and summary.get("script") == os.path.basename(script):
-            return path
+        if (
+            summary.get("script") == os.path.basename(args.script)
+            and (not completed or summary.get("status") == "completed")
+            and ran_with(summary.get("args", {}), flags)
+        ):
+            return path, summary
     return None
 
 
-def run_one(args: Args, seed: int, threads: int) -> tuple[int, int, float]:
-    """Run the script for one seed; returns (seed, exit code, seconds)."""
-    cmd = [sys.executable, args.script, "--seed", str(seed), "--exp-name", args.exp_name, "--num-threads",
-           str(threads), *args.script_args]  # fmt: skip
+def command(args: Args, run: Run, threads: int) -> list[str]:
+    cmd = [sys.executable, os.path.abspath(args.script), "--seed", str(run.seed), "--exp-name", args.exp_name,
+           "--num-threads", str(threads), *args.script_args]  # fmt: skip
+    for name, value in run.point:
+        cmd += [f"--{name}", value]
+    return cmd
+
+
+def outcome_from_run(args: Args, run: Run, code: int | None, since: float) -> Outcome:
+    """What became of a run, from its exit code and the summary.json it wrote."""
+    found = newest_summary(args, run, completed=False, since=since)
+    summary = found[1] if found else {}
+    if summary.get("status") == "completed" and code in (0, None):
+        return Outcome("completed")
+    if summary.get("status") == "interrupted":
+        how = f" by {summary['signal']}" if summary.get("signal") else ""
+        return Outcome("interrupted", f"stopped{how} during the {summary.get('phase', '?')} phase; saved what finished")
+    if code is not None and code < 0:
+        return Outcome("interrupted", f"killed by {signal.Signals(-code).name}, no summary")
+    if summary.get("status"):
+        return Outcome("failed", f"exit {code}, status {summary['status']}")
+    return Outcome("failed", f"exit {code}, no summary.json" if code is not None else "no summary.json")
+
+
+def tail(path: str, n: int = 8) -> list[str]:
+    try:
+        with open(path, errors="replace") as f:
+            return f.read().splitlines()[-n:]
+    except OSError:
+        return []
+
+
+# --------------------------------------------------------------------------------------------------------------
+# The local launcher: worker threads, each running one script process at a time.
+
+
+class Stop:
+    """The first SIGINT/SIGTERM: remember it and pass it on once to every live run (each in its own process group,
+    so a terminal's Ctrl-C reaches them only through us); a second one kills them."""
+
+    def __init__(self):
+        self.signum = 0
+        self.count = 0
+        self.lock = threading.Lock()
+        self.procs: set[subprocess.Popen] = set()
+
+    def handler(self, signum, frame):
+        with self.lock:  # only worker threads take this lock, briefly; the handler runs in the main thread
+            again, self.signum = self.signum != 0, self.signum or signum
+            self.count += 1
+            for p in self.procs:
+                with contextlib.suppress(ProcessLookupError):
+                    p.send_signal(signal.SIGKILL if again else signum)
+        # os.write, not print: the main thread may be inside a print when the signal lands
+        os.write(1, f"\n{signal.Signals(signum).name}: {'killing' if again else 'stopping'} the runs\n".encode())
+
+    @contextlib.contextmanager
+    def installed(self):
+        # a SIGINT ignored at start (a background job of a script) stays ignored, as Python itself does
+        signals = [s for s in (signal.SIGINT, signal.SIGTERM) if signal.getsignal(s) is not signal.SIG_IGN]
+        old = {s: signal.signal(s, self.handler) for s in signals}
+        try:
+            yield self
+        finally:
+            for s, h in old.items():
+                signal.signal(s, h)
+
+
+def run_local(args: Args, todo: list[Run], stop: Stop) -> dict[Run, Outcome]:
+    threads = args.threads or max(1, (os.cpu_count() or 1) // args.workers)
+    print(f"running {args.script} for {len(todo)} run(s): {args.workers} workers, {threads} thread(s) each", flush=True)
     os.makedirs(args.logs_dir, exist_ok=True)
-    log = os.path.join(args.logs_dir, f"{args.exp_name}__{seed}.log")
-    start = time.time()
-    with open(log, "w") as f:
-        f.write(shlex.join(cmd) + "\n")
-        f.flush()
-        code = subprocess.call(cmd, stdout=f, stderr=subprocess.STDOUT)
-    print(f"seed {seed}: exit {code} after {time.time() - start:.0f}s (log: {log})", flush=True)
-    return seed, code, time.time() - start
+    outcomes: dict[Run, Outcome] = {}
+
+    def one(run: Run) -> None:
+        cmd = command(args, run, threads)
+        label = f"{args.exp_name}__{run.label.replace('/', '_')}__{run.seed}" if run.point else None
+        log = os.path.join(args.logs_dir, f"{label or f'{args.exp_name}__{run.seed}'}.log")
+        start = time.time()
+        with open(log, "w") as f:
+            f.write(shlex.join(cmd) + "\n")
+            f.flush()
+            with stop.lock:
+                if stop.signum:
+                    outcomes[run] = Outcome("not started")
+                    return
+                p = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, process_group=0)
+                stop.procs.add(p)
+            code = p.wait()
+            with stop.lock:
+                stop.procs.discard(p)
+        outcomes[run] = outcome = outcome_from_run(args, run, code, start)
+        outcome.stderr_path = log
+        counts = {s: sum(o.status == s for o in outcomes.values()) for s in ("completed", "interrupted", "failed")}
+        print(f"{run}: {outcome.status} (exit {code}) after {time.time() - start:.0f}s (log: {log}) "
+              f"[{len(outcomes)}/{len(todo)} finished: {counts['completed']} done, {counts['failed']} failed, "
+              f"{counts['interrupted']} interrupted]", flush=True)  # fmt: skip
+
+    with ThreadPoolExecutor(args.workers) as pool:
+        list(pool.map(one, todo))
+    return outcomes
+
+
+# --------------------------------------------------------------------------------------------------------------
+# The Slurm launcher: submitit writes the sbatch array and runs slurm_job on the nodes; squeue says what is pending
+# or running; a job that left the queue is judged by its run's summary.json and its stderr (a single-node Slurm
+# has no accounting database, so sacct cannot be relied on).
+
+
+def slurm_job(cmd: list[str], cwd: str) -> int:
+    """What each array task runs on its node: the script, in the submission directory."""
+    import shlex
+    import signal
+    import subprocess
+    import sys
+
+    # submitit asks Slurm for SIGUSR2 before the time limit, to checkpoint and requeue: a run has nothing to requeue,
+    # and the signal's default action would kill it unsaved. Ignore it here and in the run (an ignored signal stays
+    # ignored across exec). SIGTERM (time limit, scancel) reaches the run from Slurm; it saves what finished.
+    signal.signal(signal.SIGUSR2, signal.SIG_IGN)
+    print(f"run_seeds: {shlex.join(cmd)}", file=sys.stderr, flush=True)
+    code = subprocess.call(cmd, cwd=cwd, stdin=subprocess.DEVNULL)
+    print(f"run_seeds: the run exited with code {code}", file=sys.stderr, flush=True)
+    return code
+
+
+def check_slurm(args: Args) -> None:
+    """Before anything is written: Slurm is here, answers, and has the partition."""
+    if shutil.which("sbatch") is None:
+        raise ValueError("--launcher slurm: no sbatch on PATH (this machine has no Slurm; use --launcher local)")
+    try:
+        out = subprocess.run(["sinfo", "-h", "-o", "%R"], capture_output=True, text=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired) as e:
+        raise ValueError(f"--launcher slurm: sinfo failed ({e})") from None
+    if out.returncode != 0:
+        first = (out.stderr.strip().splitlines() or ["no message"])[0]
+        raise ValueError(f"--launcher slurm: Slurm does not answer (sinfo: {first})")
+    partitions = sorted(set(out.stdout.split()))
+    if args.slurm_partition is not None and args.slurm_partition not in partitions:
+        raise ValueError(f"--slurm-partition {args.slurm_partition}: no such partition (this cluster has: "
+                         f"{', '.join(partitions) or 'none'})")  # fmt: skip
+    # Slurm itself judges time, CPUs and memory against the partition and its nodes, submitting nothing
+    test = ["sbatch", "--test-only", "--time", str(args.slurm_time), "--cpus-per-task", str(args.slurm_cpus_per_task)]
+    test += ["--partition", args.slurm_partition] if args.slurm_partition else []
+    test += ["--mem", args.slurm_mem] if args.slurm_mem else []
+    out = subprocess.run([*test, "--wrap", "true"], capture_output=True, text=True, timeout=60)
+    if out.returncode != 0:
+        reason = " ".join(line.strip() for line in out.stderr.splitlines() if line.strip())
+        raise ValueError(f"--launcher slurm: Slurm refuses a job of --slurm-time {args.slurm_time} "
+                         f"--slurm-cpus-per-task {args.slurm_cpus_per_task}"
+                         + (f" --slurm-mem {args.slurm_mem}" if args.slurm_mem else "") + f" ({reason})")  # fmt: skip
+
+
+def squeue_states(job_ids: list[str]) -> dict[str, str] | None:
+    """The queue state (PENDING, RUNNING, ...) of each of these array tasks still in the queue; None if squeue
+    failed."""
+    arrays = sorted({j.split("_")[0] for j in job_ids})
+    out = subprocess.run(["squeue", "-h", "-r", "-o", "%i %T", "-j", ",".join(arrays)], capture_output=True,
+                         text=True, timeout=60)  # fmt: skip
+    if out.returncode != 0:
+        return None
+    return dict(line.split(maxsplit=1) for line in out.stdout.splitlines() if line.strip())
+
+
+def slurm_outcome(args: Args, run: Run, job, since: float) -> Outcome:
+    """A job that left the queue: timed out (Slurm's message on its stderr), cancelled, or as its run says."""
+    path = str(job.paths.stderr)
+    try:
+        with open(path, errors="replace") as f:
+            text = f.read()
+    except OSError:
+        text = ""
+    codes = re.findall(r"^run_seeds: the run exited with code (-?\d+)$", text, re.M)
+    outcome = outcome_from_run(args, run, int(codes[-1]) if codes else None, since)
+    outcome.stderr_path = path
+    saved = f"; the run {outcome.detail}" if outcome.status == "interrupted" else ""
+    if "DUE TO TIME LIMIT" in text:
+        return Outcome("timeout", f"job {job.job_id} exceeded --slurm-time {args.slurm_time} min{saved}", path)
+    if re.search(r"CANCELLED AT .* \*\*\*", text) and outcome.status != "completed":
+        status = "interrupted" if outcome.status == "interrupted" else "cancelled"
+        return Outcome(status, f"job {job.job_id} was cancelled{saved}", path)
+    if outcome.status == "failed" and not codes:
+        outcome.detail = f"job {job.job_id} ended before its run did ({outcome.detail})"
+    return outcome
+
+
+def run_slurm(args: Args, todo: list[Run], stop: Stop) -> dict[Run, Outcome]:
+    import cloudpickle
+    import submitit
+
+    threads = args.threads or args.slurm_cpus_per_task
+    if __name__ != "__main__":  # imported (tests): ship slurm_job itself, the nodes need not import this module
+        cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    executor = submitit.SlurmExecutor(folder=os.path.join(args.logs_dir, "slurm"))
+    executor.update_parameters(
+        job_name=args.exp_name,
+        time=args.slurm_time,
+        cpus_per_task=args.slurm_cpus_per_task,
+        partition=args.slurm_partition,
+        use_srun=False,  # the python runs in the batch step itself, with all the job's CPUs
+        additional_parameters={"mem": args.slurm_mem} if args.slurm_mem else {},
+    )
+    cwd = os.getcwd()
+    since = time.time()
+    try:
+        with executor.batch():
+            submitted = [executor.submit(slurm_job, command(args, run, threads), cwd) for run in todo]
+    except submitit.core.utils.FailedJobError as e:
+        lines = [line for line in str(e).splitlines() if line.strip()]
+        print(f"error: sbatch refused the job array: {lines[-1] if lines else e}", file=sys.stderr)
+        sys.exit(1)
+    jobs = dict(zip(todo, submitted, strict=True))
+    array_id = next(iter(jobs.values())).job_id.split("_")[0]
+    print(f"submitted {len(jobs)} run(s) of {args.script} as Slurm job array {array_id} "
+          f"(partition {args.slurm_partition or 'default'}, {args.slurm_time} min, {args.slurm_cpus_per_task} CPU(s) "
+          f"each); logs in {executor.folder}", flush=True)  # fmt: skip
+
+    outcomes: dict[Run, Outcome] = {}
+    cancelled, last, gone_since = 0.0, "", {}
+    while len(outcomes) < len(jobs):
+        if stop.signum and not cancelled:
+            print(f"cancelling Slurm job array {array_id}", flush=True)
+            subprocess.run(["scancel", array_id], check=False)
+            cancelled = time.time()
+        if cancelled and (stop.count > 1 or time.time() - cancelled > 300):  # a second signal, or Slurm is stuck
+            for run, job in jobs.items():
+                outcomes.setdefault(run, Outcome("cancelled", f"job {job.job_id}: not waited for after scancel"))
+            break
+        states = squeue_states([j.job_id for j in jobs.values()])
+        if states is None:
+            print("warning: squeue failed; trying again", file=sys.stderr, flush=True)
+        else:
+            for run, job in jobs.items():
+                if run in outcomes or job.job_id in states:
+                    continue
+                # left the queue: give slurmstepd's last lines and the run's summary a moment to land
+                gone_since.setdefault(run, time.time())
+                if time.time() - gone_since[run] >= min(args.poll_seconds, 2.0):
+                    outcome = slurm_outcome(args, run, job, since)
+                    if cancelled and outcome.status == "failed" and "ended before" in outcome.detail:
+                        outcome = Outcome("not started", f"job {job.job_id} cancelled", outcome.stderr_path)
+                    outcomes[run] = outcome
+                    print(f"{run}: {outcome.status} (job {job.job_id}, stderr: {outcome.stderr_path})", flush=True)
+            pending = sum(states.get(job.job_id) == "PENDING" for job in jobs.values())
+            completed = sum(o.status == "completed" for o in outcomes.values())
+            progress = (
+                f"slurm {array_id}: {pending} pending, {len(jobs) - len(outcomes) - pending} running, "
+                f"{completed} done, {len(outcomes) - completed} failed or stopped"
+            )
+            if progress != last:
+                print(f"[{time.strftime('%H:%M:%S')}] {progress}", flush=True)
+                last = progress
+        if len(outcomes) < len(jobs):
+            time.sleep(args.poll_seconds)
+    return outcomes
+
+
+# --------------------------------------------------------------------------------------------------------------
+# The table.
 
 
 def aggregate(summaries: list[dict]) -> dict[str, dict]:
@@ -84,40 +462,81 @@ def aggregate(summaries: list[dict]) -> dict[str, dict]:
     return table
 
 
-def main(args: Args) -> dict:
-    todo = [s for s in args.seeds if finished_summary(args.runs_dir, args.exp_name, s, args.script) is None]
-    done = sorted(set(args.seeds) - set(todo))
+def main(args: Args) -> dict[str, dict]:
+    """Run what has not finished, print and save one table per grid point; returns {grid point label: table}
+    ("" without a grid). Exits 1 if a run did not finish, 128 + the signal if stopped by one."""
+    points = grid_points(args.grid, args.script_args)
+    runs = [Run(seed, point) for point in points for seed in args.seeds]
+    todo = [run for run in runs if newest_summary(args, run) is None]
+    done = [run for run in runs if run not in todo]
     if done:
-        print(f"already finished, not run again: seeds {done}", flush=True)
-    threads = args.threads or max(1, (os.cpu_count() or 1) // args.workers)
-    if todo:
-        print(f"running {args.script} for seeds {todo}: {args.workers} workers, {threads} thread(s) each", flush=True)
-        with ThreadPoolExecutor(args.workers) as pool:
-            list(pool.map(lambda seed: run_one(args, seed, threads), todo))
+        print(f"already finished, not run again: {', '.join(map(str, done))}", flush=True)
 
-    paths = {s: finished_summary(args.runs_dir, args.exp_name, s, args.script) for s in args.seeds}
-    missing = [s for s, p in paths.items() if p is None]
-    summaries = []
-    for path in filter(None, paths.values()):
-        with open(path) as f:
-            summaries.append(json.load(f))
-    if not summaries:
+    outcomes: dict[Run, Outcome] = {}
+    stop = Stop()
+    with stop.installed():
+        if todo:
+            outcomes = (run_slurm if args.launcher == "slurm" else run_local)(args, todo, stop)
+
+    not_done = {run: o for run, o in outcomes.items() if o.status != "completed"}
+    for run, outcome in not_done.items():
+        print(f"{run}: {outcome.status}" + (f": {outcome.detail}" if outcome.detail else ""))
+        if outcome.status == "failed" and outcome.stderr_path:
+            print(f"  last lines of {outcome.stderr_path}:")
+            for line in tail(outcome.stderr_path):
+                print(f"    {line}")
+
+    tables, saved = {}, []
+    for point in points:
+        paths = {}
+        for seed in args.seeds:
+            found = newest_summary(args, Run(seed, point))
+            paths[seed] = found[0] if found else None
+        summaries = []
+        for path in filter(None, paths.values()):
+            with open(path) as f:
+                summaries.append(json.load(f))
+        label = Run(0, point).label
+        missing = [s for s, p in paths.items() if p is None]
+        if not summaries:
+            print(f"\n{args.exp_name}{f' [{label}]' if label else ''}: no run finished")
+            continue
+        tables[label] = table = aggregate(summaries)
+        print(
+            f"\n{args.exp_name}{f' [{label}]' if label else ''}: {len(summaries)} of {len(args.seeds)} seeds finished"
+            + (f", missing {missing}" if missing else "")
+        )
+        print("| key | mean | std | n |\n| --- | --- | --- | --- |")
+        for key, row in table.items():
+            print(f"| {key} | {row['mean']:.4g} | {row['std']:.3g} | {row['n']} |")
+        saved.append({"point": dict(point), "runs": paths, "table": table})
+
+    if saved:
+        out = os.path.join(args.runs_dir, f"{args.exp_name}__table.json")
+        record = {"script": args.script, "seeds": args.seeds, "grid": args.grid, "points": saved}
+        if not args.grid:
+            record.update(runs=saved[0]["runs"], table=saved[0]["table"])
+        with open(out + ".tmp", "w") as f:
+            json.dump(record, f, indent=2)
+        os.replace(out + ".tmp", out)
+        print(f"table written to {out}")
+
+    if stop.signum:
+        print(f"error: stopped by {signal.Signals(stop.signum).name}; {len(not_done)} run(s) not finished, run the "
+              "same command again to resume them", file=sys.stderr)  # fmt: skip
+        sys.exit(128 + stop.signum)
+    if not_done:
+        by_status = {}
+        for run, outcome in not_done.items():
+            by_status.setdefault(outcome.status, []).append(str(run))
+        print(f"error: {len(not_done)} of {len(runs)} run(s) did not finish ("
+              + "; ".join(f"{s}: {', '.join(r)}" for s, r in by_status.items())
+              + "); run the same command again to rerun them", file=sys.stderr)  # fmt: skip
+        sys.exit(1)
+    if not saved:
         print(f"error: no run of {args.exp_name} finished; see the logs in {args.logs_dir}", file=sys.stderr)
         sys.exit(1)
-    table = aggregate(summaries)
-    print(
-        f"\n{args.exp_name}: {len(summaries)} of {len(args.seeds)} seeds finished"
-        + (f", missing {missing}" if missing else "")
-    )
-    print("| key | mean | std | n |\n| --- | --- | --- | --- |")
-    for key, row in table.items():
-        print(f"| {key} | {row['mean']:.4g} | {row['std']:.3g} | {row['n']} |")
-    out = os.path.join(args.runs_dir, f"{args.exp_name}__table.json")
-    with open(out + ".tmp", "w") as f:
-        json.dump({"script": args.script, "seeds": args.seeds, "runs": paths, "table": table}, f, indent=2)
-    os.replace(out + ".tmp", out)
-    print(f"table written to {out}")
-    return table
+    return tables
 
 
 def parse_args() -> Args:
@@ -140,13 +559,24 @@ def parse_args() -> Args:
         raise ValueError(" ".join(message) + " (see --help)") from None
 
 
+def validate(args: Args) -> None:
+    if args.workers < 1 or args.threads < 0 or not args.seeds:
+        raise ValueError("--workers must be >= 1, --threads >= 0, and --seeds non-empty")
+    if not os.path.isfile(args.script):
+        raise ValueError(f"{args.script}: no such script")
+    grid_points(args.grid, args.script_args)
+    if args.launcher == "slurm":
+        if args.slurm_time < 1 or args.slurm_cpus_per_task < 1 or not args.poll_seconds > 0:
+            raise ValueError("--slurm-time and --slurm-cpus-per-task must be >= 1, --poll-seconds > 0")
+        if args.slurm_mem is not None and not re.fullmatch(r"\d+[KMGT]?", args.slurm_mem):
+            raise ValueError(f"--slurm-mem {args.slurm_mem!r}: expected a size like 4G or 500M")
+        check_slurm(args)
+
+
 if __name__ == "__main__":
     try:
         args = parse_args()
-        if args.workers < 1 or args.threads < 0 or not args.seeds:
-            raise ValueError("--workers must be >= 1, --threads >= 0, and --seeds non-empty")
-        if not os.path.isfile(args.script):
-            raise ValueError(f"{args.script}: no such script")
+        validate(args)
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)

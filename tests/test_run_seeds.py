@@ -28,7 +28,7 @@ def test_runs_seeds_once_and_resumes(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "fake.py").write_text(FAKE_SCRIPT)
     args = run_seeds.Args(script="fake.py", exp_name="t", seeds=[1, 2, 3], workers=2)
-    table = run_seeds.main(args)
+    table = run_seeds.main(args)[""]
     assert table["eval/x"]["mean"] == 4.0 and table["eval/x"]["n"] == 3
     run_seeds.main(run_seeds.Args(script="fake.py", exp_name="t", seeds=[1, 2, 3, 4], workers=2))
     calls = sorted(int(x) for x in (tmp_path / "calls.txt").read_text().split())
@@ -42,6 +42,6 @@ def test_a_run_of_another_script_with_the_same_exp_name_does_not_count(tmp_path,
     (tmp_path / "fake.py").write_text(FAKE_SCRIPT)
     (tmp_path / "other.py").write_text(FAKE_SCRIPT)
     run_seeds.main(run_seeds.Args(script="other.py", exp_name="t", seeds=[1], workers=1))
-    table = run_seeds.main(run_seeds.Args(script="fake.py", exp_name="t", seeds=[1], workers=1))
+    table = run_seeds.main(run_seeds.Args(script="fake.py", exp_name="t", seeds=[1], workers=1))[""]
     assert (tmp_path / "calls.txt").read_text().split() == ["1", "1"]  # fake.py ran although other.py had seed 1
     assert table["eval/x"]["n"] == 1
