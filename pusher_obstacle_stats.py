@@ -27,6 +27,9 @@ class Args:
     """run directories of inform_sac_pusher.py (one per seed), each with obstacle_distances.npz"""
     output: str | None = None
     """optional path of a JSON file with the aggregated numbers"""
+    fig5a: str | None = None
+    """optional path of a PNG: the object's xy paths of TAMER and INFORM with and without the boxes (paper Fig. 5a),
+    one panel per run directory (deterministic actions, from the run's obstacle_paths.npz)"""
 
 
 def load_run(run_dir: str) -> dict:
@@ -48,8 +51,11 @@ def load_run(run_dir: str) -> dict:
         raise ValueError(f"{path}: needs 'tamer' and 'inform' arrays")
     return {
         "seed": summary.get("seed"),
+        "run_dir": run_dir,
         "distances": distances,
         "success_distance": summary["args"]["success_distance"],
+        "layout": summary["args"].get("obstacle_layout", "paper"),
+        "min_box_distance_to_path": summary.get("obstacle/min_box_distance_to_path"),
     }
 
 
@@ -64,6 +70,10 @@ def aggregate(runs: list[dict]) -> dict:
         out[f"{p}_seed_means"] = seed_means.tolist()
         out[f"{p}_seed_mean_std"] = float(seed_means.std(ddof=1)) if len(runs) > 1 else 0.0
         out[f"{p}_success_rate"] = float((pooled < runs[0]["success_distance"]).mean())
+    closer = np.array(out["inform_seed_means"]) < np.array(out["tamer_seed_means"])
+    out["inform_closer_seeds"] = int(closer.sum())
+    out["layouts"] = sorted({r["layout"] for r in runs})
+    out["min_box_distance_to_path"] = [r["min_box_distance_to_path"] for r in runs]
     tamer = np.concatenate([r["distances"]["tamer"] for r in runs])
     inform = np.concatenate([r["distances"]["inform"] for r in runs])
     welch = stats.ttest_ind(tamer, inform, equal_var=False)
@@ -72,6 +82,32 @@ def aggregate(runs: list[dict]) -> dict:
         welch = stats.ttest_ind(out["tamer_seed_means"], out["inform_seed_means"], equal_var=False)
         out["welch_t_seed_means"], out["welch_p_seed_means"] = float(welch.statistic), float(welch.pvalue)
     return out
+
+
+def fig5a(runs: list[dict], path: str) -> None:
+    """The object's path with (solid) and without (dashed) the boxes, per policy; boxes, start and goal drawn."""
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Rectangle
+
+    fig = Figure(figsize=(4 * len(runs), 4.2))
+    axes = fig.subplots(1, len(runs), squeeze=False)[0]
+    for ax, run in zip(axes, runs, strict=True):
+        with np.load(os.path.join(run["run_dir"], "obstacle_paths.npz")) as data:
+            paths = {k: data[k] for k in data.files}
+        for name, colour in (("tamer", "tab:orange"), ("inform", "tab:blue")):
+            ax.plot(*paths[f"{name}_plain"].T, "--", color=colour, lw=1, label=f"{name.upper()}, no boxes")
+            ax.plot(*paths[f"{name}_obstacle"].T, "-", color=colour, lw=2, label=f"{name.upper()}, boxes")
+        for x, y in paths["boxes"]:
+            ax.add_patch(Rectangle((x - 0.015, y - 0.015), 0.03, 0.03, color="0.3"))
+        ax.plot(*paths["start"], "ko", ms=5, label="object start")
+        ax.plot(*paths["goal"], "r*", ms=12, label="goal")
+        ax.set_title(f"seed {run['seed']} ({run['layout']} layout)")
+        ax.set_xlabel("x (m)")
+        ax.set_aspect("equal", adjustable="datalim")
+    axes[0].set_ylabel("y (m)")
+    axes[0].legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
 
 
 def main(args: Args) -> dict:
@@ -98,6 +134,10 @@ def main(args: Args) -> dict:
             f"  Welch t-test TAMER vs INFORM, per-seed means (n={len(runs)}): t = {out['welch_t_seed_means']:.3f}, "
             f"p = {out['welch_p_seed_means']:.3g}"
         )
+    print(f"  INFORM closer than TAMER on {out['inform_closer_seeds']} of {len(runs)} seeds; layout {out['layouts']}")
+    if args.fig5a:
+        fig5a(runs, args.fig5a)
+        print(f"  Fig. 5a: {args.fig5a}")
     if args.output:
         with open(args.output, "w") as f:
             json.dump(out, f, indent=2)

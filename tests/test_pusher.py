@@ -303,6 +303,11 @@ def test_smoke_oracle_path_and_determinism(tmp_path):
         det = "eval/obstacle/{}_final_distance_deterministic"
         assert metrics[det.format("policy")] == first[det.format(policy)]
     assert len(glob.glob(str(tmp_path / "a" / "runs" / "*"))) == 1  # evaluating writes no run
+    # the obstacle statistics and Fig. 5a read the run
+    stats = subprocess.run([sys.executable, os.path.join(REPO, "pusher_obstacle_stats.py"), run_dir, "--fig5a",
+                            str(tmp_path / "fig5a.png")], capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert stats.returncode == 0, stats.stderr
+    assert "INFORM closer than TAMER on" in stats.stdout and (tmp_path / "fig5a.png").stat().st_size > 10_000
 
 
 @pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")
