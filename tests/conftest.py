@@ -23,3 +23,61 @@ def run_script(tmp_path):
 
     run.cwd = tmp_path
     return run
+
+
+FAKE_SCRIPT = '''
+"""Stands in for a training script (tests of run_seeds.py): writes runs/Fake-v0__{exp}__{seed}__{ns}/summary.json
+with its flags under "args", as the real scripts do. --fail-seed N: seed N exits 1 with a message on stderr. While
+the file "block" exists it waits (at most 600 s), so a test can stop it: SIGTERM/SIGINT are handled as the real
+scripts handle them (summary.json status interrupted with the phase and the signal, exit 143 / 130)."""
+import json, os, signal, sys, time
+
+def flag(name, default, kind):  # --name value or --name=value, as argparse reads them
+    for i, arg in enumerate(sys.argv):
+        if arg == name:
+            return kind(sys.argv[i + 1])
+        if arg.startswith(name + "="):
+            return kind(arg.split("=", 1)[1])
+    return default
+
+seed, exp = flag("--seed", 1, int), flag("--exp-name", "x", str)
+noise, fail_seed = flag("--noise", 0.0, float), flag("--fail-seed", -1, int)
+with open("calls.txt", "a") as f:
+    f.write(f"{seed} {noise}\\n")
+if seed == fail_seed:
+    print(f"boom: seed {seed} refuses to run", file=sys.stderr)
+    sys.exit(1)
+run_dir = f"runs/Fake-v0__{exp}__{seed}__{time.time_ns()}"
+os.makedirs(run_dir)
+received = []
+
+def stop(signum, frame):
+    received.append(signal.Signals(signum).name)
+    raise KeyboardInterrupt
+
+signal.signal(signal.SIGTERM, stop)
+if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+    signal.signal(signal.SIGINT, stop)
+summary = {"status": "completed"}
+print("started", flush=True)
+try:
+    deadline = time.time() + 600
+    while os.path.exists("block") and time.time() < deadline:
+        time.sleep(0.1)
+except KeyboardInterrupt:
+    summary = {"status": "interrupted", "phase": "forward", "signal": received[-1] if received else "SIGINT"}
+summary.update({"script": os.path.basename(sys.argv[0]), "seed": seed, "eval/x": seed * 2.0 + noise,
+                "args": {"seed": seed, "exp_name": exp, "noise": noise, "fail_seed": fail_seed}})
+with open(f"{run_dir}/summary.json.tmp", "w") as f:
+    json.dump(summary, f)
+os.replace(f"{run_dir}/summary.json.tmp", f"{run_dir}/summary.json")
+sys.exit({"completed": 0, "interrupted": 143 if received[-1:] == ["SIGTERM"] else 130}[summary["status"]])
+'''
+
+
+@pytest.fixture
+def fake_script(tmp_path):
+    """fake.py in tmp_path: a training script's contract (summary.json, args, SIGTERM) in a few lines."""
+    path = tmp_path / "fake.py"
+    path.write_text(FAKE_SCRIPT)
+    return path

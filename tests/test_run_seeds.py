@@ -1,21 +1,27 @@
+import glob
 import json
 import os
+import signal
+import subprocess
+import sys
+import time
 
 import pytest
+from conftest import REPO
 
 import run_seeds
 
-FAKE_SCRIPT = """
-import json, os, sys, time
-seed = int(sys.argv[sys.argv.index("--seed") + 1])
-exp = sys.argv[sys.argv.index("--exp-name") + 1]
-with open("calls.txt", "a") as f:
-    f.write(f"{seed}\\n")
-d = f"runs/Fake-v0__{exp}__{seed}__{time.time_ns()}"
-os.makedirs(d)
-json.dump({"status": "completed", "script": os.path.basename(sys.argv[0]), "seed": seed, "eval/x": seed * 2.0,
-           "args": {}}, open(f"{d}/summary.json", "w"))
-"""
+RUN_SEEDS = os.path.join(REPO, "run_seeds.py")
+
+
+def restore_default_signals():
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def calls(tmp_path) -> list[tuple[int, float]]:
+    lines = (tmp_path / "calls.txt").read_text().split("\n") if (tmp_path / "calls.txt").exists() else []
+    return sorted((int(s), float(n)) for s, n in (line.split() for line in lines if line))
 
 
 def test_aggregate_mean_std_n():
@@ -24,24 +30,175 @@ def test_aggregate_mean_std_n():
     assert table["a"]["mean"] == 2.0 and table["a"]["std"] == pytest.approx(2**0.5) and table["a"]["n"] == 2
 
 
-def test_runs_seeds_once_and_resumes(tmp_path, monkeypatch):
+def test_runs_seeds_once_and_resumes(tmp_path, monkeypatch, fake_script):
     monkeypatch.chdir(tmp_path)
-    (tmp_path / "fake.py").write_text(FAKE_SCRIPT)
     args = run_seeds.Args(script="fake.py", exp_name="t", seeds=[1, 2, 3], workers=2)
     table = run_seeds.main(args)[""]
     assert table["eval/x"]["mean"] == 4.0 and table["eval/x"]["n"] == 3
     run_seeds.main(run_seeds.Args(script="fake.py", exp_name="t", seeds=[1, 2, 3, 4], workers=2))
-    calls = sorted(int(x) for x in (tmp_path / "calls.txt").read_text().split())
-    assert calls == [1, 2, 3, 4]  # finished seeds were not run again
+    assert [s for s, _ in calls(tmp_path)] == [1, 2, 3, 4]  # finished seeds were not run again
     saved = json.load(open(os.path.join("runs", "t__table.json")))
     assert saved["table"]["eval/x"]["n"] == 4
 
 
-def test_a_run_of_another_script_with_the_same_exp_name_does_not_count(tmp_path, monkeypatch):
+def test_a_run_of_another_script_with_the_same_exp_name_does_not_count(tmp_path, monkeypatch, fake_script):
     monkeypatch.chdir(tmp_path)
-    (tmp_path / "fake.py").write_text(FAKE_SCRIPT)
-    (tmp_path / "other.py").write_text(FAKE_SCRIPT)
+    (tmp_path / "other.py").write_text(fake_script.read_text())
     run_seeds.main(run_seeds.Args(script="other.py", exp_name="t", seeds=[1], workers=1))
     table = run_seeds.main(run_seeds.Args(script="fake.py", exp_name="t", seeds=[1], workers=1))[""]
-    assert (tmp_path / "calls.txt").read_text().split() == ["1", "1"]  # fake.py ran although other.py had seed 1
+    assert calls(tmp_path) == [(1, 0.0), (1, 0.0)]  # fake.py ran although other.py had seed 1
     assert table["eval/x"]["n"] == 1
+
+
+def test_grid_runs_every_point_for_every_seed_and_resumes_by_the_recorded_args(tmp_path, monkeypatch, fake_script):
+    monkeypatch.chdir(tmp_path)
+    tables = run_seeds.main(run_seeds.Args(script="fake.py", exp_name="g", seeds=[1, 2], grid=["noise=0,0.5"]))
+    assert calls(tmp_path) == [(1, 0.0), (1, 0.5), (2, 0.0), (2, 0.5)]
+    assert tables["noise=0"]["eval/x"]["mean"] == 3.0 and tables["noise=0.5"]["eval/x"]["mean"] == 3.5
+    assert tables["noise=0"]["eval/x"]["n"] == tables["noise=0.5"]["eval/x"]["n"] == 2
+    # a new grid value (and 0.50 written differently): only the new point runs; the runs of the same seed at other
+    # grid points (same exp_name, same seed) are told apart by the args their summary.json records
+    tables = run_seeds.main(run_seeds.Args(script="fake.py", exp_name="g", seeds=[1, 2], grid=["noise=0,0.50,0.25"]))
+    assert calls(tmp_path) == [(1, 0.0), (1, 0.25), (1, 0.5), (2, 0.0), (2, 0.25), (2, 0.5)]
+    assert set(tables) == {"noise=0", "noise=0.50", "noise=0.25"} and tables["noise=0.25"]["eval/x"]["mean"] == 3.25
+    saved = json.load(open(os.path.join("runs", "g__table.json")))
+    assert [p["point"] for p in saved["points"]] == [{"noise": "0"}, {"noise": "0.50"}, {"noise": "0.25"}]
+    assert "table" not in saved  # with a grid, one table per point
+
+
+def test_flags_after_the_double_dash_also_tell_runs_apart(tmp_path, monkeypatch, fake_script):
+    monkeypatch.chdir(tmp_path)
+    run_seeds.main(run_seeds.Args(script="fake.py", exp_name="f", seeds=[1], script_args=["--noise", "0.5"]))
+    run_seeds.main(run_seeds.Args(script="fake.py", exp_name="f", seeds=[1], script_args=["--noise", "0.5"]))
+    run_seeds.main(run_seeds.Args(script="fake.py", exp_name="f", seeds=[1], script_args=["--noise=0.7"]))
+    assert calls(tmp_path) == [(1, 0.5), (1, 0.7)]
+
+
+def test_flag_values_and_recorded_args():
+    flags = run_seeds.flag_values(["--random-starts", "--no-save-model", "--x=1", "--seeds", "1", "2", "--lr", "-1e-3"])
+    assert flags == {"random-starts": True, "save-model": False, "x": ["1"], "seeds": ["1", "2"], "lr": ["-1e-3"]}
+    recorded = {"random_starts": True, "save_model": False, "x": 1, "seeds": [1, 2], "lr": -0.001}
+    assert run_seeds.ran_with(recorded, flags)
+    assert not run_seeds.ran_with({**recorded, "save_model": True}, flags)
+    assert not run_seeds.ran_with({**recorded, "seeds": [1, 3]}, flags)
+    assert not run_seeds.ran_with({k: v for k, v in recorded.items() if k != "x"}, flags)  # a flag it did not have
+    assert run_seeds.ran_with({"path": None, "name": "a"}, {"path": ["None"], "name": ["a"]})
+
+
+def test_a_failed_run_is_reported_with_the_tail_of_its_log_and_the_table_has_the_rest(run_script, fake_script):
+    result = run_script("run_seeds.py", "--script", "fake.py", "--exp-name", "e", "--seeds", "1", "2", "--",
+                        "--fail-seed", "2")  # fmt: skip
+    assert result.returncode == 1, result.stdout + result.stderr
+    assert "seed 2: failed" in result.stdout and "boom: seed 2 refuses to run" in result.stdout
+    assert "e: 1 of 2 seeds finished, missing [2]" in result.stdout
+    assert result.stderr.splitlines() == [result.stderr.strip()]  # one line
+    assert result.stderr.startswith("error: 1 of 2 run(s) did not finish (failed: seed 2)")
+
+
+@pytest.mark.parametrize(
+    ("flags", "phrase"),
+    [
+        (["--grid", "noise"], "expected FLAG=VALUE,VALUE,..."),
+        (["--grid", "noise=0,,1"], "expected FLAG=VALUE,VALUE,..."),
+        (["--grid", "seed=1,2"], "--seed is set by run_seeds itself"),
+        (["--grid", "noise=0,1", "--grid", "noise=2"], "--grid noise given twice"),
+        (["--grid", "noise=0,1", "--", "--noise", "3"], "--grid noise is also among the script's flags"),
+        (["--launcher", "slurm"], "no sbatch on PATH"),
+        (["--launcher", "cloud"], "--launcher"),
+    ],
+)
+def test_bad_input_is_one_line_and_writes_nothing(tmp_path, fake_script, flags, phrase):
+    (tmp_path / "bin").mkdir()  # a PATH without Slurm's commands (the run itself uses sys.executable)
+    env = {**os.environ, "PATH": str(tmp_path / "bin")}
+    before = sorted(os.listdir(tmp_path))
+    result = subprocess.run([sys.executable, RUN_SEEDS, "--script", "fake.py", *flags], cwd=tmp_path, env=env,
+                            capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert result.returncode == 2, result.stdout + result.stderr
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and phrase in lines[0], result.stderr
+    assert sorted(os.listdir(tmp_path)) == before
+
+
+def wait_for(predicate, proc, seconds: float, what: str):
+    """Poll until predicate() holds; on timeout kill proc and fail with its output."""
+    deadline = time.time() + seconds
+    while time.time() < deadline:
+        if predicate():
+            return
+        if proc.poll() is not None:
+            break
+        time.sleep(0.2)
+    out, err = stop(proc)
+    pytest.fail(f"{what} did not happen within {seconds}s (exit {proc.returncode})\nstdout:\n{out}\nstderr:\n{err}")
+
+
+def stop(proc) -> tuple[str | None, str | None]:
+    """SIGTERM first, so run_seeds stops its runs (a killed run_seeds would leave them running), then SIGKILL."""
+    proc.terminate()
+    try:
+        return proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        return proc.communicate(timeout=30)
+
+
+def finish(proc, seconds: float) -> tuple[str, str]:
+    try:
+        return proc.communicate(timeout=seconds)
+    except subprocess.TimeoutExpired:
+        out, err = stop(proc)
+        pytest.fail(f"no exit within {seconds}s after the signal\nstdout:\n{out}\nstderr:\n{err}")
+
+
+TINY_BUT_LONG = ["--", "--tamer-total-timesteps", "100000", "--sleep-gradient-steps", "100", "--eval-frequency",
+                 "100000"]  # fmt: skip
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_a_signal_stops_the_runs_which_save_and_are_rerun_on_resume(tmp_path, sig):
+    """A real kill of run_seeds.py running two gridworld seeds: the signal reaches each run once, each writes
+    summary.json status interrupted with that signal, run_seeds reports them and exits 128 + the signal; their
+    summaries do not count as finished, so the same command runs them again."""
+    cmd = [sys.executable, RUN_SEEDS, "--script", os.path.join(REPO, "inform_dqn_gridworld.py"), "--exp-name", "s",
+           "--seeds", "1", "2", "--workers", "2", "--threads", "1", *TINY_BUT_LONG]  # fmt: skip
+    proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=restore_default_signals)  # fmt: skip
+    # both runs have made their run directories (a run of 100k steps then trains for minutes on this machine)
+    logs = [tmp_path / "runs" / "logs" / f"s__{seed}.log" for seed in (1, 2)]
+    wait_for(lambda: all(p.exists() and "run directory" in p.read_text() for p in logs), proc, 120, "both runs")
+    time.sleep(3)  # past the few lines between "run directory" and the try block that saves on a signal
+    proc.send_signal(sig)
+    out, err = finish(proc, 120)
+    assert proc.returncode == 128 + sig, out + err
+    name = signal.Signals(sig).name
+    summaries = [json.load(open(p)) for p in glob.glob(str(tmp_path / "runs" / "*__s__*" / "summary.json"))]
+    assert sorted(s["seed"] for s in summaries) == [1, 2], out + err
+    assert all(s["status"] == "interrupted" and s["signal"] == name for s in summaries), summaries
+    assert "seed 1: interrupted" in out and "seed 2: interrupted" in out and f"by {name}" in out
+    assert err.strip().splitlines()[-1].startswith(f"error: stopped by {name}; 2 run(s) not finished")
+    args = run_seeds.Args(script="inform_dqn_gridworld.py", exp_name="s", runs_dir=str(tmp_path / "runs"),
+                          script_args=TINY_BUT_LONG[1:])  # fmt: skip
+    assert run_seeds.newest_summary(args, run_seeds.Run(1, ())) is None  # so a resume runs seed 1 again
+
+
+def test_sigterm_to_run_seeds_in_the_background_and_the_resume(tmp_path, fake_script):
+    """run_seeds.py started with & by a non-interactive shell (SIGINT ignored, as such shells do): kill -TERM still
+    stops it cleanly, and running the same command again completes the interrupted runs."""
+    (tmp_path / "block").write_text("")
+    cmd = f"{sys.executable} {RUN_SEEDS} --script fake.py --exp-name b --seeds 1 2 --workers 2"
+    script = f"{cmd} > out.txt 2> err.txt & echo $! > pid.txt; wait $!; echo $? > rc.txt"
+    shell = subprocess.Popen(["bash", "-c", script], cwd=tmp_path, preexec_fn=restore_default_signals)
+    wait_for(lambda: len(calls(tmp_path)) == 2 and (tmp_path / "pid.txt").exists(), shell, 60, "both runs starting")
+    wait_for(lambda: (tmp_path / "out.txt").exists(), shell, 10, "output")
+    time.sleep(0.5)
+    os.kill(int((tmp_path / "pid.txt").read_text()), signal.SIGTERM)
+    finish(shell, 60)
+    out, err = (tmp_path / "out.txt").read_text(), (tmp_path / "err.txt").read_text()
+    assert (tmp_path / "rc.txt").read_text().strip() == "143", out + err
+    assert "seed 1: interrupted" in out and "seed 2: interrupted" in out and "by SIGTERM" in out, out
+    assert err.strip().startswith("error: stopped by SIGTERM; 2 run(s) not finished"), err
+    (tmp_path / "block").unlink()
+    result = subprocess.run(cmd.split(), cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "already finished" not in result.stdout and "b: 2 of 2 seeds finished" in result.stdout
+    assert calls(tmp_path) == [(1, 0.0), (1, 0.0), (2, 0.0), (2, 0.0)]
