@@ -403,7 +403,7 @@ class HumanTeacher:
     a pipe or a file of answers works as well as a keyboard."""
 
     def __init__(self, variant: str):
-        self.variant = variant
+        self.variant, self.next_cell = variant, gridworld_env.transition_table(variant)
         self.answers = self.agreement = 0  # answers given, and how many Eq. 4 (the oracle) would have given too
         self.echo = not sys.stdin.isatty()  # piped answers are not echoed by a terminal: print them
         print("You are the teacher. The agent A must reach G by the shortest path (19 steps from its start).\n"
@@ -413,6 +413,7 @@ class HumanTeacher:
     def __call__(self, cell: int, action: int, explore: bool, step: int, positives: int, h_oracle: float):
         """Your answer about the move `action` from `cell`: 1.0, 0.0, or None to stop teaching."""
         how = " (exploring: a random move)" if explore else ""
+        how += " into a wall: it stays where it is" if self.next_cell[cell, action] == cell else ""
         print(f"\nstep {step} | steps taught {step - 1} | positives given {positives}\n"
               + gridworld_env.draw_maze(self.variant, agent=cell, arrows={cell: action})
               + f"the agent moves {gridworld_env.ACTION_NAMES[action]}{how}", flush=True)  # fmt: skip
@@ -684,7 +685,8 @@ def sleep_phase(args, buffer, q_net, target_net, evaluator, writer, device) -> d
             writer.add_scalar("sleep/SPS", int(sleep_step / (time.time() - start_time)), sleep_step)
         if sleep_step % args.sleep_eval_frequency == 0 or sleep_step == args.sleep_gradient_steps:
             metrics = evaluator("inform", greedy_actions(q_net, device), sleep_step)
-            progress(sleep_step, iq_loss=stats["losses/iq_loss"], eval_length=metrics["eval/inform_episode_length"])
+            progress(sleep_step, iq_loss=stats.get("losses/iq_loss", math.nan),  # synced every 100 steps
+                     eval_length=metrics["eval/inform_episode_length"])  # fmt: skip
             if "sleep/step_to_inform_optimum" not in stats and metrics["eval/inform_episode_length"] == OPTIMUM:
                 stats["sleep/step_to_inform_optimum"] = sleep_step
     return stats

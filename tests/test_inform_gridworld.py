@@ -2,6 +2,12 @@ import glob
 import json
 import math
 import os
+import queue
+import signal
+import subprocess
+import sys
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -11,6 +17,7 @@ import gridworld_env as g
 import inform_dqn_gridworld as inform
 
 SCRIPT = "inform_dqn_gridworld.py"
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TINY = ["--tamer-total-timesteps", "2000", "--tamer-learning-starts", "500", "--sleep-gradient-steps", "200",
         "--eval-frequency", "500", "--sleep-eval-frequency", "100"]  # fmt: skip
 
@@ -158,13 +165,15 @@ def test_greedy_actions_and_evaluate():
 
 
 # the script end to end ----------------------------------------------------------------------------------------------
-SUMMARY_KEYS = [
-    f"eval/{p}_episode_length" for p in inform.POLICIES
-] + [f"eval/wall/{p}_episode_length" for p in inform.POLICIES] + [
-    f"eval/start_set/{p}_{m}" for p in inform.POLICIES for m in ("episode_length", "success_rate")
-] + ["feedback/positive", "feedback/steps", "time/oracle_s", "time/tamer_s", "time/sleep_s", "time/eval_s",
-     "wall_time_s", "seed", "args", "status", "losses/iq_loss", "losses/iq_expert_term", "losses/iq_value_term",
-     "losses/iq_chi2_term"]  # fmt: skip
+SUMMARY_KEYS = (
+    [f"eval/{p}_episode_length" for p in inform.POLICIES]
+    + [f"eval/wall/{p}_episode_length" for p in inform.POLICIES]
+    + [f"eval/start_set/{p}_{m}" for p in inform.POLICIES for m in ("episode_length", "success_rate")]
+    + [f"eval/all_starts/{p}_success_rate" for p in inform.POLICIES]
+    + ["feedback/positive", "feedback/perfect_positive", "feedback/steps", "time/oracle_s", "time/tamer_s",
+       "time/sleep_s", "time/eval_s", "wall_time_s", "seed", "args", "status", "losses/iq_loss",
+       "losses/iq_expert_term", "losses/iq_value_term", "losses/iq_chi2_term"]
+)  # fmt: skip
 
 
 def only_run_dir(cwd):
@@ -358,28 +367,117 @@ def test_evaluate_mode_reproduces_the_run(run_script):
     assert len(glob.glob(os.path.join(run_script.cwd, "runs", "*"))) == 1  # evaluating writes no run
 
 
-@pytest.mark.parametrize("phase, wait_for", [("tamer", "[tamer]"), ("sleep", "[sleep]")])
-def test_sigint_ends_the_run_cleanly(tmp_path, phase, wait_for):
-    import signal
-    import subprocess
-    import sys
+def default_signals():
+    """In the child: SIGINT and SIGTERM at their defaults, whatever the test runner inherited (e.g. trap '' INT)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
-    proc = subprocess.Popen(
-        [sys.executable, os.path.join(os.path.dirname(os.path.dirname(__file__)), SCRIPT), "--sleep-gradient-steps",
-         "100000", "--sleep-eval-frequency", "500"],
-        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
-    for line in proc.stdout:
-        if line.startswith(wait_for):
-            break
-    proc.send_signal(signal.SIGINT)
-    _, stderr = proc.communicate(timeout=60)
-    assert proc.returncode == 130 and "Traceback" not in stderr, stderr
-    run_dir = only_run_dir(tmp_path)
+
+class Child:
+    """A process whose output is read by threads, so that every wait is bounded; a failure shows its output."""
+
+    def __init__(self, cmd, cwd):
+        self.proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                     preexec_fn=default_signals)  # fmt: skip
+        self.out, self.err, self.lines = [], [], queue.Queue()
+        self.threads = [
+            threading.Thread(target=self._read, args=(self.proc.stdout, self.out, True), daemon=True),
+            threading.Thread(target=self._read, args=(self.proc.stderr, self.err, False), daemon=True),
+        ]
+        for thread in self.threads:
+            thread.start()
+
+    def _read(self, stream, store, to_queue):
+        for line in stream:
+            store.append(line)
+            if to_queue:
+                self.lines.put(line)
+        if to_queue:
+            self.lines.put(None)
+
+    def fail(self, why):
+        self.proc.kill()
+        self.proc.wait(30)
+        for thread in self.threads:
+            thread.join(10)
+        pytest.fail(f"{why}\n--- stdout ---\n{''.join(self.out)[-3000:]}\n--- stderr ---\n{''.join(self.err)[-3000:]}")
+
+    def wait_for_line(self, prefix, timeout=180):
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                line = self.lines.get(timeout=max(deadline - time.monotonic(), 0.01))
+            except queue.Empty:
+                self.fail(f"no line starting with {prefix!r} within {timeout}s")
+            if line is None:
+                self.fail(f"the process ended (code {self.proc.wait(30)}) before a line starting with {prefix!r}")
+            if line.startswith(prefix):
+                return line
+
+    def finish(self, timeout=120):
+        try:
+            self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.fail(f"still running {timeout}s after the signal")
+        for thread in self.threads:
+            thread.join(30)
+        return self.proc.returncode, "".join(self.out), "".join(self.err)
+
+
+# Long phases, so that the signal surely lands in the phase named: each prints its first progress line after 5% of
+# its steps (2k of 40k env steps; 1k of 20k gradient steps) and has at least ten seconds to go after it.
+LONG_PHASE = {
+    "tamer": ["--tamer-total-timesteps", "40000", "--eval-frequency", "2000"],
+    "sleep": ["--tamer-total-timesteps", "2000", "--tamer-learning-starts", "500", "--sleep-gradient-steps", "20000",
+              "--sleep-eval-frequency", "1000"],
+}  # fmt: skip
+
+
+def assert_interrupted_run(cwd, phase, signal_name):
+    run_dir = only_run_dir(cwd)
     summary = json.load(open(os.path.join(run_dir, "summary.json")))
-    assert summary["status"] == "interrupted" and summary["phase"] == phase
+    assert summary["status"] == "interrupted" and summary["phase"] == phase and summary["signal"] == signal_name
     assert os.path.exists(os.path.join(run_dir, "tamer_h.pt")) == (phase == "sleep")  # what finished is saved
     assert not os.path.exists(os.path.join(run_dir, "inform_q.pt"))
+    assert f"eval/{'inform' if phase == 'sleep' else 'tamer'}_episode_length" in summary  # the curves so far
+
+
+@pytest.mark.parametrize(
+    "sig, phase, code",
+    [(signal.SIGINT, "tamer", 130), (signal.SIGINT, "sleep", 130), (signal.SIGTERM, "sleep", 143)],
+)  # fmt: skip
+def test_signal_ends_the_run_cleanly(tmp_path, sig, phase, code):
+    """Ctrl-C and SIGTERM (kill, Slurm) both save what finished and write summary.json with status interrupted."""
+    child = Child([sys.executable, os.path.join(REPO, SCRIPT), *LONG_PHASE[phase]], tmp_path)
+    child.wait_for_line(f"[{phase}]")
+    child.proc.send_signal(sig)
+    returncode, _, stderr = child.finish()
+    assert returncode == code and "Traceback" not in stderr, (returncode, stderr)
+    assert f"interrupted ({sig.name}) during the {phase} phase" in stderr
+    assert_interrupted_run(tmp_path, phase, sig.name)
+
+
+def test_sigterm_stops_a_run_started_in_the_background(tmp_path):
+    """`python ... &` from a script: SIGINT is ignored there (POSIX), SIGTERM still saves what finished."""
+    run = f"'{sys.executable}' '{os.path.join(REPO, SCRIPT)}' {' '.join(LONG_PHASE['tamer'])}"
+    command = f"{run} > out.txt 2> err.txt & echo pid=$!; wait $!; echo rc=$?"
+    child = Child(["bash", "-c", command], tmp_path)
+    pid = int(child.wait_for_line("pid=").strip().split("=")[1])
+    deadline = time.monotonic() + 180
+    while "[tamer]" not in (tmp_path / "out.txt").read_text():
+        if time.monotonic() > deadline or child.proc.poll() is not None:
+            child.fail(f"no [tamer] line in out.txt:\n{(tmp_path / 'out.txt').read_text()[-2000:]}\n"
+                       f"err.txt:\n{(tmp_path / 'err.txt').read_text()[-2000:]}")  # fmt: skip
+        time.sleep(0.2)
+    if os.path.exists(f"/proc/{pid}/status"):  # Linux: the background run ignores SIGINT, as the shell set it up
+        with open(f"/proc/{pid}/status") as f:
+            ignored = int(next(line for line in f if line.startswith("SigIgn:")).split()[1], 16)
+        assert ignored & (1 << (signal.SIGINT - 1))
+    os.kill(pid, signal.SIGTERM)
+    returncode, stdout, _ = child.finish()
+    assert returncode == 0 and "rc=143" in stdout, (stdout, (tmp_path / "err.txt").read_text())
+    assert "Traceback" not in (tmp_path / "err.txt").read_text()
+    assert_interrupted_run(tmp_path, "tamer", "SIGTERM")
 
 
 def test_divergence_is_reported(run_script):
