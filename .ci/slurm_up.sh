@@ -8,7 +8,8 @@
 # The node is this machine (its hostname, all its CPUs, its memory), one partition `debug`. We are in a container:
 # no systemd and no cgroups, so processes are tracked by parent pid (proctrack/linuxproc) and tasks are not bound
 # (task/none). No accounting database: sacct has nothing to say, so run_seeds.py reads a timed-out job's stderr.
-# If a daemon does not come up, its log is printed and the script fails.
+# If a daemon does not come up, its log is printed and the script fails. `up` first stops daemons an earlier `up` left.
+# SLURMD_NICE=10: slurmd (and so every job) runs at that niceness, to share a machine politely.
 set -euo pipefail
 
 LOG_DIR=/var/log/slurm
@@ -37,6 +38,7 @@ wait_for() {
 node_idle() { [[ "$(sinfo -h -N -o %t 2>/dev/null)" == idle* ]]; }
 
 up() {
+  down
   if ! command -v slurmctld >/dev/null || ! command -v slurmd >/dev/null || ! command -v munged >/dev/null; then
     apt-get update -qq
     DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
@@ -47,6 +49,8 @@ up() {
   cpus=$(nproc)
   mem_mb=$(($(awk '/MemTotal/ {print $2}' /proc/meminfo) / 1024 - 512))
   mkdir -p /etc/slurm "$LOG_DIR" /var/spool/slurmctld /var/spool/slurmd /run/slurm
+  : >"$LOG_DIR/slurmctld.log" && : >"$LOG_DIR/slurmd.log" # so a failure shows this start's lines only
+  [[ -f /var/log/munge/munged.log ]] && : >/var/log/munge/munged.log
   cat >"$CONF" <<EOF
 # written by .ci/slurm_up.sh: one node (this machine), one partition, no accounting, no cgroups
 ClusterName=ci
@@ -84,7 +88,7 @@ EOF
   # -c: a clean state (no jobs left from an earlier start)
   slurmctld -c || fail "slurmctld did not start"
   wait_for "$WAIT_S" "slurmctld answering (scontrol ping)" bash -c 'scontrol ping | grep -q UP'
-  slurmd || fail "slurmd did not start"
+  nice -n "${SLURMD_NICE:-0}" slurmd || fail "slurmd did not start"
   wait_for "$WAIT_S" "node $host idle in sinfo" node_idle
   sinfo
 }
