@@ -55,13 +55,13 @@ class Args:
     threads: int = 0
     """torch threads per run (0: local, the machine's cores divided among the workers; slurm, --slurm-cpus-per-task)"""
     slurm_partition: str | None = None
-    """Slurm partition (default: the cluster's default partition)"""
+    """Slurm partition (None: the cluster's default partition)"""
     slurm_time: int = 120
     """minutes per run (Slurm's --time); a run still going then is stopped, saves what finished, reported timed out"""
     slurm_cpus_per_task: int = 1
     """CPUs per run (Slurm's --cpus-per-task)"""
     slurm_mem: str | None = None
-    """memory per run in Slurm's syntax, e.g. 4G or 500M (default: the partition's default)"""
+    """memory per run in Slurm's syntax, e.g. 4G or 500M (None: the partition's default)"""
     poll_seconds: float = 5.0
     """seconds between two looks at the Slurm queue"""
     runs_dir: str = "runs"

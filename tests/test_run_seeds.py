@@ -104,6 +104,8 @@ def test_a_failed_run_is_reported_with_the_tail_of_its_log_and_the_table_has_the
         (["--grid", "noise=0,1", "--grid", "noise=2"], "--grid noise given twice"),
         (["--grid", "noise=0,1", "--", "--noise", "3"], "--grid noise is also among the script's flags"),
         (["--launcher", "slurm"], "no sbatch on PATH"),
+        (["--launcher", "slurm", "--slurm-mem", "4X"], "--slurm-mem '4X': expected a size like 4G or 500M"),
+        (["--launcher", "slurm", "--slurm-time", "0"], "--slurm-time and --slurm-cpus-per-task must be >= 1"),
         (["--launcher", "cloud"], "--launcher"),
     ],
 )

@@ -93,7 +93,7 @@ def test_two_gridworld_seeds_and_a_grid_through_slurm_then_resume(tmp_path):
 
 def test_a_failed_job_is_reported_with_the_tail_of_its_stderr(tmp_path, fake_script):
     result = run_seeds(tmp_path, "--script", "fake.py", "--exp-name", "f", "--seeds", "1", "2", "--launcher",
-                       "slurm", "--slurm-time", "5", "--", "--fail-seed", "2")  # fmt: skip
+                       "slurm", "--slurm-time", "5", "--slurm-mem", "1G", "--", "--fail-seed", "2")  # fmt: skip
     assert result.returncode == 1, result.stdout + result.stderr
     assert "seed 2: failed: exit 1" in result.stdout and "boom: seed 2 refuses to run" in result.stdout
     assert "f: 1 of 2 seeds finished, missing [2]" in result.stdout
