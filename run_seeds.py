@@ -204,8 +204,10 @@ def outcome_from_run(args: Args, run: Run, code: int | None, since: float) -> Ou
     if summary.get("status") == "interrupted":
         how = f" by {summary['signal']}" if summary.get("signal") else ""
         return Outcome("interrupted", f"stopped{how} during the {summary.get('phase', '?')} phase; saved what finished")
+    if code in (-signal.SIGINT, -signal.SIGTERM):
+        return Outcome("interrupted", f"killed by {signal.Signals(-code).name} before it could save")
     if code is not None and code < 0:
-        return Outcome("interrupted", f"killed by {signal.Signals(-code).name}, no summary")
+        return Outcome("failed", f"killed by {signal.Signals(-code).name}, no summary.json")
     if summary.get("status"):
         return Outcome("failed", f"exit {code}, status {summary['status']}")
     return Outcome("failed", f"exit {code}, no summary.json" if code is not None else "no summary.json")
@@ -262,9 +264,12 @@ def run_local(args: Args, todo: list[Run], stop: Stop) -> dict[Run, Outcome]:
     outcomes: dict[Run, Outcome] = {}
 
     def one(run: Run) -> None:
+        if stop.signum:  # checked again under the lock below; this one keeps an earlier attempt's log
+            outcomes[run] = Outcome("not started")
+            return
         cmd = command(args, run, threads)
-        label = f"{args.exp_name}__{run.label.replace('/', '_')}__{run.seed}" if run.point else None
-        log = os.path.join(args.logs_dir, f"{label or f'{args.exp_name}__{run.seed}'}.log")
+        name = "__".join([args.exp_name, *([run.label.replace("/", "_")] if run.point else []), str(run.seed)])
+        log = os.path.join(args.logs_dir, f"{name}.log")
         start = time.time()
         with open(log, "w") as f:
             f.write(shlex.join(cmd) + "\n")
