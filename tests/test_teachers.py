@@ -292,3 +292,33 @@ def test_human_through_a_pseudo_terminal(tmp_path):
     summary, _ = summary_of(tmp_path)
     assert summary["feedback/positive"] == 3 and summary["feedback/steps"] == 4
     assert b"(Enter)" not in seen  # a terminal echoes what the person types: the script does not
+
+
+# the study's tables -------------------------------------------------------------------------------------------------
+def fake_run(runs_dir, name, seed, **metrics):
+    run_dir = runs_dir / f"KnoxStoneMaze-v0__{name}__{seed}__0"
+    run_dir.mkdir(parents=True)
+    summary = {"status": "completed", "script": SCRIPT, "seed": seed, "args": {"exp_name": name},
+               "eval/tamer_episode_length": 19.0, "eval/inform_episode_length": 19.0, "feedback/positive": 100,
+               "eval/all_starts/tamer_success_rate": 0.5, "eval/all_starts/inform_success_rate": 0.5,
+               "sleep/expert_transitions": 10, **metrics}  # fmt: skip
+    (run_dir / "summary.json").write_text(json.dumps(summary))
+
+
+def test_teacher_study_tables(tmp_path):
+    from inform_utils import teacher_study
+
+    fake_run(tmp_path, "base", 1, **{"feedback/positive_to_tamer_optimum": 400, "feedback/step_to_tamer_optimum": 1500})
+    fake_run(tmp_path, "base", 2, **{"feedback/positive_to_tamer_optimum": None, "feedback/step_to_tamer_optimum": None,
+                                     "eval/all_starts/inform_success_rate": 0.25})  # fmt: skip
+    fake_run(tmp_path, "sleep_after_250", 1, **{"feedback/positive": 60, "eval/inform_episode_length": 200.0})
+    fake_run(tmp_path, "sleep_after_500", 1, **{"feedback/positive": 120})
+    fake_run(tmp_path, "sleep_after_1000", 1, **{"feedback/positive": 240})
+    fake_run(tmp_path, "sleep_after_500", 2, **{"feedback/positive": 130})
+    runs = teacher_study.load_runs(str(tmp_path), "KnoxStoneMaze-v0")
+    table, ratios = teacher_study.efficiency_table(runs)
+    assert "| TAMER alone: +1 signals (env step) at its first 19 | 400 (1500) | never | 1/2 |" in table
+    assert "| 1 | 400 | 500 | 120 | 0.30 |" in ratios  # the smallest k whose sleep reached 19, not a later one
+    assert "| 2 | None | 500 | - | - |" in ratios
+    assert "| perfect teacher | 2 | 100 |" in teacher_study.robustness_table(runs)
+    assert "| 1/2 |" in teacher_study.robustness_table(runs)  # INFORM >= TAMER on seed 1 only
