@@ -6,7 +6,7 @@ Writes, each only when its runs exist:
 - fig3_maze.png: TAMER's greedy episode length against env steps, INFORM's against sleep steps, the oracle (Fig. 3);
 - fig3_pusher.png: the same for Pusher's return (Fig. 3);
 - fig5b_obstacle.png: final object-goal distances of TAMER and INFORM on the obstacle env (Fig. 5b);
-- fig6_wall_maze.png: Q-learning on the wall maze with the recovered and the environment reward (Fig. 6);
+- fig6_wall_maze.png: tabular agents on the wall maze, every arm of the reward-experiment runs (Fig. 6);
 - recovered_reward.png: the recovered reward of one maze run, drawn over the maze.
 """
 
@@ -18,15 +18,17 @@ import os
 import sys
 from dataclasses import dataclass
 
+import matplotlib
 import numpy as np
 import torch
 import tyro
 from matplotlib.figure import Figure
+from matplotlib.patches import Polygon, Rectangle
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from inform_dqn_gridworld import reward_figure
+import gridworld_env
 
-COLOURS = {"oracle": "black", "tamer": "tab:orange", "inform": "tab:blue", "recovered": "tab:blue", "env": "tab:red"}
+COLOURS = {"oracle": "black", "tamer": "tab:orange", "inform": "tab:blue"}
 
 
 @dataclass
@@ -36,7 +38,7 @@ class Args:
     pusher_exp: str = "inform_sac_pusher"
     """exp_name of the Pusher runs (one per seed)"""
     qlearning_exp: str = "q_learning_recovered_reward"
-    """exp_name of the reward-experiment run (it holds all its seeds)"""
+    """exp_name of the reward-experiment runs (each holds one reward source and one bootstrap, with all agents)"""
     runs_dir: str = "runs"
     """where the runs are"""
     out: str = "docs/figures"
@@ -111,28 +113,95 @@ def fig5b(run_dirs: list[str], path: str) -> None:
     fig.savefig(path, dpi=120)
 
 
-def fig6(run_dir: str, path: str) -> None:
-    """Q-learning on the wall maze: mean and spread over seeds of episode length against env steps."""
-    summary = json.load(open(os.path.join(run_dir, "summary.json")))
-    fig = Figure(figsize=(7, 4))
+def reward_figure(table: np.ndarray, title: str):
+    """The recovered reward drawn over the maze: each free cell split into four triangles, one per action.
+
+    A copy of inform_dqn_gridworld.reward_figure: a helper script does not import a training script."""
+    fig = Figure(figsize=(6, 6))
     ax = fig.subplots()
-    for arm, label in (("recovered", "Q-learning, INFORM's reward"), ("env", "Q-learning, env reward")):
-        acc = EventAccumulator(run_dir, size_guidance={"scalars": 0})
-        acc.Reload()
-        tags = sorted(t for t in acc.Tags()["scalars"] if t.startswith(f"qlearning/{arm}/seed_") and
-                      t.endswith("/episode_length") and "greedy" not in t)  # fmt: skip
-        # a seed that finished its episodes in fewer steps is held at its last length (np.interp does that)
-        grid = np.linspace(0, max(acc.Scalars(t)[-1].step for t in tags), 200)
-        values = np.stack([np.interp(grid, [e.step for e in acc.Scalars(t)], [e.value for e in acc.Scalars(t)])
-                           for t in tags])  # fmt: skip
-        band(ax, grid, values, label, COLOURS[arm])
-    ax.axhline(summary["optimum_episode_length"], color="black", ls="--", label="optimum")
-    if "eval/wall/tamer_episode_length" in summary:
-        ax.axhline(summary["eval/wall/tamer_episode_length"], color=COLOURS["tamer"], ls=":", label="TAMER policy")
-    ax.set(xlabel="environment steps", ylabel="episode length", title="Wall maze (Fig. 6)")
-    ax.legend()
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
+    visited = np.arange(gridworld_env.N_CELLS) != gridworld_env.GOAL  # the agent never acts in G (terminal)
+    lim = max(float(np.abs(table[visited]).max()), 1e-8)
+    cmap, norm = matplotlib.colormaps["coolwarm"], matplotlib.colors.Normalize(-lim, lim)
+    # triangle corners for up, down, left, right, in (x, y) with y pointing down
+    corners = {0: [(0, 0), (1, 0)], 1: [(0, 1), (1, 1)], 2: [(0, 0), (0, 1)], 3: [(1, 0), (1, 1)]}
+    for cell, (r, c) in enumerate(gridworld_env.CELLS):
+        if cell == gridworld_env.GOAL:
+            ax.add_patch(Rectangle((c, r), 1, 1, facecolor="0.85"))
+        else:
+            for a, ((x1, y1), (x2, y2)) in corners.items():
+                tri = [(c + 0.5, r + 0.5), (c + x1, r + y1), (c + x2, r + y2)]
+                ax.add_patch(Polygon(tri, facecolor=cmap(norm(table[cell, a])), edgecolor="white", lw=0.5))
+        label = "G" if cell == gridworld_env.GOAL else "S" if cell == gridworld_env.START else ""
+        ax.text(c + 0.5, r + 0.5, label, ha="center", va="center", fontsize=12, weight="bold")
+    for r, c in gridworld_env.BLOCKED:
+        ax.add_patch(Rectangle((c, r), 1, 1, facecolor="0.25"))
+    for wall in gridworld_env.PLAIN_WALLS:
+        (r1, c1), (r2, c2) = sorted(wall)
+        xs, ys = ([c2, c2], [r1, r1 + 1]) if r1 == r2 else ([c1, c1 + 1], [r2, r2])
+        ax.plot(xs, ys, color="black", lw=3)
+    ax.set(xlim=(0, gridworld_env.COLS), ylim=(gridworld_env.ROWS, 0), aspect="equal", xticks=[], yticks=[])
+    ax.set_title(title)
+    fig.colorbar(matplotlib.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.8, label="r(s, a, s')")
+    return fig
+
+
+REWARD_STYLE = {  # reward -> (colour, label); bootstrap -> (line style, label); the names of the arms' keys
+    "recovered_network": ("tab:blue", "INFORM reward, network on the wall's s'"),
+    "recovered_table": ("tab:green", "INFORM reward, plain-maze table (variant)"),
+    "env": ("tab:red", "env reward"),
+}
+BOOTSTRAP_STYLE = {"sampled": ("-", "sampled bootstrap (SARSA-like)"), "max": ("--", "max bootstrap (Q-learning)")}
+
+
+def completed_reward_runs(runs_dir: str, exp_name: str) -> dict:
+    """The reward-experiment runs per episode budget and arm: {num_episodes: {arm: run_dir}}, the newest run holding
+    the arm (an env arm appears in every run of its bootstrap; runs on the same seeds hold the same agents)."""
+    found = {}
+    pattern = os.path.join(runs_dir, f"KnoxStoneMazeWall-v0__{exp_name}__*", "summary.json")
+    for path in sorted(glob.glob(pattern), key=os.path.getmtime):
+        with open(path) as f:
+            summary = json.load(f)
+        if summary.get("status") == "completed" and "arms" in summary:  # older runs had no agents.npz
+            for arm in summary["arms"]:
+                found.setdefault(summary["args"]["num_episodes"], {})[arm] = (os.path.dirname(path), summary)
+    return found
+
+
+def fig6(runs: dict, path: str) -> None:
+    """Fig. 6 redrawn with every arm: training episode length against env steps, mean over agents and +-1 std, one
+    panel per episode budget; the optimum and TAMER's greedy policy on the wall maze (untrained there) as lines."""
+    budgets = sorted(runs)
+    fig = Figure(figsize=(7 * len(budgets), 6), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(1, len(budgets), squeeze=False)[0])
+    for ax, budget in zip(axes, budgets, strict=True):
+        arms = runs[budget]
+        for arm in sorted(arms, key=lambda a: (list(REWARD_STYLE).index(a.split("/")[1]), a)):
+            run_dir, summary = arms[arm]
+            bootstrap, reward = arm.split("/")
+            colour, reward_label = REWARD_STYLE[reward]
+            style, bootstrap_label = BOOTSTRAP_STYLE[bootstrap.removesuffix("_bootstrap")]
+            with np.load(os.path.join(run_dir, "agents.npz")) as npz:
+                steps, lengths = npz[f"{arm}/steps"], npz[f"{arm}/lengths"]
+            grid = np.linspace(0, steps[:, -1].max(), 300)[1:]
+            # an agent that finished its episodes in fewer steps is held at its last length (np.interp does that)
+            values = np.stack([np.interp(grid, s, v) for s, v in zip(steps, lengths, strict=True)])
+            n, n_stay = summary[f"{arm}/n_agents"], summary[f"{arm}/n_stay_optimum"]
+            median = summary[f"{arm}/steps_to_stay_optimum_median"]
+            reached = f"{n_stay}/{n} stay at 25" + (f", median {median / 1000:.1f}k steps" if median else "")
+            mean, std = values.mean(0), values.std(0)
+            ax.plot(grid, mean, color=colour, ls=style, label=f"{reward_label}, {bootstrap_label}: {reached}")
+            ax.fill_between(grid, np.maximum(mean - std, 0), np.minimum(mean + std, 200), color=colour, alpha=0.1)
+        summary = next(iter(arms.values()))[1]
+        ax.axhline(summary["optimum_episode_length"], color="black", ls=":", lw=1, label="optimum (25)")
+        tamer = summary.get("eval/wall/tamer_episode_length_per_run") or []
+        known = [t for t in tamer if t is not None]
+        if known:
+            label = f"TAMER's greedy policy, untrained on the wall ({len(known)} runs, lengths {sorted(set(known))})"
+            ax.axhline(np.mean(known), color="tab:orange", ls="-.", lw=1.5, label=label)
+        ax.set(xlabel="environment steps", ylabel="training episode length", ylim=(0, 210))
+        ax.set_title(f"Wall maze (Fig. 6), {budget} episodes per agent; mean +-1 std over agents", fontsize=10)
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), fontsize=8)
+        ax.grid(alpha=0.3)
     fig.savefig(path, dpi=120)
 
 
@@ -155,9 +224,9 @@ def main(args: Args) -> None:
         fig3(pusher, "return", "episode return", f"{args.out}/fig3_pusher.png", "Pusher")
         fig5b(pusher, f"{args.out}/fig5b_obstacle.png")
         written += ["fig3_pusher.png", "fig5b_obstacle.png"]
-    qlearning = completed_runs(args.runs_dir, f"KnoxStoneMazeWall-v0__{args.qlearning_exp}__*")
-    if qlearning:
-        fig6(qlearning[-1], f"{args.out}/fig6_wall_maze.png")
+    reward_runs = completed_reward_runs(args.runs_dir, args.qlearning_exp)
+    if reward_runs:
+        fig6(reward_runs, f"{args.out}/fig6_wall_maze.png")
         written.append("fig6_wall_maze.png")
     print(f"wrote {', '.join(written) or 'nothing (no finished runs found)'} to {args.out}")
 

@@ -1,36 +1,42 @@
-"""Tabular Q-learning on the wall maze with INFORM's recovered reward against the environment's own reward.
+"""Tabular agents on the wall maze, trained with INFORM's recovered reward or with the environment's own reward.
 
 Reproduces the reward experiment of Tarakli & Di Nuovo, "Learning while Sleeping" (ICDL 2024), Fig. 6 (SPEC.md
-sections 6, 7 and 9): the reward r(s, a) that INFORM recovered on the plain maze (Eq. 3, saved by
-inform_dqn_gridworld.py) trains fresh Q-learning agents on the wall variant, which the recovered reward never saw,
-next to agents trained on the environment reward (+1 at G). The TAMER network of the same gridworld run is
+sections 6, 7 and 9). INFORM learns a soft Q network on the plain maze (inform_dqn_gridworld.py saves it as
+inform_q.pt). Its recovered reward (Eq. 3), r(s, a, s') = Q(s, a) - (1 - terminated) gamma V(s'), is evaluated on
+the transition the agent actually makes on the wall maze, which INFORM never saw, and trains fresh tabular agents
+there, next to agents trained on the environment reward (+1 at G). The TAMER network of the same gridworld run is
 evaluated on the wall maze, untrained there, as the baseline.
 
     python inform_dqn_gridworld.py --seed 1
     python q_learning_recovered_reward.py --reward-path runs/KnoxStoneMaze-v0__inform_dqn_gridworld__1__<t>
 
-Choices the paper leaves open, fixed here:
-- The recovered reward replaces the environment's reward: a step (s, a) earns table[s, a] whatever s' the wall
-  maze gives. The table was computed with the plain maze's s' (so the two moves the new walls block, 10 down and
-  18 up, keep the reward of a move that now bumps). Entering G terminates, as in the environment; the table's
-  entry for that step is Q(s, a) (Eq. 3 with terminated = 1) and Q-learning does not bootstrap past it.
-  Truncation at 200 steps (the registered TimeLimit) does bootstrap.
-- Q starts at zero. Ties in the behaviour policy's argmax are broken uniformly at random with the run's seeded
-  rng (argmax-first would always pick "up" in unvisited cells). The greedy policy that is evaluated after each
-  episode takes the first maximal action, so the evaluation consumes no randomness.
-- A seed whose greedy policy is not at the optimum from some episode to the last is "not reached": it counts in
-  `n_reached`, and `steps_to_optimum` / `episodes_to_optimum` are averaged over the seeds that reached it
-  (null when none did). No censored value is imputed.
+Two tabular updates (`--bootstrap`), named for what they are:
+- `sampled` (default, the authors' update as SPEC section 6 describes it): target r + gamma Q(s', a') with a'
+  drawn epsilon-greedily from Q(s', .), a SARSA-like target. a' is drawn for the target only; the action taken at
+  s' is drawn again (SARSA proper would take a'). Its fixed point is the epsilon-greedy policy's own values.
+- `max` (textbook Q-learning): target r + gamma max_a' Q(s', a').
+
+Two recovered rewards (`--reward-source`):
+- `network` (default): Eq. 3 from the saved INFORM network with the run's sleep gamma and temperature, s' being the
+  wall maze's next state (a blocked move gives s' = s).
+- `table`: the 30 x 4 table the gridworld run saved, computed with the *plain* maze's s' and applied whatever s'
+  the wall maze gives. It pays for moves the new wall blocks; kept only as a labelled variant.
+
+Several gridworld runs can be given at once (`--reward-path A B C`): every run trains `--num-seeds` agents, the
+env-reward arm trains the same number of agents on the same seeds, so both arms have the same n.
 """
 
 import contextlib
 import io
 import json
 import os
+import signal
 import sys
 import time
 import warnings
+import zipfile
 from dataclasses import asdict, dataclass
+from typing import Literal
 
 import gymnasium as gym
 import numpy as np
@@ -42,8 +48,15 @@ from torch.utils.tensorboard import SummaryWriter
 
 import gridworld_env
 
-ARMS = ("recovered", "env")
-METRICS = ("steps_to_optimum", "episodes_to_optimum", "auc", "final_episode_length")
+BOOTSTRAP_RULES = {
+    "sampled": "sampled bootstrap (SARSA-like): target r + gamma Q(s', a'), a' epsilon-greedy from Q(s', .)",
+    "max": "max bootstrap (textbook Q-learning): target r + gamma max_a' Q(s', a')",
+}
+REWARD_NAMES = {
+    "recovered_network": "recovered reward, INFORM network on the wall maze's s' (Eq. 3)",
+    "recovered_table": "recovered reward, 30x4 table with the plain maze's s' (variant)",
+    "env": "environment reward (+1 at G)",
+}
 
 
 @dataclass
@@ -51,58 +64,46 @@ class Args:
     exp_name: str = os.path.basename(__file__)[: -len(".py")]
     """the name of this experiment"""
     seed: int = 1
-    """seed of the first Q-learning run; the others use seed + 1, ..., seed + num_seeds - 1 (the same in both arms)"""
+    """seed of the first agent; agent j of gridworld run i uses seed + i * num_seeds + j (the same in both arms)"""
     num_threads: int = 1
-    """torch CPU threads (torch only loads the checkpoints and runs the 30-cell TAMER network once)"""
+    """torch CPU threads (torch only evaluates the 30-cell networks once)"""
     env_id: str = "KnoxStoneMazeWall-v0"
-    """the maze the Q-learning agents train on"""
+    """the maze the tabular agents train on"""
 
     # Reward source
-    reward_path: str | None = None
-    """recovered_reward.pt (or the gridworld run directory holding it); default: the newest such file under runs/"""
+    reward_source: Literal["network", "table"] = "network"
+    """network: Eq. 3 from inform_q.pt on the transition actually made; table: recovered_reward.pt (plain maze's s')"""
+    reward_path: tuple[str, ...] | None = None
+    """gridworld run directories (or their inform_q.pt / recovered_reward.pt); default: the newest run under runs/"""
     runs_dir: str = "runs"
     """where to look for gridworld runs when --reward-path is not given"""
 
-    # Q-learning
+    # Tabular agents
+    bootstrap: Literal["sampled", "max"] = "sampled"
+    """sampled: bootstrap on an epsilon-greedy sampled a' (the authors' SARSA-like update); max: Q-learning"""
     num_episodes: int = 300
-    """training episodes per seed and arm"""
+    """training episodes per agent"""
     num_seeds: int = 5
-    """independent Q-learning runs per arm"""
+    """agents per gridworld run and arm"""
     alpha: float = 0.2
-    """Q-learning step size"""
+    """step size of the tabular update"""
     gamma: float = 0.99
-    """Q-learning discount"""
+    """discount of the tabular agents"""
     epsilon: float = 0.05
-    """probability of a uniformly random action (fixed, no decay)"""
+    """probability of a uniformly random action (fixed, no decay); also the sampled bootstrap's epsilon"""
 
     # Reporting
-    dense_threshold: float = 1e-3
-    """a recovered reward entry counts as non-zero ("dense") when |r(s, a)| exceeds this"""
     final_window: int = 10
     """final_episode_length is the mean training episode length over this many last episodes"""
+    stability_window: int = 100
+    """greedy_optimal_fraction is the fraction of this many last episodes after which the greedy policy is optimal"""
     grid_points: int = 200
-    """points of the common env-step grid the per-seed curves are interpolated to (mean curve and fig6.png)"""
+    """points of the common env-step grid the per-agent curves are interpolated to (mean curve and fig6.png)"""
 
 
-def check_args(args: Args) -> None:
-    """Reject bad flag values before anything is read or written; each message says what is wrong."""
-    for name in ("num_threads", "num_episodes", "num_seeds", "final_window", "grid_points"):
-        if getattr(args, name) < 1:
-            raise ValueError(f"--{name.replace('_', '-')} must be a positive integer, got {getattr(args, name)}")
-    if not 0.0 < args.alpha <= 1.0:
-        raise ValueError(f"--alpha must be in (0, 1], got {args.alpha}")
-    if not 0.0 <= args.gamma < 1.0:
-        raise ValueError(f"--gamma must be in [0, 1), got {args.gamma}")
-    if not 0.0 <= args.epsilon <= 1.0:
-        raise ValueError(f"--epsilon must be in [0, 1], got {args.epsilon}")
-    if args.dense_threshold < 0.0:
-        raise ValueError(f"--dense-threshold must be >= 0, got {args.dense_threshold}")
-    if args.env_id not in ("KnoxStoneMazeWall-v0", "KnoxStoneMaze-v0"):
-        raise ValueError(f"--env-id must be KnoxStoneMazeWall-v0 or KnoxStoneMaze-v0, got {args.env_id!r}")
-
-
+# ALGO LOGIC: the recovered reward (Eq. 3) ---------------------------------------------------------------------------
 class QNetwork(nn.Module):
-    """The 30-32-32-4 MLP of inform_dqn_gridworld.py, rebuilt here to load the saved TAMER network H(s, a)."""
+    """The 30-32-32-4 MLP of inform_dqn_gridworld.py, rebuilt here to load its saved networks (H and soft Q)."""
 
     def __init__(self, obs_dim: int, n_actions: int, hidden: int = 32):
         super().__init__()
@@ -114,132 +115,32 @@ class QNetwork(nn.Module):
         return self.network(x)
 
 
-def one_line(e: Exception) -> str:
-    lines = str(e).strip().splitlines()
-    return f"{type(e).__name__}: {lines[0][:200]}" if lines else type(e).__name__
+def soft_value(q: torch.Tensor, temperature: float) -> torch.Tensor:  # V(s) = temp * logsumexp(Q(s, .) / temp)
+    return temperature * torch.logsumexp(q / temperature, dim=-1)
 
 
-def find_newest_reward(runs_dir: str) -> str:
-    """The recovered_reward.pt of the newest run (by file time) under runs_dir."""
-    candidates = []
-    if os.path.isdir(runs_dir):
-        for name in os.listdir(runs_dir):
-            path = os.path.join(runs_dir, name, "recovered_reward.pt")
-            if os.path.isfile(path):
-                candidates.append((os.path.getmtime(path), path))
-    if not candidates:
-        raise ValueError(
-            f"no --reward-path given and no {runs_dir}/*/recovered_reward.pt found; "
-            "run inform_dqn_gridworld.py first or pass --reward-path"
-        )
-    return max(candidates)[1]
+def recovered_reward(q_net, obs, actions, next_obs, terminated, gamma: float, temperature: float) -> torch.Tensor:
+    """Eq. 3 on a batch of transitions: r(s, a, s') = Q(s, a) - (1 - terminated) gamma V(s')."""
+    with torch.no_grad():
+        q_sa = q_net(obs).gather(-1, actions[..., None]).squeeze(-1)
+        return q_sa - (1.0 - terminated) * gamma * soft_value(q_net(next_obs), temperature)
 
 
-def load_checkpoint(path: str, what: str) -> dict:
-    try:
-        with warnings.catch_warnings():  # a foreign pickle warns before it fails; the error line says enough
-            warnings.simplefilter("ignore")
-            ckpt = torch.load(path, weights_only=True, map_location="cpu")
-    except Exception as e:  # a corrupt or foreign file raises many kinds of errors; one line names it
-        raise ValueError(f"cannot read {what} {path} as a torch checkpoint ({one_line(e)})") from None
-    if not isinstance(ckpt, dict):
-        raise ValueError(f"{path} is not a {what} checkpoint: expected a dict, found {type(ckpt).__name__}")
-    return ckpt
+def transition_reward_table(q_net, next_cell: np.ndarray, gamma: float, temperature: float) -> np.ndarray:
+    """Eq. 3 for every (s, a) with s' = next_cell[s, a]. The maze is deterministic, so r(s, a, s') of the transition
+    the agent makes is this table's entry: it is computed once instead of at every step (the training loop checks
+    that the s' it sees is the one used here)."""
+    n_cells, n_actions = next_cell.shape
+    eye = torch.eye(n_cells)
+    obs = eye.repeat_interleave(n_actions, 0)
+    actions = torch.arange(n_actions).repeat(n_cells)
+    s_next = torch.as_tensor(next_cell.reshape(-1))
+    terminated = (s_next == gridworld_env.GOAL).float()
+    r = recovered_reward(q_net, obs, actions, eye[s_next], terminated, gamma, temperature)
+    return r.double().numpy().reshape(n_cells, n_actions)
 
 
-def load_reward_table(path: str) -> tuple[np.ndarray, dict]:
-    """The (30, 4) table r(s, a) a gridworld run saved, and its metadata (env_id, gamma, temperature)."""
-    if os.path.isdir(path):
-        path = os.path.join(path, "recovered_reward.pt")
-    if not os.path.isfile(path):
-        raise ValueError(f"reward table {path} does not exist")
-    ckpt = load_checkpoint(path, "reward table")
-    reward = ckpt.get("reward")
-    if not isinstance(reward, torch.Tensor):
-        raise ValueError(f"{path} is not a recovered-reward checkpoint: no 'reward' tensor (keys: {sorted(ckpt)})")
-    expected = (gridworld_env.N_CELLS, gridworld_env.N_ACTIONS)
-    if tuple(reward.shape) != expected:
-        raise ValueError(f"reward table in {path} has shape {tuple(reward.shape)}, expected {expected}")
-    table = reward.double().numpy()
-    if not np.isfinite(table).all():
-        raise ValueError(f"reward table in {path} contains NaN or inf")
-    meta = {k: v for k, v in ckpt.items() if k != "reward" and isinstance(v, str | int | float)}
-    return table, meta
-
-
-def load_tamer(path: str) -> np.ndarray:
-    """The greedy policy table (one action per cell) of a saved TAMER network H(s, a)."""
-    ckpt = load_checkpoint(path, "TAMER network")
-    try:
-        net = QNetwork(**ckpt["kwargs"])
-        net.load_state_dict(ckpt["state_dict"])
-        with torch.no_grad():
-            return net(torch.eye(gridworld_env.N_CELLS)).argmax(1).numpy()
-    except Exception as e:
-        raise ValueError(f"cannot rebuild the TAMER network from {path} ({one_line(e)})") from None
-
-
-def resolve_source(args: Args) -> dict:
-    """Find and read every input before anything is written: the reward table and, if present, TAMER's network."""
-    if args.reward_path is None:
-        path = find_newest_reward(args.runs_dir)
-        print(f"reward table: {path} (the newest gridworld run with a table under {args.runs_dir}/)", flush=True)
-    else:
-        path = args.reward_path
-    table, meta = load_reward_table(path)
-    path = os.path.join(path, "recovered_reward.pt") if os.path.isdir(path) else path
-    tamer_path = os.path.join(os.path.dirname(path), "tamer_h.pt")
-    tamer_policy = load_tamer(tamer_path) if os.path.isfile(tamer_path) else None
-    return {"path": path, "table": table, "meta": meta, "tamer_path": tamer_path, "tamer_policy": tamer_policy}
-
-
-def value_iteration(reward: np.ndarray, next_cell: np.ndarray, gamma: float, tol: float = 1e-10) -> np.ndarray:
-    """Q(s, a) = r(s, a) + gamma (1 - [s' = G]) max_a' Q(s', a') for a reward table on a maze's deterministic moves."""
-    not_done = (next_cell != gridworld_env.GOAL).astype(np.float64)
-    q = np.zeros_like(reward, dtype=np.float64)
-    while True:
-        new_q = reward + gamma * not_done * q.max(axis=1)[next_cell]
-        if np.abs(new_q - q).max() < tol:
-            return new_q
-        q = new_q
-
-
-def reward_shape_report(table: np.ndarray, gamma: float, threshold: float) -> dict:
-    """How dense the recovered reward is and how far its optimal policy agrees with the true one, per maze.
-
-    Agreement: the fraction of states from which G is reachable (V* > 0; G itself excluded) where the greedy
-    action of value iteration on the recovered reward is one of the true optimal actions (Q* ties count as a match).
-    """
-    non_goal = np.arange(gridworld_env.N_CELLS) != gridworld_env.GOAL  # G is terminal: its row is never used
-    report = {
-        "reward/density": float((np.abs(table[non_goal]) > threshold).mean()),
-        "reward/density_threshold": threshold,
-        "reward/positive_fraction": float((table[non_goal] > threshold).mean()),
-    }
-    for variant in ("plain", "wall"):
-        next_cell = gridworld_env.transition_table(variant)
-        q_star = gridworld_env.optimal_q(variant, gamma)
-        policy = value_iteration(table, next_cell, gamma).argmax(1)
-        reachable = (q_star.max(1) > 0) & non_goal
-        cells = np.flatnonzero(reachable)
-        match = q_star[cells, policy[cells]] >= q_star[cells].max(1) - 1e-9
-        self_loop = (next_cell == np.arange(gridworld_env.N_CELLS)[:, None]) & non_goal[:, None]
-        report[f"reward/{variant}/policy_agreement"] = float(match.mean())
-        report[f"reward/{variant}/agreement_states"] = int(len(cells))
-        report[f"reward/{variant}/vi_episode_length"] = gridworld_env.greedy_episode_length(policy, variant)
-        report[f"reward/{variant}/positive_self_loops"] = int((self_loop & (table > threshold)).sum())
-    return report
-
-
-def greedy_path(policy: np.ndarray, variant: str, max_steps: int = 40) -> list[int]:
-    """The cells a table policy visits from S (for the printed report)."""
-    next_cell = gridworld_env.transition_table(variant)
-    path = [gridworld_env.START]
-    while len(path) <= max_steps and path[-1] != gridworld_env.GOAL:
-        path.append(int(next_cell[path[-1], policy[path[-1]]]))
-    return path
-
-
+# ALGO LOGIC: the tabular agents -------------------------------------------------------------------------------------
 def epsilon_greedy(q_s: np.ndarray, epsilon: float, rng: np.random.Generator) -> int:
     """A random action with probability epsilon, else a greedy one with ties broken uniformly at random."""
     if rng.random() < epsilon:
@@ -248,9 +149,19 @@ def epsilon_greedy(q_s: np.ndarray, epsilon: float, rng: np.random.Generator) ->
     return int(best[rng.integers(len(best))]) if len(best) > 1 else int(best[0])
 
 
-def q_learning(env: gym.Env, reward_table: np.ndarray | None, args: Args, seed: int, variant: str) -> dict:
-    """Tabular Q-learning for args.num_episodes episodes; reward_table None means the environment's reward.
+def td_target(q, r, s_next, terminated, bootstrap: str, gamma: float, epsilon: float, rng) -> float:
+    """The tabular target: no bootstrap past G; else on a sampled epsilon-greedy a' ("sampled") or the max ("max")."""
+    if terminated:
+        return r
+    if bootstrap == "sampled":
+        return r + gamma * q[s_next, epsilon_greedy(q[s_next], epsilon, rng)]
+    return r + gamma * q[s_next].max()
 
+
+def train_agent(env: gym.Env, reward: dict | None, args: Args, seed: int, variant: str) -> dict:
+    """One tabular agent for args.num_episodes episodes; reward None means the environment's reward.
+
+    `reward` holds a (30, 4) "table" and, for the network source, the "next_cell" the table was computed with.
     Returns per episode the training length, the cumulative env steps at its end, and the greedy policy's length
     on `variant` evaluated after it.
     """
@@ -266,9 +177,14 @@ def q_learning(env: gym.Env, reward_table: np.ndarray | None, args: Args, seed: 
             a = epsilon_greedy(q[s], args.epsilon, rng)
             obs, env_reward, terminated, truncated, _ = env.step(a)
             s_next = int(obs.argmax())
-            r = env_reward if reward_table is None else reward_table[s, a]  # the recovered reward replaces it
-            target = r if terminated else r + args.gamma * q[s_next].max()  # truncation still bootstraps
-            q[s, a] += args.alpha * (target - q[s, a])
+            if reward is None:
+                r = env_reward
+            else:  # the recovered reward replaces the env's
+                r = reward["table"][s, a]
+                if reward.get("next_cell") is not None and reward["next_cell"][s, a] != s_next:
+                    raise RuntimeError(f"the reward of ({s}, {a}) was computed for s' {reward['next_cell'][s, a]}")
+            target = td_target(q, r, s_next, terminated, args.bootstrap, args.gamma, args.epsilon, rng)
+            q[s, a] += args.alpha * (target - q[s, a])  # truncation at 200 steps still bootstraps
             s = s_next
             length += 1
         total_steps += length
@@ -276,16 +192,18 @@ def q_learning(env: gym.Env, reward_table: np.ndarray | None, args: Args, seed: 
         steps_at_end.append(total_steps)
         greedy_lengths.append(gridworld_env.greedy_episode_length(q.argmax(1), variant))
         obs, _ = env.reset()
-    return {
-        "lengths": np.array(lengths),
-        "steps": np.array(steps_at_end),
-        "greedy": np.array(greedy_lengths),
-        "q": q,
-    }
+    return {"lengths": np.array(lengths), "steps": np.array(steps_at_end), "greedy": np.array(greedy_lengths), "q": q}
 
 
-def time_to_optimum(run: dict, optimum: int) -> tuple[float, float]:
-    """(env steps, episodes) until the greedy policy first reaches the optimum and keeps it to the last episode."""
+# Metrics ------------------------------------------------------------------------------------------------------------
+def first_optimum(run: dict, optimum: int) -> tuple[float, float]:
+    """(env steps, episodes) until the end of the first training episode that took `optimum` steps."""
+    hits = np.flatnonzero(run["lengths"] == optimum)
+    return (float(run["steps"][hits[0]]), float(hits[0] + 1)) if len(hits) else (float("nan"), float("nan"))
+
+
+def stays_at_optimum(run: dict, optimum: int) -> tuple[float, float]:
+    """(env steps, episodes) until the greedy policy is at the optimum and stays there to the last episode."""
     at_optimum = run["greedy"] == optimum
     if not at_optimum[-1]:
         return float("nan"), float("nan")
@@ -294,16 +212,276 @@ def time_to_optimum(run: dict, optimum: int) -> tuple[float, float]:
     return float(run["steps"][first]), float(first + 1)
 
 
-def run_metrics(run: dict, optimum: int, final_window: int) -> dict:
-    steps, episodes = time_to_optimum(run, optimum)
+def agent_metrics(run: dict, optimum: int, final_window: int, stability_window: int) -> dict:
+    steps_first, episodes_first = first_optimum(run, optimum)
+    steps_stay, episodes_stay = stays_at_optimum(run, optimum)
     return {
-        "steps_to_optimum": steps,
-        "episodes_to_optimum": episodes,
-        # area under the episode-length curve against the episode number: the env steps the episodes took
-        "auc": float(run["lengths"].sum()),
+        "steps_to_first_optimum": steps_first,
+        "episodes_to_first_optimum": episodes_first,
+        "steps_to_stay_optimum": steps_stay,
+        "episodes_to_stay_optimum": episodes_stay,
+        "auc": float(run["lengths"].sum()),  # area under the length-per-episode curve = the env steps used
         "final_episode_length": float(run["lengths"][-final_window:].mean()),
         "final_greedy_episode_length": float(run["greedy"][-1]),
+        "greedy_optimal_fraction": float((run["greedy"][-stability_window:] == optimum).mean()),
     }
+
+
+def censored_median(values: np.ndarray) -> float:
+    """Median over all agents, one that never reached counting as later than any that did (nan if over half never)."""
+    return float(np.median(np.where(np.isfinite(values), values, np.inf)))
+
+
+# Diagnosis: what the reward makes optimal on the wall maze -------------------------------------------------------
+def value_iteration(reward, next_cell, gamma: float, epsilon: float = 0.0, tol: float = 1e-10) -> np.ndarray:
+    """Fixed point of Q(s, a) = r(s, a) + gamma (1 - [s' = G]) E_{a' ~ pi(s')} Q(s', a'), with pi greedy (epsilon 0:
+    the max bootstrap's fixed point) or epsilon-greedy (the sampled bootstrap's, ties aside)."""
+    not_done = (next_cell != gridworld_env.GOAL).astype(np.float64)
+    q = np.zeros_like(reward, dtype=np.float64)
+    while True:
+        v = (1.0 - epsilon) * q.max(axis=1) + epsilon * q.mean(axis=1)
+        new_q = reward + gamma * not_done * v[next_cell]
+        if np.abs(new_q - q).max() < tol:
+            return new_q
+        q = new_q
+
+
+def shortest_path_return(reward, next_cell, gamma: float, start: int, horizon: int = 200) -> tuple[float, int]:
+    """The best discounted return from `start` among the paths that enter G in the fewest steps, and that number."""
+    w = np.full(gridworld_env.N_CELLS, -np.inf)  # w[s]: best return from s entering G in exactly k steps
+    for k in range(1, horizon + 1):
+        w_next = w[next_cell]
+        cont = np.where(next_cell == gridworld_env.GOAL, 0.0, np.where(np.isfinite(w_next), gamma * w_next, -np.inf))
+        w = np.where(np.isin(next_cell, [gridworld_env.GOAL]) | np.isfinite(w_next), reward + cont, -np.inf).max(1)
+        if np.isfinite(w[start]):
+            return float(w[start]), k
+    return float("nan"), -1
+
+
+def greedy_path(policy: np.ndarray, next_cell: np.ndarray, max_steps: int = 200) -> list[int]:
+    """The cells a table policy visits from S until G, or until a cell repeats (a deterministic policy then loops)."""
+    path = [gridworld_env.START]
+    while len(path) <= max_steps and path[-1] != gridworld_env.GOAL:
+        path.append(int(next_cell[path[-1], policy[path[-1]]]))
+        if path[-1] in path[:-1]:
+            break
+    return path
+
+
+def diagnose(reward: np.ndarray, variant: str, gamma: float, epsilon: float) -> dict:
+    """What each update's fixed point does under this reward on this maze: its greedy path from S, and, when that
+    path loops, what the loop is worth (staying in it forever) against the shortest way from the loop to G."""
+    next_cell = gridworld_env.transition_table(variant)
+    out = {}
+    for name, eps in (("max", 0.0), ("sampled", epsilon)):
+        q = value_iteration(reward, next_cell, gamma, eps)
+        policy = q.argmax(1)
+        path = greedy_path(policy, next_cell)
+        out[f"{name}/episode_length"] = gridworld_env.greedy_episode_length(policy, variant)
+        out[f"{name}/path"] = path
+        out[f"{name}/loop"] = loop = path[path.index(path[-1]) : -1] if path[-1] != gridworld_env.GOAL else []
+        if loop:  # the loop's discounted reward per round, repeated forever from its first cell
+            per_round = sum(gamma**i * reward[c, policy[c]] for i, c in enumerate(loop))
+            out[f"{name}/loop_worth"] = float(per_round / (1.0 - gamma ** len(loop)))
+            ret, steps = shortest_path_return(reward, next_cell, gamma, loop[0])
+            out[f"{name}/loop_to_goal_return"], out[f"{name}/loop_to_goal_steps"] = ret, steps
+    out["shortest_path/return"], out["shortest_path/steps"] = shortest_path_return(
+        reward, next_cell, gamma, gridworld_env.START
+    )
+    out["max/v_start"] = float(value_iteration(reward, next_cell, gamma)[gridworld_env.START].max())
+    return out
+
+
+# Main ---------------------------------------------------------------------------------------------------------------
+def run_arm(args, arm: str, reward_by_run: list, seeds: list, variant: str, optimum: int, runs: list, writer) -> None:
+    """Train every agent of one arm; finished agents are appended to `runs` (so an interrupt keeps them)."""
+    for i, (reward, seed) in enumerate(zip(reward_by_run, seeds, strict=True)):
+        env = gym.make(args.env_id)
+        t0 = time.time()
+        run = train_agent(env, reward, args, seed, variant)
+        env.close()
+        run["seconds"] = time.time() - t0
+        runs.append(run)
+        m = agent_metrics(run, optimum, args.final_window, args.stability_window)
+        for length, greedy, step in zip(run["lengths"], run["greedy"], run["steps"], strict=True):
+            writer.add_scalar(f"{arm}/seed_{seed}/episode_length", length, step)
+            writer.add_scalar(f"{arm}/seed_{seed}/greedy_episode_length", greedy, step)
+        print(
+            f"[{arm}] agent {i + 1}/{len(seeds)} (seed {seed}): {int(run['steps'][-1]):,} env steps | "
+            f"first {optimum}-step episode at {m['steps_to_first_optimum']:,.0f} | "
+            f"stays at {optimum} from {m['steps_to_stay_optimum']:,.0f} | greedy {int(run['greedy'][-1])} | "
+            f"{run['seconds']:.1f}s",
+            flush=True,
+        )
+
+
+def main(args: Args, sources: list[dict]) -> dict:
+    run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
+    run_start = time.time()
+    torch.set_num_threads(args.num_threads)
+    variant = gym.make(args.env_id).unwrapped.variant
+    optimum = gridworld_env.greedy_episode_length(gridworld_env.optimal_q(variant, args.gamma).argmax(1), variant)
+    seeds = [args.seed + i * args.num_seeds + j for i in range(len(sources)) for j in range(args.num_seeds)]
+
+    # The recovered reward of each gridworld run on this maze (read by resolve_sources), TAMER, the diagnosis
+    reward_by_agent = [source["reward"] for source in sources for _ in range(args.num_seeds)]
+    tamer_lengths = [
+        None if s["tamer_policy"] is None else gridworld_env.greedy_episode_length(s["tamer_policy"], variant)
+        for s in sources
+    ]
+    diagnoses = [diagnose(source["reward"]["table"], variant, args.gamma, args.epsilon) for source in sources]
+    arms = {f"{args.bootstrap}_bootstrap/recovered_{args.reward_source}": reward_by_agent,
+            f"{args.bootstrap}_bootstrap/env": [None] * len(seeds)}  # fmt: skip
+
+    run_dir = make_run_dir(run_name)  # only now: every input has been read and checked
+    writer = SummaryWriter(run_dir)
+    writer.add_text(
+        "hyperparameters",
+        "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
+    )
+    received = []  # SIGTERM (Slurm's cancel and time limit, kill) stops the run as Ctrl-C does
+
+    def stop(signum, frame):
+        received.append(signal.Signals(signum).name)
+        raise KeyboardInterrupt
+
+    previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    signal.signal(signal.SIGTERM, stop)
+    if previous[signal.SIGINT] is signal.default_int_handler:  # an ignored SIGINT (nohup, &) stays ignored
+        signal.signal(signal.SIGINT, stop)
+    runs = {arm: [] for arm in arms}
+    times, arm = {}, next(iter(arms))
+    try:
+        print(f"run directory: {run_dir}", flush=True)
+        print(f"optimum on {args.env_id}: {optimum} steps; update: {BOOTSTRAP_RULES[args.bootstrap]}", flush=True)
+        for source, tamer, diag in zip(sources, tamer_lengths, diagnoses, strict=True):
+            print(
+                f"{source['path']}: TAMER on {args.env_id} {tamer} steps | value iteration on the recovered reward: "
+                f"max bootstrap {diag['max/episode_length']} steps (V(S) {diag['max/v_start']:.3f}, loop "
+                f"{diag['max/loop']} worth {diag.get('max/loop_worth', float('nan')):.3f}, from it to G "
+                f"{diag.get('max/loop_to_goal_return', float('nan')):.3f}), sampled bootstrap "
+                f"{diag['sampled/episode_length']} steps | shortest path S to G: return "
+                f"{diag['shortest_path/return']:.3f}",
+                flush=True,
+            )
+        for arm, reward in arms.items():
+            run_arm(args, arm, reward, seeds, variant, optimum, runs[arm], writer)
+            times[f"time/{arm}_s"] = sum(run["seconds"] for run in runs[arm])
+    except KeyboardInterrupt:
+        # what finished is kept: the summary records the agents done per arm and no figure is drawn
+        name = received[0] if received else "SIGINT"
+        print(f"interrupted ({name}) during {arm}; the summary in {run_dir} says what finished", file=sys.stderr)
+        summary = {
+            **{f"{a}/agents_done": len(runs[a]) for a in arms},
+            "wall_time_s": time.time() - run_start,
+            "seed": args.seed,
+            "script": os.path.basename(__file__),
+            "status": "interrupted",
+            "phase": arm,
+            "signal": name,
+            "args": asdict(args),
+        }
+        write_json_atomic(f"{run_dir}/summary.json", summary)
+        writer.close()
+        return summary
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+    summary = {
+        "optimum_episode_length": optimum,
+        "reward_source": args.reward_source,
+        "bootstrap": args.bootstrap,
+        "bootstrap_rule": BOOTSTRAP_RULES[args.bootstrap],
+        "arms": list(arms),
+        "seeds": seeds,
+        "num_agents": len(seeds),
+    }
+    tamer_key = "eval/wall/tamer_episode_length" if variant == "wall" else "eval/tamer_episode_length"
+    summary[f"{tamer_key}_per_run"] = tamer_lengths
+    known = [t for t in tamer_lengths if t is not None]
+    summary[tamer_key] = float(np.mean(known)) if known else None
+    summary["tamer/n_reached"] = sum(t == optimum for t in known) if known else None
+    for arm in arms:
+        per_agent = [agent_metrics(run, optimum, args.final_window, args.stability_window) for run in runs[arm]]
+        for metric in per_agent[0]:
+            values = np.array([m[metric] for m in per_agent])
+            reached = values[np.isfinite(values)]
+            summary[f"{arm}/{metric}_per_agent"] = [nan_to_none(v) for v in values]
+            summary[f"{arm}/{metric}_median"] = nan_to_none(censored_median(values))
+            summary[f"{arm}/{metric}_mean"] = nan_to_none(reached.mean()) if len(reached) else None
+            if metric.startswith(("steps_", "episodes_")):
+                summary[f"{arm}/{metric}_min"] = nan_to_none(reached.min()) if len(reached) else None
+                summary[f"{arm}/{metric}_max"] = nan_to_none(reached.max()) if len(reached) else None
+        summary[f"{arm}/n_first_optimum"] = int(np.isfinite([m["steps_to_first_optimum"] for m in per_agent]).sum())
+        summary[f"{arm}/n_stay_optimum"] = int(np.isfinite([m["steps_to_stay_optimum"] for m in per_agent]).sum())
+        summary[f"{arm}/n_agents"] = len(per_agent)
+    for key, value in summary.items():
+        if isinstance(value, int | float) and not isinstance(value, bool):
+            writer.add_scalar(key, value, 0)
+    for key in sorted({k for d in diagnoses for k in d}):
+        summary[f"diagnosis/{key}_per_run"] = [d.get(key) for d in diagnoses]
+
+    # Curves on a common env-step grid per arm: the mean to TensorBoard, every agent to agents.npz, a figure
+    curves = {}
+    for arm in arms:
+        grid = np.linspace(0, max(int(run["steps"][-1]) for run in runs[arm]), args.grid_points + 1)[1:]
+        curves[arm] = (grid, interpolate_curves(runs[arm], grid))
+        for step, mean in zip(grid, curves[arm][1].mean(0), strict=True):
+            writer.add_scalar(f"{arm}/episode_length", mean, int(step))
+    np.savez(
+        f"{run_dir}/agents.npz",
+        **{
+            f"{arm}/{k}": np.stack([run[k] for run in runs[arm]])
+            for arm in arms
+            for k in ("lengths", "steps", "greedy")
+        },
+    )
+    tamer_label = "TAMER's greedy policy, untrained on the wall" if variant == "wall" else "TAMER's greedy policy"
+    title = f"{args.env_id}: {len(seeds)} agents per arm, {args.num_episodes} episodes each"
+    fig6(curves, optimum, summary[tamer_key], title, tamer_label).savefig(f"{run_dir}/fig6.png", dpi=120)
+
+    summary.update(
+        {
+            "reward/paths": [os.path.abspath(s["path"]) for s in sources],
+            "reward/tamer_paths": [
+                os.path.abspath(s["tamer_path"]) if s["tamer_policy"] is not None else None for s in sources
+            ],  # fmt: skip
+            "reward/sleep_gamma_per_run": [s["meta"].get("gamma") for s in sources],
+            "reward/temperature_per_run": [s["meta"].get("temperature") for s in sources],
+            **times,
+            "wall_time_s": time.time() - run_start,
+            "seed": args.seed,
+            "script": os.path.basename(__file__),
+            "status": "completed",
+            "args": asdict(args),
+        }
+    )
+    write_json_atomic(f"{run_dir}/summary.json", summary)
+    writer.close()
+    for arm in arms:
+        print(f"{arm} ({len(seeds)} agents): " + arm_report(summary, arm, optimum), flush=True)
+    print(f"done in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json, figure: {run_dir}/fig6.png")
+    return summary
+
+
+# Helpers: reading inputs, output files, the figure ---------------------------------------------------------------
+def arm_report(summary: dict, arm: str, optimum: int) -> str:
+    def steps(metric):
+        median = summary[f"{arm}/{metric}_median"]
+        if summary[f"{arm}/{metric}_min"] is None:
+            return "never"
+        lo, hi = summary[f"{arm}/{metric}_min"], summary[f"{arm}/{metric}_max"]
+        return f"median {'never' if median is None else f'{median:,.0f}'} (reached {lo:,.0f}-{hi:,.0f})"
+
+    return (
+        f"first {optimum}-step episode: {summary[f'{arm}/n_first_optimum']} agents, "
+        f"{steps('steps_to_first_optimum')} env steps | stays at {optimum}: {summary[f'{arm}/n_stay_optimum']} "
+        f"agents, {steps('steps_to_stay_optimum')} env steps | "
+        f"greedy at {optimum} after {summary[f'{arm}/greedy_optimal_fraction_mean']:.0%} of the last "
+        f"{min(summary['args']['stability_window'], summary['args']['num_episodes'])} episodes | "
+        f"final episode length {summary[f'{arm}/final_episode_length_mean']:.1f}"
+    )
 
 
 def nan_to_none(x: float):
@@ -311,30 +489,33 @@ def nan_to_none(x: float):
 
 
 def interpolate_curves(runs: list[dict], grid: np.ndarray) -> np.ndarray:
-    """Each seed's episode length (at the env step its episode ended) on a common step grid; (seeds, points).
+    """Each agent's episode length (at the env step its episode ended) on a common step grid; (agents, points).
 
-    np.interp holds the first episode's length before it ends and the last one's after the seed's budget ran out.
+    np.interp holds the first episode's length before it ends and the last one's after the agent's budget ran out.
     """
     return np.stack([np.interp(grid, run["steps"], run["lengths"]) for run in runs])
 
 
+def arm_label(arm: str) -> str:
+    bootstrap, reward = arm.split("/")
+    return f"{REWARD_NAMES[reward]}; {BOOTSTRAP_RULES[bootstrap.removesuffix('_bootstrap')].split(':')[0]}"
+
+
 def fig6(curves: dict, optimum: int, tamer_length: float | None, title: str, tamer_label: str) -> Figure:
-    """Paper Fig. 6: mean and spread (+-1 std and min-max bands) over seeds of episode length against env steps."""
-    fig = Figure(figsize=(7, 5), layout="constrained")
+    """Paper Fig. 6: mean and spread (+-1 std and min-max bands) over agents of episode length against env steps."""
+    fig = Figure(figsize=(8, 5.5), layout="constrained")
     ax = fig.subplots()
-    colours = {"recovered": "tab:blue", "env": "tab:orange"}
-    labels = {"recovered": "Q-learning, INFORM recovered reward", "env": "Q-learning, environment reward"}
-    for arm, (grid, values) in curves.items():
+    for (arm, (grid, values)), colour in zip(curves.items(), ("tab:blue", "tab:orange"), strict=False):
         mean, std = values.mean(0), values.std(0)
-        ax.plot(grid, mean, color=colours[arm], label=f"{labels[arm]} (mean, n={len(values)})")
-        ax.fill_between(grid, values.min(0), values.max(0), color=colours[arm], alpha=0.12, lw=0)
-        ax.fill_between(grid, np.maximum(mean - std, 0), mean + std, color=colours[arm], alpha=0.25, lw=0)
+        ax.plot(grid, mean, color=colour, label=f"{arm_label(arm)} (mean, n={len(values)})")
+        ax.fill_between(grid, values.min(0), values.max(0), color=colour, alpha=0.12, lw=0)
+        ax.fill_between(grid, np.maximum(mean - std, 0), mean + std, color=colour, alpha=0.25, lw=0)
     ax.axhline(optimum, color="black", ls="--", lw=1, label=f"optimum ({optimum})")
     if tamer_length is not None:
         ax.axhline(tamer_length, color="tab:red", ls=":", lw=1.5, label=f"{tamer_label} ({tamer_length:g})")
-    ax.set(xlabel="environment steps", ylabel="episode length", ylim=(0, 210))
-    ax.set_title(f"{title}\nline: mean over seeds; bands: +-1 std (dark), min-max (light)", fontsize=10)
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, fontsize=8)
+    ax.set(xlabel="environment steps", ylabel="training episode length", ylim=(0, 210))
+    ax.set_title(f"{title}\nline: mean over agents; bands: +-1 std (dark), min-max (light)", fontsize=10)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=1, fontsize=8)
     ax.grid(alpha=0.3)
     return fig
 
@@ -357,142 +538,161 @@ def write_json_atomic(path: str, data: dict) -> None:
     os.replace(path + ".tmp", path)
 
 
-def run_arm(args: Args, arm: str, seeds: list, source: dict, variant: str, optimum: int, runs: list, writer) -> None:
-    """Q-learning for every seed of one arm (the recovered reward, or the env's); finished runs are appended."""
-    for i, seed in enumerate(seeds):
-        env = gym.make(args.env_id)
-        t_seed = time.time()
-        run = q_learning(env, source["table"] if arm == "recovered" else None, args, seed, variant)
-        env.close()
-        run["seconds"] = time.time() - t_seed
-        runs.append(run)
-        m = run_metrics(run, optimum, args.final_window)
-        for length, greedy, step in zip(run["lengths"], run["greedy"], run["steps"], strict=True):
-            writer.add_scalar(f"qlearning/{arm}/seed_{seed}/episode_length", length, step)
-            writer.add_scalar(f"qlearning/{arm}/seed_{seed}/greedy_episode_length", greedy, step)
-        print(
-            f"[{arm}] seed {seed} ({i + 1}/{len(seeds)}): {args.num_episodes} episodes | "
-            f"{int(run['steps'][-1]):,} env steps | greedy {int(run['greedy'][-1])} | "
-            f"steps to optimum {m['steps_to_optimum']:,.0f} | episodes to optimum {m['episodes_to_optimum']:.0f} | "
-            f"{run['seconds']:.1f}s",
-            flush=True,
+def check_args(args: Args) -> None:
+    """Reject bad flag values before anything is read or written; each message says what is wrong."""
+    for name in ("num_threads", "num_episodes", "num_seeds", "final_window", "stability_window", "grid_points"):
+        if getattr(args, name) < 1:
+            raise ValueError(f"--{name.replace('_', '-')} must be a positive integer, got {getattr(args, name)}")
+    if args.seed < 0:
+        raise ValueError(f"--seed must be >= 0, got {args.seed}")
+    if not 0.0 < args.alpha <= 1.0:
+        raise ValueError(f"--alpha must be in (0, 1], got {args.alpha}")
+    if not 0.0 <= args.gamma < 1.0:
+        raise ValueError(f"--gamma must be in [0, 1), got {args.gamma}")
+    if not 0.0 <= args.epsilon <= 1.0:
+        raise ValueError(f"--epsilon must be in [0, 1], got {args.epsilon}")
+    if args.env_id not in ("KnoxStoneMazeWall-v0", "KnoxStoneMaze-v0"):
+        raise ValueError(f"--env-id must be KnoxStoneMazeWall-v0 or KnoxStoneMaze-v0, got {args.env_id!r}")
+
+
+def one_line(e: Exception) -> str:
+    lines = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {lines[0][:200]}" if lines else type(e).__name__
+
+
+FILES = {"network": "inform_q.pt", "table": "recovered_reward.pt"}
+
+
+def find_newest_run(runs_dir: str, filename: str) -> str:
+    """The gridworld run directory under runs_dir with the newest `filename` (by file time)."""
+    candidates = []
+    if os.path.isdir(runs_dir):
+        for name in os.listdir(runs_dir):
+            path = os.path.join(runs_dir, name, filename)
+            if os.path.isfile(path):
+                candidates.append((os.path.getmtime(path), os.path.dirname(path)))
+    if not candidates:
+        raise ValueError(
+            f"no --reward-path given and no {runs_dir}/*/{filename} found; "
+            "run inform_dqn_gridworld.py first or pass --reward-path"
         )
+    return max(candidates)[1]
 
 
-def main(args: Args, source: dict) -> dict:
-    run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
-    run_start = time.time()
-    torch.set_num_threads(args.num_threads)
-    variant = gym.make(args.env_id).unwrapped.variant
-    seeds = [args.seed + i for i in range(args.num_seeds)]
-
-    # Reward-shape report and the baselines, from the inputs alone
-    optimum = gridworld_env.greedy_episode_length(gridworld_env.optimal_q(variant, args.gamma).argmax(1), variant)
-    shape = reward_shape_report(source["table"], args.gamma, args.dense_threshold)
-    tamer_length = None
-    if source["tamer_policy"] is not None:
-        tamer_length = float(gridworld_env.greedy_episode_length(source["tamer_policy"], variant))
-
-    run_dir = make_run_dir(run_name)
-    writer = SummaryWriter(run_dir)
-    writer.add_text(
-        "hyperparameters",
-        "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
-    )
-    print(f"run directory: {run_dir}", flush=True)
-    print(f"optimum on {args.env_id}: {optimum} steps", flush=True)
-    if tamer_length is None:
-        print(f"TAMER baseline: no network at {source['tamer_path']}, skipped", flush=True)
-    else:
-        print(f"TAMER baseline ({source['tamer_path']}) on {args.env_id}: {tamer_length:g} steps", flush=True)
-    vi_policies = {v: value_iteration(source["table"], gridworld_env.transition_table(v), args.gamma).argmax(1)
-                   for v in ("plain", "wall")}  # fmt: skip
-    print("reward shape: " + " | ".join(f"{k.removeprefix('reward/')} {v:.4g}" for k, v in shape.items()), flush=True)
-    for v, policy in vi_policies.items():
-        print(
-            f"  greedy path of value iteration on the recovered reward, {v} maze: {greedy_path(policy, v)}", flush=True
-        )
-
-    # Q-learning, both arms on the same seeds
-    runs = {arm: [] for arm in ARMS}
-    times = {}
-    arm = ARMS[0]
+def load_checkpoint(path: str, what: str) -> dict:
+    if not os.path.isfile(path):
+        raise ValueError(f"{what} {path} does not exist")
+    if not zipfile.is_zipfile(path):  # torch.save writes a zip archive; a truncated one has lost its directory
+        raise ValueError(f"cannot read {what} {path} as a torch checkpoint (not a complete zip archive)")
     try:
-        for arm in ARMS:
-            run_arm(args, arm, seeds, source, variant, optimum, runs[arm], writer)
-            times[f"time/{arm}_s"] = sum(run["seconds"] for run in runs[arm])
-    except KeyboardInterrupt:
-        # what finished is kept: the summary records the seeds done per arm and no figure is drawn
-        print(f"interrupted during the {arm} arm; the summary in {run_dir} says what finished", file=sys.stderr)
-        summary = {
-            **{f"qlearning/{a}/seeds_done": len(runs[a]) for a in ARMS},
-            "wall_time_s": time.time() - run_start,
-            "seed": args.seed,
-            "script": os.path.basename(__file__),
-            "status": "interrupted",
-            "phase": arm,
-            "args": asdict(args),
-        }
-        write_json_atomic(f"{run_dir}/summary.json", summary)
-        writer.close()
-        return summary
+        with warnings.catch_warnings():  # a foreign pickle warns before it fails; the error line says enough
+            warnings.simplefilter("ignore")
+            ckpt = torch.load(path, weights_only=True, map_location="cpu")
+    except Exception as e:  # a corrupt or foreign file raises many kinds of errors; one line names it
+        raise ValueError(f"cannot read {what} {path} as a torch checkpoint ({one_line(e)})") from None
+    if not isinstance(ckpt, dict):
+        raise ValueError(f"{path} is not a {what} checkpoint: expected a dict, found {type(ckpt).__name__}")
+    return ckpt
 
-    # Curves on a common env-step grid per arm, the mean to TensorBoard, mean and spread to fig6.png
-    curves = {}
-    for arm in ARMS:
-        grid = np.linspace(0, max(int(run["steps"][-1]) for run in runs[arm]), args.grid_points + 1)[1:]
-        curves[arm] = (grid, interpolate_curves(runs[arm], grid))
-        for step, mean in zip(grid, curves[arm][1].mean(0), strict=True):
-            writer.add_scalar(f"qlearning/{arm}/episode_length", mean, int(step))
-    tamer_label = "TAMER, untrained on the wall" if variant == "wall" else "TAMER"
-    figure = fig6(curves, optimum, tamer_length, f"{args.env_id}: Q-learning, {len(seeds)} seeds", tamer_label)
-    figure.savefig(f"{run_dir}/fig6.png", dpi=120)
 
-    tamer_key = "eval/wall/tamer_episode_length" if variant == "wall" else "eval/tamer_episode_length"
-    summary = {"optimum_episode_length": optimum, tamer_key: tamer_length}
-    for arm in ARMS:
-        per_seed = [run_metrics(run, optimum, args.final_window) for run in runs[arm]]
-        for metric in (*METRICS, "final_greedy_episode_length"):
-            values = np.array([m[metric] for m in per_seed])
-            reached = values[np.isfinite(values)]
-            key = f"qlearning/{arm}/{metric}"
-            summary[f"{key}_mean"] = nan_to_none(reached.mean()) if len(reached) else None
-            summary[f"{key}_std"] = nan_to_none(reached.std()) if len(reached) else None
-            summary[f"{key}_per_seed"] = [nan_to_none(v) for v in values]
-        summary[f"qlearning/{arm}/n_reached"] = int(np.isfinite([m["steps_to_optimum"] for m in per_seed]).sum())
-        summary[f"qlearning/{arm}/total_env_steps_mean"] = float(np.mean([run["steps"][-1] for run in runs[arm]]))
-    for key, value in summary.items():
-        if isinstance(value, int | float) and not isinstance(value, bool):
-            writer.add_scalar(key, value, 0)
-    summary.update(shape)
-    summary.update(
-        {
-            "reward/source": os.path.abspath(source["path"]),
-            "reward/env_id": source["meta"].get("env_id"),
-            "reward/tamer_path": os.path.abspath(source["tamer_path"]) if tamer_length is not None else None,
-            "seeds": seeds,
-            **times,
-            "wall_time_s": time.time() - run_start,
-            "seed": args.seed,
-            "script": os.path.basename(__file__),
-            "status": "completed",
-            "args": asdict(args),
-        }
-    )
-    write_json_atomic(f"{run_dir}/summary.json", summary)
-    writer.close()
-    for arm in ARMS:
-        k = f"qlearning/{arm}"
-        mean, std = summary[f"{k}/steps_to_optimum_mean"], summary[f"{k}/steps_to_optimum_std"]
-        reached = "never" if mean is None else f"{mean:,.0f} ± {std:,.0f}"
-        print(
-            f"{arm}: steps to optimum {reached} (reached by {summary[f'{k}/n_reached']}/{len(seeds)}) | "
-            f"final episode length {summary[f'{k}/final_episode_length_mean']:.1f} | "
-            f"auc {summary[f'{k}/auc_mean']:,.0f}",
-            flush=True,
+def check_plain_maze(ckpt: dict, path: str, what: str) -> None:
+    """The reward must come from INFORM on the plain maze: the experiment transfers it to the wall maze."""
+    env_id = ckpt.get("env_id")
+    if env_id not in gridworld_env.ENV_IDS:
+        raise ValueError(
+            f"{path}: a {what} for {env_id!r}, not for one of the mazes ({', '.join(gridworld_env.ENV_IDS)})"
         )
-    print(f"done in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json, figure: {run_dir}/fig6.png")
-    return summary
+    if gridworld_env.ENV_IDS[env_id].get("variant") != "plain":
+        raise ValueError(f"{path}: a {what} learnt on {env_id}; the reward experiment needs one from the plain maze")
+
+
+def load_inform_network(path: str) -> tuple[QNetwork, dict]:
+    """The saved INFORM soft Q network and the sleep phase's gamma and temperature that define its reward (Eq. 3)."""
+    ckpt = load_checkpoint(path, "INFORM network")
+    if not isinstance(ckpt.get("state_dict"), dict) or not isinstance(ckpt.get("kwargs"), dict):
+        raise ValueError(f"{path} is not a saved network: needs 'state_dict' and 'kwargs' (keys: {sorted(ckpt)})")
+    check_plain_maze(ckpt, path, "network")
+    dims = (ckpt["kwargs"].get("obs_dim"), ckpt["kwargs"].get("n_actions"))
+    if dims != (gridworld_env.N_CELLS, gridworld_env.N_ACTIONS):
+        raise ValueError(f"{path}: a network for obs {dims[0]}, actions {dims[1]}, not the maze's 30 cells x 4 moves")
+    meta = {k: ckpt.get(k) for k in ("env_id", "gamma", "temperature")}
+    gamma, temperature = meta["gamma"], meta["temperature"]
+    if not isinstance(gamma, float | int) or not 0.0 <= gamma < 1.0:
+        raise ValueError(f"{path}: needs the sleep phase's 'gamma' in [0, 1) to recover the reward, found {gamma!r}")
+    if not isinstance(temperature, float | int) or not 0.0 < temperature < float("inf"):
+        raise ValueError(
+            f"{path}: needs the sleep phase's 'temperature' > 0 to recover the reward, found {temperature!r}"
+        )
+    try:
+        net = QNetwork(**ckpt["kwargs"])
+        net.load_state_dict(ckpt["state_dict"])
+    except Exception as e:
+        raise ValueError(f"cannot rebuild the INFORM network from {path} ({one_line(e)})") from None
+    return net, meta
+
+
+def load_reward_table(path: str) -> tuple[np.ndarray, dict]:
+    """The (30, 4) table r(s, a) a gridworld run saved (plain maze's s'), and its metadata."""
+    ckpt = load_checkpoint(path, "reward table")
+    reward = ckpt.get("reward")
+    if not isinstance(reward, torch.Tensor):
+        raise ValueError(f"{path} is not a recovered-reward checkpoint: no 'reward' tensor (keys: {sorted(ckpt)})")
+    expected = (gridworld_env.N_CELLS, gridworld_env.N_ACTIONS)
+    if tuple(reward.shape) != expected:
+        raise ValueError(f"reward table in {path} has shape {tuple(reward.shape)}, expected {expected}")
+    if "env_id" in ckpt:
+        check_plain_maze(ckpt, path, "reward table")
+    meta = {k: v for k, v in ckpt.items() if k != "reward" and isinstance(v, str | int | float)}
+    return reward.double().numpy(), meta
+
+
+def load_tamer(path: str) -> np.ndarray:
+    """The greedy policy table (one action per cell) of a saved TAMER network H(s, a)."""
+    ckpt = load_checkpoint(path, "TAMER network")
+    try:
+        net = QNetwork(**ckpt["kwargs"])
+        net.load_state_dict(ckpt["state_dict"])
+        with torch.no_grad():
+            return net(torch.eye(gridworld_env.N_CELLS)).argmax(1).numpy()
+    except Exception as e:
+        raise ValueError(f"cannot rebuild the TAMER network from {path} ({one_line(e)})") from None
+
+
+def resolve_sources(args: Args) -> list[dict]:
+    """Find and read every input before anything is written: per gridworld run, its reward and TAMER's network."""
+    filename = FILES[args.reward_source]
+    paths = args.reward_path
+    if not paths:
+        paths = (find_newest_run(args.runs_dir, filename),)
+        print(f"gridworld run: {paths[0]} (the newest with a {filename} under {args.runs_dir}/)", flush=True)
+    next_cell = gridworld_env.transition_table(gym.make(args.env_id).unwrapped.variant)
+    sources = []
+    for given in paths:
+        path = os.path.join(given, filename) if os.path.isdir(given) else given
+        source = {"path": path, "network": None, "table": None}
+        if args.reward_source == "network":
+            source["network"], source["meta"] = load_inform_network(path)
+        else:
+            source["table"], source["meta"] = load_reward_table(path)
+            if not np.isfinite(source["table"]).all():
+                raise ValueError(f"reward table in {path} contains NaN or inf")
+        source["reward"] = reward_for(source, args.reward_source, next_cell)
+        source["tamer_path"] = os.path.join(os.path.dirname(path), "tamer_h.pt")
+        has_tamer = os.path.isfile(source["tamer_path"])
+        source["tamer_policy"] = load_tamer(source["tamer_path"]) if has_tamer else None
+        sources.append(source)
+    return sources
+
+
+def reward_for(source: dict, reward_source: str, next_cell: np.ndarray) -> dict:
+    """The reward the agents train on: Eq. 3 on this maze's s' (network), or the saved plain-maze table."""
+    if reward_source == "table":
+        return {"table": source["table"], "next_cell": None}
+    meta = source["meta"]
+    table = transition_reward_table(source["network"], next_cell, float(meta["gamma"]), float(meta["temperature"]))
+    if not np.isfinite(table).all():
+        raise ValueError(f"the recovered reward of {source['path']} contains NaN or inf")
+    return {"table": table, "next_cell": next_cell}
 
 
 def parse_args() -> Args:
@@ -519,9 +719,10 @@ if __name__ == "__main__":
     try:
         args = parse_args()
         check_args(args)
-        source = resolve_source(args)
+        sources = resolve_sources(args)
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
-    summary = main(args, source)
-    sys.exit(130 if summary["status"] == "interrupted" else 0)
+    summary = main(args, sources)
+    if summary["status"] == "interrupted":
+        sys.exit(143 if summary.get("signal") == "SIGTERM" else 130)

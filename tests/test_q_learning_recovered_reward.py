@@ -1,8 +1,13 @@
 import glob
 import json
+import math
 import os
 import runpy
+import selectors
+import signal
+import subprocess
 import sys
+import time
 
 import gymnasium as gym
 import numpy as np
@@ -14,8 +19,10 @@ import q_learning_recovered_reward as qrr
 
 SCRIPT = "q_learning_recovered_reward.py"
 SCRIPT_PATH = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), SCRIPT)
-GRIDWORLD_TINY = ["--tamer-total-timesteps", "2000", "--tamer-learning-starts", "500", "--sleep-gradient-steps", "200",
+GRIDWORLD_TINY = ["--tamer-total-timesteps", "1000", "--tamer-learning-starts", "500", "--sleep-gradient-steps", "100",
                   "--eval-frequency", "500", "--sleep-eval-frequency", "100"]  # fmt: skip
+WALL, PLAIN = g.transition_table("wall"), g.transition_table("plain")
+UP, LEFT = 0, 2
 
 
 def env_reward_table(variant: str) -> np.ndarray:
@@ -27,12 +34,28 @@ def shaped_reward_table(variant: str, gamma: float = 0.99) -> np.ndarray:
     """Potential-based shaping of the env reward with Phi = V*: the same optimal policy, a dense signal."""
     next_cell = g.transition_table(variant)
     v = g.optimal_q(variant, gamma).max(1)
-    not_done = next_cell != g.GOAL
-    return env_reward_table(variant) + gamma * not_done * v[next_cell] - v[:, None]
+    return env_reward_table(variant) + gamma * (next_cell != g.GOAL) * v[next_cell] - v[:, None]
 
 
-def save_table(path, table, env_id="KnoxStoneMaze-v0"):
-    torch.save({"reward": torch.as_tensor(table, dtype=torch.float32), "env_id": env_id, "gamma": 0.99}, path)
+def save_network(path, seed=0, obs_dim=30, **meta):
+    """A random 30-32-32-4 network in inform_dqn_gridworld.py's format (state_dict, kwargs, env_id, gamma, temp)."""
+    torch.manual_seed(seed)
+    net = qrr.QNetwork(obs_dim, 4)
+    meta = {"env_id": "KnoxStoneMaze-v0", "gamma": 0.99, "temperature": 0.1, **meta}
+    kwargs = {"obs_dim": obs_dim, "n_actions": 4, "hidden": 32}
+    torch.save({"state_dict": net.state_dict(), "kwargs": kwargs, **meta}, path)
+    return net
+
+
+def make_gridworld_run(path, seed=0):
+    """A directory shaped like a gridworld run: inform_q.pt, tamer_h.pt and the plain-maze recovered_reward.pt."""
+    os.makedirs(path, exist_ok=True)
+    net = save_network(os.path.join(path, "inform_q.pt"), seed)
+    save_network(os.path.join(path, "tamer_h.pt"), seed + 100, gamma=None, temperature=None)
+    table = qrr.transition_reward_table(net, PLAIN, 0.99, 0.1)
+    torch.save({"reward": torch.as_tensor(table, dtype=torch.float32), "env_id": "KnoxStoneMaze-v0", "gamma": 0.99,
+                "temperature": 0.1}, os.path.join(path, "recovered_reward.pt"))  # fmt: skip
+    return net
 
 
 def args_for(**overrides) -> qrr.Args:
@@ -41,160 +64,265 @@ def args_for(**overrides) -> qrr.Args:
     return args
 
 
-# the pieces -------------------------------------------------------------------------------------------------------
-@pytest.mark.parametrize(
-    "variant, table_fn, episodes",
-    [("wall", env_reward_table, 300), ("wall", shaped_reward_table, 40), ("plain", shaped_reward_table, 40)],
-)
-def test_q_learning_on_a_known_good_reward_reaches_the_optimum(variant, table_fn, episodes):
+# Eq. 3 on the transition actually made -----------------------------------------------------------------------------
+def test_blocked_move_uses_s_prime_equal_s_by_hand():
+    torch.manual_seed(3)
+    net = qrr.QNetwork(30, 4)
+    with torch.no_grad():
+        q = net(torch.eye(30)).double().numpy()
+    gamma, temp = 0.99, 0.1
+    v = [temp * math.log(sum(math.exp(x / temp) for x in q[s])) for s in range(30)]  # soft value, written out
+    wall = qrr.transition_reward_table(net, WALL, gamma, temp)
+    plain = qrr.transition_reward_table(net, PLAIN, gamma, temp)
+    assert WALL[18, UP] == 18 and PLAIN[18, UP] == 13  # the new wall blocks 18 -> 13
+    assert wall[18, UP] == pytest.approx(q[18, UP] - gamma * v[18], abs=1e-5)  # s' = s
+    assert plain[18, UP] == pytest.approx(q[18, UP] - gamma * v[13], abs=1e-5)
+    assert wall[18, LEFT] == pytest.approx(q[18, LEFT] - gamma * v[17], abs=1e-5) == plain[18, LEFT]
+    assert wall[10, UP] == pytest.approx(q[10, UP], abs=1e-6)  # entering G terminates: no V(s') term
+    assert wall[4, UP] == pytest.approx(q[4, UP] - gamma * v[4], abs=1e-5)  # the border: s' = s as well
+    # the batch form (one transition at a time) agrees with the table
+    eye = torch.eye(30)
+    one = qrr.recovered_reward(net, eye[18], torch.tensor(UP), eye[18], torch.tensor(0.0), gamma, temp)
+    assert float(one) == pytest.approx(wall[18, UP], abs=1e-6)
+
+
+def test_the_network_reward_on_the_plain_maze_is_the_saved_table(tmp_path):
+    net = make_gridworld_run(tmp_path / "run")
+    saved, _ = qrr.load_reward_table(str(tmp_path / "run" / "recovered_reward.pt"))
+    assert np.allclose(qrr.transition_reward_table(net, PLAIN, 0.99, 0.1), saved, atol=1e-6)
+    (source,) = qrr.resolve_sources(args_for(reward_path=(str(tmp_path / "run"),)))
+    assert np.array_equal(source["reward"]["next_cell"], WALL)  # default --env-id: the wall maze's s'
+    assert not np.allclose(source["reward"]["table"], saved)
+
+
+# the tabular agents ------------------------------------------------------------------------------------------------
+def test_td_target_sampled_and_max():
+    q = np.zeros((30, 4))
+    q[7] = [1.0, -2.0, 3.0, 0.5]
+    rng = np.random.default_rng(0)
+    assert qrr.td_target(q, 0.5, 7, True, "max", 0.9, 0.05, rng) == 0.5  # no bootstrap past G
+    assert qrr.td_target(q, 0.5, 7, True, "sampled", 0.9, 0.05, rng) == 0.5
+    assert qrr.td_target(q, 0.5, 7, False, "max", 0.9, 1.0, rng) == pytest.approx(0.5 + 0.9 * 3.0)
+    assert qrr.td_target(q, 0.5, 7, False, "sampled", 0.9, 0.0, rng) == pytest.approx(0.5 + 0.9 * 3.0)
+    sampled = {qrr.td_target(q, 0.0, 7, False, "sampled", 1.0, 1.0, rng) for _ in range(200)}
+    assert sampled == {1.0, -2.0, 3.0, 0.5}  # epsilon 1: every a' is drawn, the max is not assumed
+
+
+@pytest.mark.parametrize("bootstrap", ["sampled", "max"])
+@pytest.mark.parametrize("variant", ["wall", "plain"])
+def test_each_bootstrap_learns_a_known_good_reward(bootstrap, variant):
     env = gym.make("KnoxStoneMazeWall-v0" if variant == "wall" else "KnoxStoneMaze-v0")
     optimum = 25 if variant == "wall" else 19
-    run = qrr.q_learning(env, table_fn(variant), args_for(num_episodes=episodes), seed=0, variant=variant)
+    reward = {"table": shaped_reward_table(variant), "next_cell": g.transition_table(variant)}
+    run = qrr.train_agent(env, reward, args_for(num_episodes=40, bootstrap=bootstrap), seed=0, variant=variant)
     assert run["greedy"][-1] == optimum
-    steps, episodes_to = qrr.time_to_optimum(run, optimum)
-    assert np.isfinite(steps) and 1 <= episodes_to <= episodes
+    steps, episodes = qrr.stays_at_optimum(run, optimum)
+    assert np.isfinite(steps) and 1 <= episodes <= 40
     assert run["steps"][-1] == run["lengths"].sum()
 
 
-def test_env_reward_arm_is_the_table_of_the_env_reward():
-    """reward_table None (the env's +1) and the same reward as a table give the same run for one seed."""
+def test_the_reward_must_be_the_one_of_the_transition_made():
+    """A reward computed for the plain maze's s' but claimed for the wall maze is caught at the first mismatch."""
+    reward = {"table": shaped_reward_table("plain"), "next_cell": PLAIN}
+    with pytest.raises(RuntimeError, match="computed for s'"):
+        qrr.train_agent(gym.make("KnoxStoneMazeWall-v0"), reward, args_for(num_episodes=50), seed=0, variant="wall")
+
+
+def test_env_arm_is_the_table_of_the_env_reward():
     args = args_for(num_episodes=30)
-    a = qrr.q_learning(gym.make("KnoxStoneMazeWall-v0"), None, args, seed=3, variant="wall")
-    b = qrr.q_learning(gym.make("KnoxStoneMazeWall-v0"), env_reward_table("wall"), args, seed=3, variant="wall")
+    a = qrr.train_agent(gym.make("KnoxStoneMazeWall-v0"), None, args, seed=3, variant="wall")
+    reward = {"table": env_reward_table("wall"), "next_cell": WALL}
+    b = qrr.train_agent(gym.make("KnoxStoneMazeWall-v0"), reward, args, seed=3, variant="wall")
     assert np.array_equal(a["lengths"], b["lengths"]) and np.array_equal(a["q"], b["q"])
 
 
 def test_epsilon_greedy_breaks_ties_at_random_and_is_seeded():
     rng = np.random.default_rng(0)
-    picks = {qrr.epsilon_greedy(np.zeros(4), 0.0, rng) for _ in range(200)}
-    assert picks == {0, 1, 2, 3}  # argmax-first would always say 0
+    assert {qrr.epsilon_greedy(np.zeros(4), 0.0, rng) for _ in range(200)} == {0, 1, 2, 3}
     assert {qrr.epsilon_greedy(np.array([0.0, 1.0, 1.0, -1.0]), 0.0, rng) for _ in range(200)} == {1, 2}
     one = [qrr.epsilon_greedy(np.zeros(4), 0.1, np.random.default_rng(5)) for _ in range(5)]
-    two = [qrr.epsilon_greedy(np.zeros(4), 0.1, np.random.default_rng(5)) for _ in range(5)]
-    assert one == two
+    assert one == [qrr.epsilon_greedy(np.zeros(4), 0.1, np.random.default_rng(5)) for _ in range(5)]
 
 
-def test_time_to_optimum_needs_the_optimum_kept_to_the_end():
-    run = {"greedy": np.array([200, 25, 200, 25, 25]), "steps": np.array([200, 300, 500, 530, 555])}
-    assert qrr.time_to_optimum(run, 25) == (530.0, 4.0)  # the first visit (episode 2) did not last
-    run["greedy"] = np.array([25, 25, 25, 25, 25])
-    assert qrr.time_to_optimum(run, 25) == (200.0, 1.0)
+def test_metrics_first_episode_and_stays():
+    run = {"lengths": np.array([200, 25, 60, 25, 25]), "greedy": np.array([200, 25, 200, 25, 25]),
+           "steps": np.array([200, 225, 285, 310, 335])}  # fmt: skip
+    assert qrr.first_optimum(run, 25) == (225.0, 2.0)
+    assert qrr.stays_at_optimum(run, 25) == (310.0, 4.0)  # the greedy visit at episode 2 did not last
     run["greedy"] = np.array([200, 25, 25, 25, 40])
-    steps, episodes = qrr.time_to_optimum(run, 25)
-    assert np.isnan(steps) and np.isnan(episodes)
+    assert all(np.isnan(qrr.stays_at_optimum(run, 25)))
+    run["lengths"] = np.array([200, 30, 60, 26, 27])
+    assert all(np.isnan(qrr.first_optimum(run, 25)))
+    assert qrr.censored_median(np.array([1.0, np.nan, 3.0])) == 3.0  # the agent that never reached ranks last
+    assert np.isinf(qrr.censored_median(np.array([1.0, np.nan, np.nan])))  # over half never: no median
 
 
-def test_reward_shape_report_on_known_tables():
-    report = qrr.reward_shape_report(env_reward_table("plain"), 0.99, 1e-3)
-    assert report["reward/density"] == pytest.approx(1 / (29 * 4))  # one non-zero entry: 10 up
-    assert report["reward/plain/policy_agreement"] == 1.0 and report["reward/plain/agreement_states"] == 29
-    # on the wall maze, cell 13 is cut off (no path to G), so 28 states count; the plain-maze reward (10 up) is still
-    # the wall maze's, so its optimal policy is the wall maze's
-    assert report["reward/wall/agreement_states"] == 28 and report["reward/wall/policy_agreement"] == 1.0
-    assert report["reward/wall/vi_episode_length"] == 25 and report["reward/wall/positive_self_loops"] == 0
-    # a reward for bumping into the new wall at 18 (up) is a loop the wall maze's optimal policy never leaves
-    table = shaped_reward_table("plain")
-    table[18, 0] = 1.0
-    report = qrr.reward_shape_report(table, 0.99, 1e-3)
-    assert report["reward/wall/positive_self_loops"] == 1 and report["reward/wall/vi_episode_length"] == 200
-
-
-def test_value_iteration_on_the_env_reward_is_optimal_q():
+# diagnosis ---------------------------------------------------------------------------------------------------------
+def test_value_iteration_and_the_loop_diagnosis():
     for variant in ("plain", "wall"):
         q = qrr.value_iteration(env_reward_table(variant), g.transition_table(variant), 0.99)
         assert np.allclose(q, g.optimal_q(variant, 0.99), atol=1e-8)
+    assert qrr.diagnose(env_reward_table("wall"), "wall", 0.99, 0.05)["max/loop"] == []
+    # every move costs 0.015, bumping at 18 (up) only 0.001: under the max the agent walks to 18 and stays there
+    table = np.full((30, 4), -0.015)
+    table[18, UP] = -0.001
+    d = qrr.diagnose(table, "wall", 0.99, 0.05)
+    assert d["max/episode_length"] == 200 and d["max/loop"] == [18]
+    assert d["max/loop_worth"] == pytest.approx(-0.001 / 0.01)  # staying forever: -0.1
+    assert d["max/loop_to_goal_steps"] == 9  # 18 -> 17 16 15 12 7 8 9 10 -> G: -0.13
+    assert d["max/loop_to_goal_return"] == pytest.approx(-0.015 * (1 - 0.99**9) / 0.01)
+    assert d["shortest_path/steps"] == 25
+    # under the epsilon-greedy fixed point (the sampled bootstrap's) staying also pays for the random moves at 18,
+    # forever, and that tips it here: the agent goes on to G
+    assert d["sampled/episode_length"] == 25
 
 
+# the script: in process --------------------------------------------------------------------------------------------
 def test_main_is_deterministic_and_never_reuses_a_run_dir(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    save_table(tmp_path / "r.pt", shaped_reward_table("plain"))
-    args = args_for(reward_path=str(tmp_path / "r.pt"), num_episodes=30, num_seeds=2, seed=4)
+    make_gridworld_run(tmp_path / "a", seed=1)
+    make_gridworld_run(tmp_path / "b", seed=2)
+    args = args_for(reward_path=("a", "b"), num_episodes=20, num_seeds=2, seed=4, bootstrap="max")
     summaries = []
     for _ in range(2):
-        summary = qrr.main(args, qrr.resolve_source(args))
+        summary = qrr.main(args, qrr.resolve_sources(args))
         summaries.append({k: v for k, v in summary.items() if not (k.startswith("time/") or k == "wall_time_s")})
     assert len(glob.glob("runs/*/summary.json")) == 2
     assert summaries[0] == summaries[1]
-    assert summaries[0]["seeds"] == [4, 5] and summaries[0]["eval/wall/tamer_episode_length"] is None
+    s = summaries[0]
+    assert s["seeds"] == [4, 5, 6, 7] and s["arms"] == ["max_bootstrap/recovered_network", "max_bootstrap/env"]
+    assert s["max_bootstrap/env/n_agents"] == 4 and len(s["max_bootstrap/env/steps_to_first_optimum_per_agent"]) == 4
+    assert len(s["eval/wall/tamer_episode_length_per_run"]) == 2 and s["bootstrap"] == "max"
+    (run_dir,) = glob.glob("runs/*")[:1]
+    with np.load(os.path.join(run_dir, "agents.npz")) as npz:
+        assert npz["max_bootstrap/env/lengths"].shape == (4, 20)
 
 
 def test_ctrl_c_keeps_what_finished(tmp_path, monkeypatch):
-    """Ctrl-C (KeyboardInterrupt) during the second arm: summary says interrupted, with the arm and seeds done."""
+    """Ctrl-C (KeyboardInterrupt) during the second arm: summary says interrupted, with the arm and agents done."""
     monkeypatch.chdir(tmp_path)
-    save_table(tmp_path / "r.pt", shaped_reward_table("plain"))
-    args = args_for(reward_path=str(tmp_path / "r.pt"), num_episodes=10, num_seeds=2, seed=1)
-    real, calls = qrr.q_learning, []
+    make_gridworld_run(tmp_path / "a")
+    args = args_for(reward_path=("a",), num_episodes=10, num_seeds=2, seed=1)
+    real, calls = qrr.train_agent, []
 
-    def q_learning_then_ctrl_c(*a, **kw):
+    def train_then_ctrl_c(*a, **kw):
         calls.append(1)
-        if len(calls) == 3:  # the first seed of the second arm
+        if len(calls) == 3:  # the first agent of the second arm
             raise KeyboardInterrupt
         return real(*a, **kw)
 
-    monkeypatch.setattr(qrr, "q_learning", q_learning_then_ctrl_c)
-    summary = qrr.main(args, qrr.resolve_source(args))
+    monkeypatch.setattr(qrr, "train_agent", train_then_ctrl_c)
+    summary = qrr.main(args, qrr.resolve_sources(args))
     (path,) = glob.glob("runs/*/summary.json")
-    assert json.load(open(path)) == summary
-    assert summary["status"] == "interrupted" and summary["phase"] == qrr.ARMS[1]
-    assert summary[f"qlearning/{qrr.ARMS[0]}/seeds_done"] == 2 and summary[f"qlearning/{qrr.ARMS[1]}/seeds_done"] == 0
+    assert json.load(open(path)) == json.loads(json.dumps(summary))
+    assert summary["status"] == "interrupted" and summary["phase"] == "sampled_bootstrap/env"
+    assert summary["signal"] == "SIGINT"
+    assert summary["sampled_bootstrap/recovered_network/agents_done"] == 2
+    assert summary["sampled_bootstrap/env/agents_done"] == 0
     assert not glob.glob("runs/*/fig6.png")
 
 
-# the script end to end --------------------------------------------------------------------------------------------
-SUMMARY_KEYS = [f"qlearning/{arm}/{m}_{s}" for arm in qrr.ARMS for m in qrr.METRICS for s in ("mean", "std")] + [
-    f"qlearning/{arm}/n_reached" for arm in qrr.ARMS
-] + ["optimum_episode_length", "eval/wall/tamer_episode_length", "reward/source", "reward/density",
-     "reward/plain/policy_agreement", "reward/wall/policy_agreement", "seed", "args", "status",
-     "wall_time_s"]  # fmt: skip
-
-
+# the script: real processes ----------------------------------------------------------------------------------------
 def test_smoke_on_a_real_gridworld_run(run_script):
-    """A tiny gridworld run writes the table; without --reward-path the script finds it, says so, and runs."""
+    """A tiny gridworld run; without --reward-path the script finds it, says so, and runs on its network."""
     assert run_script("inform_dqn_gridworld.py", "--seed", "2", *GRIDWORLD_TINY).returncode == 0
     (gridworld_dir,) = glob.glob(os.path.join(run_script.cwd, "runs", "*"))
     result = run_script(SCRIPT, "--num-episodes", "15", "--num-seeds", "2", "--seed", "3")
     assert result.returncode == 0, result.stderr
-    assert "reward table:" in result.stdout and os.path.basename(gridworld_dir) in result.stdout
-    (run_dir,) = glob.glob(
-        os.path.join(run_script.cwd, "runs", "KnoxStoneMazeWall-v0__q_learning_recovered_reward__3__*")
-    )
+    assert "gridworld run:" in result.stdout and os.path.basename(gridworld_dir) in result.stdout
+    (run_dir,) = glob.glob(os.path.join(run_script.cwd, "runs", "KnoxStoneMazeWall-v0__q_learning_recovered_reward_*"))
     summary = json.load(open(os.path.join(run_dir, "summary.json")))
-    assert set(SUMMARY_KEYS) <= set(summary), set(SUMMARY_KEYS) - set(summary)
+    arm = "sampled_bootstrap/recovered_network"
+    keys = [f"{arm}/n_first_optimum", f"{arm}/steps_to_stay_optimum_median", "sampled_bootstrap/env/n_agents",
+            f"{arm}/greedy_optimal_fraction_mean", "diagnosis/max/episode_length_per_run", "bootstrap_rule",
+            "eval/wall/tamer_episode_length"]  # fmt: skip
+    assert set(keys) <= set(summary), set(keys) - set(summary)
     assert summary["status"] == "completed" and summary["optimum_episode_length"] == 25
-    assert os.path.samefile(summary["reward/source"], os.path.join(gridworld_dir, "recovered_reward.pt"))
-    # the TAMER baseline is the saved network's greedy length on the wall maze
+    assert os.path.samefile(summary["reward/paths"][0], os.path.join(gridworld_dir, "inform_q.pt"))
     ckpt = torch.load(os.path.join(gridworld_dir, "tamer_h.pt"), weights_only=True)
     net = qrr.QNetwork(**ckpt["kwargs"])
     net.load_state_dict(ckpt["state_dict"])
     policy = net(torch.eye(30)).argmax(1).numpy()
-    assert summary["eval/wall/tamer_episode_length"] == g.greedy_episode_length(policy, "wall")
+    assert summary["eval/wall/tamer_episode_length_per_run"] == [g.greedy_episode_length(policy, "wall")]
     assert os.path.getsize(os.path.join(run_dir, "fig6.png")) > 10_000
 
-    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    acc = EventAccumulator(run_dir)
-    acc.Reload()
-    tags = set(acc.Tags()["scalars"])
-    for arm in qrr.ARMS:
-        assert f"qlearning/{arm}/episode_length" in tags
-        assert len(acc.Scalars(f"qlearning/{arm}/seed_3/episode_length")) == 15
+def read_until(proc, text: str, timeout: float) -> str:
+    """The child's stdout until `text` appears; on timeout kill the child and fail with what it wrote."""
+    out, deadline = b"", time.monotonic() + timeout
+    sel = selectors.DefaultSelector()
+    sel.register(proc.stdout, selectors.EVENT_READ)
+    while text.encode() not in out:
+        left = deadline - time.monotonic()
+        if left <= 0 or proc.poll() is not None:
+            proc.kill()
+            rest, err = proc.communicate(timeout=30)
+            pytest.fail(f"no {text!r} from the child (exit {proc.returncode}); stdout: {out + rest!r}; stderr: {err!r}")
+        if sel.select(timeout=min(left, 1.0)):
+            out += os.read(proc.stdout.fileno(), 4096)
+    return out.decode()
+
+
+@pytest.mark.parametrize("sig, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+def test_a_real_signal_keeps_what_finished(sig, code, tmp_path):
+    make_gridworld_run(tmp_path / "a")
+    proc = subprocess.Popen(
+        [sys.executable, SCRIPT_PATH, "--reward-path", "a", "--num-episodes", "1000000", "--bootstrap", "max"],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        preexec_fn=lambda: (
+            signal.signal(signal.SIGINT, signal.SIG_DFL),
+            signal.signal(signal.SIGTERM, signal.SIG_DFL),
+        ),
+    )
+    read_until(proc, "run directory:", timeout=120)
+    proc.send_signal(sig)
+    try:
+        _, err = proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate(timeout=30)
+        pytest.fail(f"the child did not stop within 60 s of {sig.name}; stdout: {out!r}; stderr: {err!r}")
+    assert proc.returncode == code, err
+    assert f"interrupted ({sig.name})" in err.decode() and "Traceback" not in err.decode()
+    (path,) = glob.glob(str(tmp_path / "runs" / "*" / "summary.json"))
+    summary = json.load(open(path))
+    assert summary["status"] == "interrupted" and summary["signal"] == sig.name
+    assert summary["phase"] == "max_bootstrap/recovered_network"
+    assert summary["max_bootstrap/recovered_network/agents_done"] == 0
 
 
 # bad input: one "error:" line, a non-zero exit, no run directory --------------------------------------------------
-def corrupt_file(path):
-    save_table(path, np.zeros((30, 4)))
+def corrupt_network(path):
+    save_network(path)
     data = open(path, "rb").read()
     open(path, "wb").write(data[: len(data) // 2])
 
 
-BAD_INPUTS = {
+def weights_that_do_not_fit(path):
+    save_network(path)
+    ckpt = torch.load(path, weights_only=True)
+    ckpt["kwargs"]["hidden"] = 16
+    torch.save(ckpt, path)
+
+
+BAD_NETWORKS = {
     "missing": (lambda p: None, "does not exist"),
-    "wrong shape": (lambda p: save_table(p, np.zeros((29, 4))), "shape"),
-    "corrupt": (corrupt_file, "cannot read"),
-    "not a checkpoint": (lambda p: open(p, "w").write('{"hello": 1}\n'), "cannot read"),
-    "no reward tensor": (lambda p: torch.save({"state_dict": {}, "kwargs": {}}, p), "'reward'"),
+    "corrupt": (corrupt_network, "cannot read INFORM network"),
+    "text file": (lambda p: open(p, "w").write('{"hello": 1}\n'), "cannot read INFORM network"),
     "a bare tensor": (lambda p: torch.save(torch.zeros(30, 4), p), "expected a dict"),
-    "NaN": (lambda p: save_table(p, np.full((30, 4), np.nan)), "NaN"),
+    "a reward table": (lambda p: torch.save({"reward": torch.zeros(30, 4)}, p), "needs 'state_dict' and 'kwargs'"),
+    "learnt on the wall maze": (lambda p: save_network(p, env_id="KnoxStoneMazeWall-v0"), "from the plain maze"),
+    "not a maze network": (lambda p: save_network(p, env_id="CartPole-v1"), "not for one of the mazes"),
+    "another maze's size": (lambda p: save_network(p, obs_dim=36), "not the maze's 30 cells"),
+    "no temperature": (lambda p: save_network(p, temperature=None), "'temperature' > 0"),
+    "weights do not fit": (weights_that_do_not_fit, "cannot rebuild the INFORM network"),
+}
+BAD_TABLES = {
+    "wrong shape": (lambda p: torch.save({"reward": torch.zeros(29, 4)}, p), "shape"),
+    "NaN": (lambda p: torch.save({"reward": torch.full((30, 4), float("nan"))}, p), "NaN"),
+    "no reward tensor": (lambda p: torch.save({"state_dict": {}, "kwargs": {}}, p), "'reward'"),
 }
 
 
@@ -205,40 +333,58 @@ def run_main_in_process(monkeypatch, capsys, *flags):
     return exit_info.value.code, capsys.readouterr().err
 
 
-@pytest.mark.parametrize("case", sorted(BAD_INPUTS))
-def test_bad_reward_file_is_one_line_and_leaves_nothing(case, tmp_path, monkeypatch, capsys):
-    monkeypatch.chdir(tmp_path)
-    make, message = BAD_INPUTS[case]
-    make(tmp_path / "r.pt")
-    code, err = run_main_in_process(monkeypatch, capsys, "--reward-path", str(tmp_path / "r.pt"))
+def assert_one_error_line(code, err, message, tmp_path):
     lines = err.strip().splitlines()
     assert code == 2 and len(lines) == 1 and lines[0].startswith("error:") and message in lines[0], err
     assert not os.path.exists(tmp_path / "runs")
+
+
+@pytest.mark.parametrize("case", sorted(BAD_NETWORKS))
+def test_bad_network_file_is_one_line_and_leaves_nothing(case, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    os.makedirs("run")
+    make, message = BAD_NETWORKS[case]
+    make("run/inform_q.pt")
+    code, err = run_main_in_process(monkeypatch, capsys, "--reward-path", "run")
+    assert_one_error_line(code, err, message, tmp_path)
+
+
+@pytest.mark.parametrize("case", sorted(BAD_TABLES))
+def test_bad_reward_table_is_one_line_and_leaves_nothing(case, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    make, message = BAD_TABLES[case]
+    make("r.pt")
+    code, err = run_main_in_process(monkeypatch, capsys, "--reward-source", "table", "--reward-path", "r.pt")
+    assert_one_error_line(code, err, message, tmp_path)
 
 
 @pytest.mark.parametrize(
     "flags, message",
-    [([], "no --reward-path given"), (["--num-seeds", "0"], "--num-seeds"), (["--epsilon", "2"], "--epsilon")],
+    [
+        ([], "no --reward-path given"),
+        (["--num-seeds", "0"], "--num-seeds"),
+        (["--epsilon", "2"], "--epsilon"),
+        (["--bootstrap", "mean"], "--bootstrap"),
+    ],
 )
 def test_bad_flags_are_one_line(flags, message, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     code, err = run_main_in_process(monkeypatch, capsys, *flags)
-    lines = err.strip().splitlines()
-    assert code == 2 and len(lines) == 1 and lines[0].startswith("error:") and message in lines[0], err
-    assert not os.path.exists(tmp_path / "runs")
+    assert_one_error_line(code, err, message, tmp_path)
 
 
 def test_corrupt_tamer_network_is_an_error_too(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
-    save_table(tmp_path / "recovered_reward.pt", np.zeros((30, 4)))
-    open(tmp_path / "tamer_h.pt", "w").write("not a network")
-    code, err = run_main_in_process(monkeypatch, capsys, "--reward-path", str(tmp_path))
-    assert code == 2 and err.startswith("error:") and "TAMER" in err and len(err.strip().splitlines()) == 1
+    make_gridworld_run(tmp_path / "run")
+    open(tmp_path / "run" / "tamer_h.pt", "w").write("not a network")
+    code, err = run_main_in_process(monkeypatch, capsys, "--reward-path", "run")
+    assert_one_error_line(code, err, "TAMER", tmp_path)
 
 
 def test_bad_input_in_a_real_process_has_no_traceback(run_script):
-    (run_script.cwd / "r.pt").write_bytes(b"\x80\x04garbage")
-    result = run_script(SCRIPT, "--reward-path", "r.pt")
+    os.makedirs(run_script.cwd / "run")
+    save_network(run_script.cwd / "run" / "inform_q.pt", env_id="KnoxStoneMazeWall-v0")
+    result = run_script(SCRIPT, "--reward-path", "run")
     lines = result.stderr.strip().splitlines()
     assert result.returncode == 2 and len(lines) == 1 and lines[0].startswith("error:"), result.stderr
-    assert "Traceback" not in result.stderr and not os.path.exists(run_script.cwd / "runs")
+    assert "plain maze" in lines[0] and not os.path.exists(run_script.cwd / "runs")
