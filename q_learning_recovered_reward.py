@@ -272,10 +272,10 @@ def diagnose(reward: np.ndarray, variant: str, gamma: float, epsilon: float) -> 
     """What each update's fixed point does under this reward on this maze: its greedy path from S, and, when that
     path loops, what the loop is worth (staying in it forever) against the shortest way from the loop to G."""
     next_cell = gridworld_env.transition_table(variant)
-    out = {}
+    out, q = {}, {}
     for name, eps in (("max", 0.0), ("sampled", epsilon)):
-        q = value_iteration(reward, next_cell, gamma, eps)
-        policy = q.argmax(1)
+        q[name] = value_iteration(reward, next_cell, gamma, eps)
+        policy = q[name].argmax(1)
         path = greedy_path(policy, next_cell)
         out[f"{name}/episode_length"] = gridworld_env.greedy_episode_length(policy, variant)
         out[f"{name}/path"] = path
@@ -285,6 +285,12 @@ def diagnose(reward: np.ndarray, variant: str, gamma: float, epsilon: float) -> 
             out[f"{name}/loop_worth"] = float(per_round / (1.0 - gamma ** len(loop)))
             ret, steps = shortest_path_return(reward, next_cell, gamma, loop[0])
             out[f"{name}/loop_to_goal_return"], out[f"{name}/loop_to_goal_steps"] = ret, steps
+    if out["max/loop"]:  # at the max policy's loop: staying against setting off on the shortest way to G
+        cell = out["max/loop"][0]
+        stay, go = int(q["max"][cell].argmax()), int(gridworld_env.optimal_q(variant, gamma)[cell].argmax())
+        for name in q:
+            out[f"{name}/q_stay_in_max_loop"] = float(q[name][cell, stay])
+            out[f"{name}/q_leave_max_loop_for_goal"] = float(q[name][cell, go])
     out["shortest_path/return"], out["shortest_path/steps"] = shortest_path_return(
         reward, next_cell, gamma, gridworld_env.START
     )
@@ -355,15 +361,8 @@ def main(args: Args, sources: list[dict]) -> dict:
         print(f"run directory: {run_dir}", flush=True)
         print(f"optimum on {args.env_id}: {optimum} steps; update: {BOOTSTRAP_RULES[args.bootstrap]}", flush=True)
         for source, tamer, diag in zip(sources, tamer_lengths, diagnoses, strict=True):
-            print(
-                f"{source['path']}: TAMER on {args.env_id} {tamer} steps | value iteration on the recovered reward: "
-                f"max bootstrap {diag['max/episode_length']} steps (V(S) {diag['max/v_start']:.3f}, loop "
-                f"{diag['max/loop']} worth {diag.get('max/loop_worth', float('nan')):.3f}, from it to G "
-                f"{diag.get('max/loop_to_goal_return', float('nan')):.3f}), sampled bootstrap "
-                f"{diag['sampled/episode_length']} steps | shortest path S to G: return "
-                f"{diag['shortest_path/return']:.3f}",
-                flush=True,
-            )
+            print(f"{source['path']}: TAMER's greedy policy on {args.env_id}: {tamer} steps", flush=True)
+            print(f"  value iteration on the recovered reward: {diagnosis_report(diag)}", flush=True)
         for arm, reward in arms.items():
             run_arm(args, arm, reward, seeds, variant, optimum, runs[arm], writer)
             times[f"time/{arm}_s"] = sum(run["seconds"] for run in runs[arm])
@@ -482,6 +481,24 @@ def arm_report(summary: dict, arm: str, optimum: int) -> str:
         f"{min(summary['args']['stability_window'], summary['args']['num_episodes'])} episodes | "
         f"final episode length {summary[f'{arm}/final_episode_length_mean']:.1f}"
     )
+
+
+def diagnosis_report(d: dict) -> str:
+    text = f"max bootstrap's fixed point {d['max/episode_length']} steps (V(S) {d['max/v_start']:.3f}"
+    if d["max/loop"]:
+        cell = d["max/loop"][0]
+        text += (
+            f"; it loops at {d['max/loop']}, worth {d['max/loop_worth']:.3f} forever against "
+            f"{d['max/loop_to_goal_return']:.3f} for the {d['max/loop_to_goal_steps']} steps from {cell} to G"
+        )
+    text += f"), sampled bootstrap's {d['sampled/episode_length']} steps"
+    if d["max/loop"]:
+        text += (
+            f" (at {cell}: Q(stay) {d['sampled/q_stay_in_max_loop']:.3f}, Q(set off for G) "
+            f"{d['sampled/q_leave_max_loop_for_goal']:.3f}; under the max {d['max/q_stay_in_max_loop']:.3f} and "
+            f"{d['max/q_leave_max_loop_for_goal']:.3f})"
+        )
+    return text + f"; the shortest path S to G is worth {d['shortest_path/return']:.3f}"
 
 
 def nan_to_none(x: float):

@@ -175,6 +175,8 @@ def test_value_iteration_and_the_loop_diagnosis():
     # under the epsilon-greedy fixed point (the sampled bootstrap's) staying also pays for the random moves at 18,
     # forever, and that tips it here: the agent goes on to G
     assert d["sampled/episode_length"] == 25
+    assert d["max/q_stay_in_max_loop"] > d["max/q_leave_max_loop_for_goal"]
+    assert d["sampled/q_stay_in_max_loop"] < d["sampled/q_leave_max_loop_for_goal"]
 
 
 # the script: in process --------------------------------------------------------------------------------------------
