@@ -1,20 +1,17 @@
-"""INFORM on MuJoCo Pusher: SAC-style TAMER from a simulated teacher's yes/no feedback ("day"), then offline
-IQ-Learn on the remembered transitions ("sleep"), giving a far-sighted policy and a recovered reward.
+"""INFORM on MuJoCo Pusher: SAC-style TAMER learns from a simulated teacher's yes/no feedback ("day"), then offline
+IQ-Learn on the remembered transitions ("sleep") gives a far-sighted policy and a recovered reward.
 
-Reproduces the Pusher experiment of Tarakli & Di Nuovo, "Learning while Sleeping" (ICDL 2024): Algorithm 1,
-Fig. 3 (returns of TAMER, INFORM and the expert) and the obstacle robustness test. See SPEC.md sections 1, 2, 4,
-5, 8 and 9. The paper's fixed-start protocol is the default (every episode resets with the run's seed);
-`--random-starts` gives the standard task. The oracle is the shipped `oracles/{env_id}__sac_oracle.pt`
-(written by oracle_train.py) when it exists, a checkpoint named by `--oracle-path`, or a SAC agent trained here
-on the environment reward (`--train-oracle`).
+Tarakli & Di Nuovo, "Learning while Sleeping" (ICDL 2024): Algorithm 1, Fig. 3 and the obstacle robustness test; see
+SPEC.md sections 1, 2, 4, 5, 8 and 9. Every episode starts from the run's seed (the paper's protocol) unless
+--random-starts. The teacher is the shipped oracles/{env_id}__sac_oracle.pt (from oracle_train.py), --oracle-path, or
+a SAC agent trained here (--train-oracle). The algorithm reads top to bottom down to `main`; the checks, files and
+--evaluate come after it.
 
     python inform_sac_pusher.py --seed 1
 """
 
 import atexit
 import collections
-import contextlib
-import io
 import json
 import math
 import os
@@ -25,7 +22,8 @@ import sys
 import tempfile
 import time
 import xml.etree.ElementTree as ET
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
+from typing import Literal
 
 import gymnasium as gym
 import numpy as np
@@ -39,11 +37,10 @@ ENV_IDS = ("Pusher-v5", "Pusher-v4")
 POLICIES = ("oracle", "tamer", "inform")
 LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
 REPO_DIR = os.path.dirname(os.path.abspath(__file__))
-# the robustness test's three 3 cm cubes on the table (SPEC section 4)
-OBSTACLE_HALF_SIZE = 0.015
-OBSTACLE_POSITIONS = ((0.32, -0.20), (0.35, -0.23), (0.38, -0.26))  # the paper's (layout "paper")
-OBSTACLE_SPACING = 0.0424  # the paper's distance between neighbouring boxes, kept in the bisector layout
-OBSTACLE_Z = -0.325
+# the robustness test's three 3 cm cubes on the table (SPEC section 4): the paper's positions (layout "paper"), the
+# paper's distance between neighbouring boxes (kept by layout "bisector"), their half-size and height
+OBSTACLE_POSITIONS = ((0.32, -0.20), (0.35, -0.23), (0.38, -0.26))
+OBSTACLE_SPACING, OBSTACLE_HALF_SIZE, OBSTACLE_Z = 0.0424, 0.015, -0.325
 OBSTACLE_LAYOUTS = ("bisector", "paper")
 
 
@@ -101,8 +98,8 @@ class Args:
     """random-action steps before H and the actor are trained"""
     tamer_batch_size: int = 256
     """batch size of the H regression and the actor update"""
-    tamer_q_lr: float = 1e-3
-    """learning rate of the twin feedback models H"""
+    tamer_h_lr: float = 1e-3
+    """learning rate of the twin feedback models H (and of TAMER's entropy coefficient)"""
     tamer_policy_lr: float = 3e-4
     """learning rate of the TAMER actor"""
     tamer_policy_frequency: int = 1
@@ -155,195 +152,65 @@ class Args:
     """episodes of each evaluation during the phases"""
     obstacle_episodes: int = 100
     """episodes per policy on the obstacle variant, all from the run's initial state, sampled actions"""
-    obstacle_layout: str = "bisector"
-    """bisector: the boxes on the perpendicular bisector of the run's object start and the goal, the middle one
-    on the straight path (SPEC section 4); paper: the paper's three fixed coordinates (on the path for reset seed 0)"""
+    obstacle_layout: Literal["bisector", "paper"] = "bisector"
+    """bisector: on the bisector of the object's start and the goal, the middle box on the path; paper: the paper's"""
     authors_test_episodes: int = 100
     """episodes of the authors' test: sampled actions from the run's initial state (eval/authors_test/...)"""
     log_frequency: int = 1000
     """steps between scalar logs (losses, SPS, feedback)"""
     evaluate: str | None = None
-    """re-evaluate a saved tamer_actor.pt, inform_actor.pt or oracle checkpoint (plain env and obstacle test,
-    --eval-episodes, --obstacle-episodes), print the metrics as JSON, train and write nothing"""
+    """re-evaluate a saved tamer_actor.pt, inform_actor.pt or oracle (and the obstacle test); print JSON, no run"""
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# argument and checkpoint validation: everything is checked before anything is created
+# environments: Pusher, and Pusher with the robustness test's boxes
 
 
-def mujoco_major() -> int:
-    import mujoco
+def make_env(env_id: str, seed: int, obstacles=None) -> gym.Env:
+    """Plain Pusher, or with boxes at the xy `obstacles` (built at run time from the installed model)."""
+    if obstacles is None:
+        env = gym.make(env_id)
+    elif env_id == "Pusher-v5":
+        env = gym.make(env_id, xml_file=obstacle_xml(env_id, obstacles))
+    else:  # Pusher-v4 has no xml_file argument: same class, model file swapped at construction
+        from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
+        from gymnasium.envs.mujoco.pusher_v4 import PusherEnv
 
-    return int(mujoco.__version__.split(".")[0])
+        xml, space = obstacle_xml(env_id, obstacles), gym.spaces.Box(-np.inf, np.inf, (23,), np.float64)
 
+        class PusherObstacleV4(PusherEnv):
+            def __init__(self, **kwargs):
+                gym.utils.EzPickle.__init__(self, **kwargs)
+                MujocoEnv.__init__(self, xml, 5, observation_space=space, **kwargs)
 
-def shipped_oracle_paths(env_id: str) -> list[str]:
-    """Where the shipped teacher may be: beside the script (a clone) and under the working directory (a copy)."""
-    name = os.path.join("oracles", f"{env_id}__sac_oracle.pt")
-    return list(dict.fromkeys([os.path.join(REPO_DIR, name), os.path.abspath(name)]))
-
-
-def env_shapes(env_id: str) -> tuple[int, int]:
-    env = gym.make(env_id)
-    shapes = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
-    env.close()
-    return shapes
-
-
-def read_checkpoint(path: str, flag: str, missing_hint: str = "") -> object:
-    """torch.load(weights_only=True): tensors and plain values only, never code; ValueError names flag and file."""
-    if not os.path.isfile(path):
-        raise ValueError(f"{flag} {path}: no such file{missing_hint}")
-    try:
-        return torch.load(path, weights_only=True, map_location="cpu")
-    except Exception as e:
-        raise ValueError(
-            f"{flag} {path}: cannot be read as a weights-only torch checkpoint ({type(e).__name__})"
-        ) from None
+        env = gym.wrappers.TimeLimit(PusherObstacleV4(), max_episode_steps=100)
+    env.action_space.seed(seed)
+    env.observation_space.seed(seed)
+    return env
 
 
-def load_oracle_checkpoint(path: str, env_id: str, obs_dim: int, act_dim: int) -> dict:
-    """Read an oracle_train.py checkpoint and check it fits this env; ValueError names the file."""
-    ckpt = read_checkpoint(path, "--oracle-path", " (train one with oracle_train.py)")
-    required = ("env_id", "kwargs", "actor_state_dict", "qf_state_dict", "action_low", "action_high")
-    if not isinstance(ckpt, dict) or any(k not in ckpt for k in required) or not isinstance(ckpt["kwargs"], dict):
-        raise ValueError(f"--oracle-path {path}: not an oracle checkpoint (needs keys {', '.join(required)})")
-    if ckpt["env_id"] != env_id:
-        raise ValueError(f"--oracle-path {path}: oracle was trained on {ckpt['env_id']}, this run uses {env_id}")
-    kw = ckpt["kwargs"]
-    if kw.get("obs_dim") != obs_dim or kw.get("act_dim") != act_dim:
-        raise ValueError(
-            f"--oracle-path {path}: shapes obs {kw.get('obs_dim')} act {kw.get('act_dim')} do not match "
-            f"{env_id} (obs {obs_dim}, act {act_dim})"
-        )
-    try:
-        Actor(obs_dim, act_dim, kw["hidden"]).load_state_dict(ckpt["actor_state_dict"])
-        QEnsemble(obs_dim, act_dim, kw["hidden"], n=2).load_state_dict(ckpt["qf_state_dict"])
-    except Exception as e:
-        raise ValueError(
-            f"--oracle-path {path}: networks do not load ({type(e).__name__}: {' '.join(str(e).split())[:100]})"
-        ) from None
-    return ckpt
+_OBSTACLE_DIR: list[str] = []  # one temporary directory per process, removed at exit
 
 
-def check_args(args: Args, load_oracle: bool = True) -> dict | None:
-    """Reject bad flag values before anything is written; returns the oracle checkpoint to use, if any."""
-    if args.env_id not in ENV_IDS:
-        raise ValueError(f"unknown --env-id {args.env_id!r}; this script trains on one of {', '.join(ENV_IDS)}")
-    if args.env_id == "Pusher-v4" and mujoco_major() >= 3:
-        raise ValueError(
-            "Pusher-v4 needs mujoco<3 (Gymnasium issue 950); use --env-id Pusher-v5, or run in a separate venv "
-            "with `pip install mujoco==2.3.7`"
-        )
-    if args.seed < 0:
-        raise ValueError(f"--seed must be >= 0 (numpy refuses negative seeds), got {args.seed}")
-    positive_ints = [
-        "num_threads",
-        "oracle_total_timesteps",
-        "oracle_batch_size",
-        "oracle_policy_frequency",
-        "hidden_size",
-        "tamer_total_timesteps",
-        "tamer_batch_size",
-        "tamer_policy_frequency",
-        "sleep_gradient_steps",
-        "sleep_batch_size",
-        "eval_episodes",
-        "eval_frequency",
-        "sleep_eval_frequency",
-        "periodic_eval_episodes",
-        "obstacle_episodes",
-        "authors_test_episodes",
-        "credit_window",
-        "log_frequency",
-    ]
-    for name in positive_ints:
-        if getattr(args, name) < 1:
-            raise ValueError(f"--{name.replace('_', '-')} must be a positive integer, got {getattr(args, name)}")
-    for name in ["feedback_alpha_start", "feedback_alpha_end", "sleep_gamma", "oracle_gamma"]:
-        if not 0.0 <= getattr(args, name) <= 1.0:
-            raise ValueError(f"--{name.replace('_', '-')} must be in [0, 1], got {getattr(args, name)}")
-    positive_floats = [
-        "oracle_q_lr",
-        "oracle_policy_lr",
-        "tamer_q_lr",
-        "tamer_policy_lr",
-        "sleep_q_lr",
-        "sleep_policy_lr",
-        "sleep_temperature",
-        "success_distance",
-    ]
-    for name in positive_floats:
-        if not 0.0 < getattr(args, name) < math.inf:
-            raise ValueError(f"--{name.replace('_', '-')} must be a finite number > 0, got {getattr(args, name)}")
-    if not 0.0 < args.tau <= 1.0:
-        raise ValueError(f"--tau must be in (0, 1], got {args.tau}")
-    for name in ("teacher_noise", "teacher_sparsity"):
-        if not 0.0 <= getattr(args, name) <= 1.0:
-            raise ValueError(f"--{name.replace('_', '-')} is a probability, in [0, 1]; got {getattr(args, name)}")
-    if args.teacher_delay < 0 or (args.feedback_budget is not None and args.feedback_budget < 0):
-        raise ValueError(
-            f"--teacher-delay ({args.teacher_delay}) and --feedback-budget ({args.feedback_budget}) must be >= 0"
-        )
-    if args.obstacle_layout not in OBSTACLE_LAYOUTS:
-        raise ValueError(f"--obstacle-layout must be one of {', '.join(OBSTACLE_LAYOUTS)}; got {args.obstacle_layout}")
-    if not 0.0 <= args.sleep_chi2_coef < math.inf:
-        raise ValueError(f"--sleep-chi2-coef must be a finite number >= 0 (0 turns it off), got {args.sleep_chi2_coef}")
-    if not 1 <= args.tamer_learning_starts < args.tamer_total_timesteps:
-        raise ValueError(
-            f"--tamer-learning-starts ({args.tamer_learning_starts}) must be >= 1 and below "
-            f"--tamer-total-timesteps ({args.tamer_total_timesteps}), or H is never trained"
-        )
-    if args.tamer_batch_size > args.tamer_total_timesteps or args.sleep_batch_size > args.tamer_total_timesteps:
-        raise ValueError(
-            f"--tamer-batch-size ({args.tamer_batch_size}) and --sleep-batch-size ({args.sleep_batch_size}) "
-            f"must not exceed --tamer-total-timesteps ({args.tamer_total_timesteps}), the size of the buffer"
-        )
-    if not load_oracle:
-        return None
-    obs_dim, act_dim = env_shapes(args.env_id)
-    if args.oracle_path is not None and args.train_oracle:
-        raise ValueError("--oracle-path and --train-oracle exclude each other; pass one of them")
-    path = args.oracle_path
-    if path is None and not args.train_oracle:
-        path = next((p for p in shipped_oracle_paths(args.env_id) if os.path.isfile(p)), None)
-        if path is None:  # a copied script: say so before an hour of training starts
-            print(
-                f"[oracle] no shipped teacher found (looked for {' and '.join(shipped_oracle_paths(args.env_id))}); "
-                f"training one here for {args.oracle_total_timesteps} env steps, about "
-                f"{args.oracle_total_timesteps / 100 / 60:.0f} min on one core at ~100 steps/s. To skip this, pass "
-                "--oracle-path PATH (a checkpoint of oracle_train.py, e.g. the repo's oracles/), or --train-oracle to "
-                "silence this note",
-                file=sys.stderr,
-                flush=True,
-            )
-    if path is not None:
-        ckpt = load_oracle_checkpoint(path, args.env_id, obs_dim, act_dim)
-        ckpt["path"] = path
-        return ckpt
-    if args.oracle_batch_size > args.oracle_total_timesteps:
-        raise ValueError(
-            f"--oracle-batch-size ({args.oracle_batch_size}) exceeds --oracle-total-timesteps "
-            f"({args.oracle_total_timesteps})"
-        )
-    if not 1 <= args.oracle_learning_starts < args.oracle_total_timesteps:
-        raise ValueError(
-            f"--oracle-learning-starts ({args.oracle_learning_starts}) must be >= 1 and below "
-            f"--oracle-total-timesteps ({args.oracle_total_timesteps})"
-        )
-    return None
-
-
-# ---------------------------------------------------------------------------------------------------------------
-# environments
-
-
-def pusher_xml_path(env_id: str) -> str:
-    """The Pusher model file of the installed Gymnasium (never modified: the obstacle variant is a copy)."""
+def obstacle_xml(env_id: str, positions) -> str:
+    """Pusher's own model (never modified) plus the boxes, written to a file that outlives the env's construction
+    (EzPickle re-creates the env from it); returns its path."""
     import gymnasium.envs.mujoco as gym_mujoco
 
     name = "pusher_v5.xml" if env_id == "Pusher-v5" else "pusher.xml"
-    return os.path.join(os.path.dirname(gym_mujoco.__file__), "assets", name)
+    tree, h = ET.parse(os.path.join(os.path.dirname(gym_mujoco.__file__), "assets", name)), OBSTACLE_HALF_SIZE
+    for i, (x, y) in enumerate(positions):
+        ET.SubElement(tree.getroot().find("worldbody"), "geom", {
+            "name": f"obstacle_{i}", "type": "box", "size": f"{h} {h} {h}", "pos": f"{x:.6f} {y:.6f} {OBSTACLE_Z}",
+            "contype": "1", "conaffinity": "1", "rgba": "0.2 0.2 0.8 1"})  # fmt: skip
+    if not _OBSTACLE_DIR:
+        _OBSTACLE_DIR.append(tempfile.mkdtemp(prefix="inform_pusher_obstacle_"))
+        atexit.register(shutil.rmtree, _OBSTACLE_DIR[0], True)
+    fd, path = tempfile.mkstemp(prefix=f"{env_id.lower().replace('-', '_')}_obstacle_", suffix=".xml",
+                                dir=_OBSTACLE_DIR[0])  # fmt: skip
+    os.close(fd)
+    tree.write(path)
+    return path
 
 
 def start_and_goal(env_id: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -365,79 +232,16 @@ def obstacle_positions(layout: str, start: np.ndarray, goal: np.ndarray) -> np.n
 
 
 def distance_to_segment(point: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
-    """Euclidean distance from `point` to the segment a-b."""
     t = np.clip(np.dot(point - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
     return float(np.linalg.norm(point - (a + t * (b - a))))
 
 
-def obstacle_xml(env_id: str, directory: str, positions) -> str:
-    """Write Pusher's own model plus the three boxes of the robustness test to `directory`; return the path."""
-    tree = ET.parse(pusher_xml_path(env_id))
-    worldbody = tree.getroot().find("worldbody")
-    h = OBSTACLE_HALF_SIZE
-    for i, (x, y) in enumerate(positions):
-        ET.SubElement(
-            worldbody,
-            "geom",
-            {
-                "name": f"obstacle_{i}",
-                "type": "box",
-                "size": f"{h} {h} {h}",
-                "pos": f"{x:.6f} {y:.6f} {OBSTACLE_Z}",
-                "contype": "1",
-                "conaffinity": "1",
-                "rgba": "0.2 0.2 0.8 1",
-            },
-        )
-    path = tempfile.mkstemp(prefix=f"{env_id.lower().replace('-', '_')}_obstacle_", suffix=".xml", dir=directory)
-    os.close(path[0])
-    tree.write(path[1])
-    return path[1]
-
-
-_OBSTACLE_DIR: list[str] = []
-
-
-def _obstacle_dir() -> str:
-    if not _OBSTACLE_DIR:
-        _OBSTACLE_DIR.append(tempfile.mkdtemp(prefix="inform_pusher_obstacle_"))
-        atexit.register(shutil.rmtree, _OBSTACLE_DIR[0], True)
-    return _OBSTACLE_DIR[0]
-
-
-def make_env(env_id: str, seed: int, obstacles=None) -> gym.Env:
-    """Plain Pusher, or with boxes at the xy `obstacles` (built at run time from the installed model)."""
-    if obstacles is not None:
-        # the model file must outlive construction (EzPickle re-creates the env from it), so it stays in a
-        # per-process temporary directory removed at exit
-        xml = obstacle_xml(env_id, _obstacle_dir(), obstacles)
-        if env_id == "Pusher-v5":
-            env = gym.make(env_id, xml_file=xml)
-        else:  # Pusher-v4 has no xml_file argument: same class, model file swapped at construction
-            from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
-            from gymnasium.envs.mujoco.pusher_v4 import PusherEnv
-
-            class PusherObstacleV4(PusherEnv):
-                def __init__(self, **kwargs):
-                    gym.utils.EzPickle.__init__(self, **kwargs)
-                    MujocoEnv.__init__(
-                        self, xml, 5, observation_space=gym.spaces.Box(-np.inf, np.inf, (23,), np.float64), **kwargs
-                    )
-
-            env = gym.wrappers.TimeLimit(PusherObstacleV4(), max_episode_steps=100)
-    else:
-        env = gym.make(env_id)
-    env.action_space.seed(seed)
-    env.observation_space.seed(seed)
-    return env
-
-
-def final_distance(info: dict) -> float:
+def final_distance(info: dict) -> float:  # the object-goal distance at the end of an episode
     return abs(float(info["reward_dist"]))
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# networks
+# networks: each is rebuilt from the `kwargs` saved beside its state_dict
 
 
 class BatchedLinear(nn.Module):
@@ -506,7 +310,8 @@ class Actor(nn.Module):
 
 def soft_update(target: nn.Module, source: nn.Module, tau: float) -> None:
     with torch.no_grad():
-        torch._foreach_lerp_(list(target.parameters()), list(source.parameters()), tau)
+        for param, target_param in zip(source.parameters(), target.parameters(), strict=True):
+            target_param.lerp_(param, tau)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -518,7 +323,15 @@ def oracle_feedback(q_star_sa: torch.Tensor, q_star_best: torch.Tensor, alpha: f
     return (q_star_sa >= q_star_best - (1.0 - alpha) * q_star_best.abs()).float()
 
 
-# ALGO LOGIC: the teacher. Eq. 4 is what a perfect teacher would answer; Teacher makes it a person (SPEC 10).
+def oracle_q(oracle_actor: Actor, oracle_qf: QEnsemble, obs: torch.Tensor, action: torch.Tensor):
+    """Q*(s, a) of the learner's action and Q*(s, a*) of the oracle's mean action a* (min of the twin critics)."""
+    _, _, a_star = oracle_actor.get_action(obs.unsqueeze(0))  # it draws a sample too: part of the seeded stream
+    q_star = oracle_qf(obs.expand(2, -1), torch.stack([action, a_star[0]])).min(0).values
+    return q_star[0], q_star[1]
+
+
+# ALGO LOGIC: the teacher (SPEC section 10). Eq. 4 says what a perfect teacher would answer; a person distorts it.
+# Copy this class verbatim into both INFORM scripts (CleanRL style: repeated across files, never within one).
 class Teacher:
     """A simulated person between Eq. 4 and the learner: noisy, sparse, late and limited (SPEC section 10).
 
@@ -572,7 +385,8 @@ def soft_value(q_net: QEnsemble, actor: Actor, obs: torch.Tensor, temperature: f
     return q_net(obs, action).min(0).values - temperature * log_prob
 
 
-def iq_loss(q_net, target_net, actor, obs, actions, next_obs, terminated, is_expert, gamma, temperature, chi2_coef):
+# ALGO LOGIC: the sleep loss. The maze script's signature and return, plus the actor that V(s) needs here.
+def iq_loss(q_net, target_net, obs, actions, next_obs, terminated, is_expert, gamma, temperature, chi2_coef, actor):
     # Eq. 2 (to minimise): y = (1 - done) gamma V_target(s');
     # L = -E_success[Q(s,a) - y] + E_all[V(s) - y] + chi2 * E_all[(Q(s,a) - y)^2]
     q_sa = q_net(obs, actions).min(0).values
@@ -582,7 +396,7 @@ def iq_loss(q_net, target_net, actor, obs, actions, next_obs, terminated, is_exp
     expert_term = -(q_sa - y)[is_expert].mean()
     value_term = (v_s - y).mean()
     chi2_term = chi2_coef * (q_sa - y).pow(2).mean()
-    return expert_term + value_term + chi2_term, expert_term.detach(), value_term.detach(), chi2_term.detach()
+    return expert_term + value_term + chi2_term, (expert_term, value_term, chi2_term)
 
 
 def recover_reward(q_sa: torch.Tensor, v_next: torch.Tensor, terminated: torch.Tensor, gamma: float) -> torch.Tensor:
@@ -596,62 +410,93 @@ def actor_loss(q_net: QEnsemble, actor: Actor, obs: torch.Tensor, temperature: t
     return (temperature * log_prob - q_net(obs, action).min(0).values).mean(), log_prob
 
 
+def update_actor(q_net, actor, obs, log_ent_coef, actor_optimizer, ent_coef_optimizer, target_entropy: float):
+    """One SAC actor step on min_i Q_i (the oracle's critics, or TAMER's H), then one of the autotuned entropy
+    coefficient exp(log_ent_coef) towards `target_entropy`."""
+    pi_loss, logp = actor_loss(q_net, actor, obs, log_ent_coef.detach().exp())
+    actor_optimizer.zero_grad(set_to_none=True)
+    pi_loss.backward()
+    actor_optimizer.step()
+    q_net.zero_grad(set_to_none=True)  # the actor loss left gradients on the critic
+    ent_coef_loss = (-log_ent_coef.exp() * (logp.detach() + target_entropy)).mean()
+    ent_coef_optimizer.zero_grad(set_to_none=True)
+    ent_coef_loss.backward()
+    ent_coef_optimizer.step()
+
+
 class RecoveredReward:
     """The reward INFORM recovers (Eq. 3), imitation-style: reward(obs, action, next_obs, terminated) -> array.
-
     V(s') is averaged over `samples` actions drawn with a fixed generator, so the reward is deterministic."""
 
     def __init__(self, q_net: QEnsemble, actor: Actor, gamma: float, temperature: float, samples: int = 16):
-        self.q_net, self.actor = q_net, actor
-        self.gamma, self.temperature, self.samples = gamma, temperature, samples
+        self.q_net, self.actor, self.gamma, self.temperature, self.samples = q_net, actor, gamma, temperature, samples
 
     @classmethod
-    def load(cls, run_dir: str, samples: int = 16) -> "RecoveredReward":
+    def load(cls, run_dir: str, samples: int = 16) -> "RecoveredReward":  # from a run's inform_critic.pt and actor
         critic = torch.load(os.path.join(run_dir, "inform_critic.pt"), weights_only=True)
-        actor_ckpt = torch.load(os.path.join(run_dir, "inform_actor.pt"), weights_only=True)
         q_net = QEnsemble(**critic["kwargs"])
         q_net.load_state_dict(critic["state_dict"])
-        actor = Actor(
-            **actor_ckpt["kwargs"], action_low=actor_ckpt["action_low"], action_high=actor_ckpt["action_high"]
-        )
-        actor.load_state_dict(actor_ckpt["state_dict"])
+        actor = actor_from_checkpoint(torch.load(os.path.join(run_dir, "inform_actor.pt"), weights_only=True))
         return cls(q_net, actor, critic["gamma"], critic["temperature"], samples)
 
     @torch.no_grad()
     def __call__(self, obs, action, next_obs, terminated) -> np.ndarray:
         obs_t = torch.as_tensor(np.asarray(obs), dtype=torch.float32)
-        batched = obs_t.ndim == 2
-        obs_t = obs_t if batched else obs_t.unsqueeze(0)
+        obs_t = obs_t if obs_t.ndim == 2 else obs_t.unsqueeze(0)
         act_t = torch.as_tensor(np.asarray(action), dtype=torch.float32).reshape(obs_t.shape[0], -1)
         next_t = torch.as_tensor(np.asarray(next_obs), dtype=torch.float32).reshape(obs_t.shape)
         term_t = torch.as_tensor(np.asarray(terminated), dtype=torch.float32).reshape(-1)
         g = torch.Generator().manual_seed(0)
-        v_next = torch.stack(
-            [soft_value(self.q_net, self.actor, next_t, self.temperature, g) for _ in range(self.samples)]
-        ).mean(0)
-        q_sa = self.q_net(obs_t, act_t).min(0).values
-        return recover_reward(q_sa, v_next, term_t, self.gamma).numpy()
+        v_next = torch.stack([soft_value(self.q_net, self.actor, next_t, self.temperature, g)
+                              for _ in range(self.samples)]).mean(0)  # fmt: skip
+        return recover_reward(self.q_net(obs_t, act_t).min(0).values, v_next, term_t, self.gamma).numpy()
 
 
 class RecoveredRewardWrapper(gym.Wrapper):
-    """Replaces the environment reward with the recovered one; the original goes to info['env_reward']."""
+    """Any Gymnasium agent trains on the recovered reward; the env's own goes to info['env_reward']."""
 
     def __init__(self, env: gym.Env, reward_fn: RecoveredReward):
         super().__init__(env)
-        self.reward_fn = reward_fn
-        self._obs = None
+        self.reward_fn, self._obs = reward_fn, None
 
     def reset(self, **kwargs):
-        obs, info = self.env.reset(**kwargs)
-        self._obs = obs
-        return obs, info
+        self._obs, info = self.env.reset(**kwargs)
+        return self._obs, info
 
     def step(self, action):
         next_obs, reward, terminated, truncated, info = self.env.step(action)
-        info = {**info, "env_reward": reward}
-        new_reward = float(self.reward_fn(self._obs, action, next_obs, terminated)[0])
-        self._obs = next_obs
-        return next_obs, new_reward, terminated, truncated, info
+        new_reward, self._obs = float(self.reward_fn(self._obs, action, next_obs, terminated)[0]), next_obs
+        return next_obs, new_reward, terminated, truncated, {**info, "env_reward": reward}
+
+
+class ReplayBuffer:
+    """Every forward-phase transition (s, a, s', h, terminated), preallocated, and the success tag of its episode."""
+
+    def __init__(self, capacity: int, obs_dim: int, act_dim: int, device: torch.device):
+        self.obs = torch.zeros(capacity, obs_dim, device=device)
+        self.next_obs = torch.zeros(capacity, obs_dim, device=device)
+        self.actions = torch.zeros(capacity, act_dim, device=device)
+        self.feedback = torch.zeros(capacity, device=device)
+        self.terminated = torch.zeros(capacity, device=device)
+        self.success = torch.zeros(capacity, dtype=torch.bool, device=device)
+        self.episodes: list[tuple[int, int, float]] = []  # (first step, end step, final object-goal distance)
+        self.size = 0  # transitions stored (fewer than the capacity when the teacher's budget ends the day early)
+
+    def tag_episode(self, start: int, end: int, distance: float, success_distance: float) -> bool:
+        """Tag the whole trajectory at its end: a success if the object ended within `success_distance`."""
+        self.success[start:end] = distance < success_distance
+        self.episodes.append((start, end, distance))
+        return distance < success_distance
+
+    def expert_indices(self, fallback_fraction: float = 0.1) -> tuple[torch.Tensor, int]:
+        """The success set's transitions and 0; with no success, the transitions of the episodes that ended closest
+        to the goal and how many episodes those are."""
+        idx = self.success.nonzero().squeeze(-1)
+        if idx.numel() > 0:
+            return idx, 0
+        k = max(1, int(len(self.episodes) * fallback_fraction))
+        closest = sorted(self.episodes, key=lambda e: e[2])[:k]
+        return torch.cat([torch.arange(s, e, device=self.success.device) for s, e, _ in closest]), k
 
 
 @torch.no_grad()
@@ -663,52 +508,577 @@ def evaluate(actor: Actor, env: gym.Env, episodes: int, reset_seed, deterministi
         done, ep_return, info, path = False, 0.0, {}, [obs[17:19]]
         while not done:
             sampled, _, mean = actor.get_action(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0), generator)
-            action = (mean if deterministic else sampled)[0].numpy()
-            obs, reward, terminated, truncated, info = env.step(action)
-            ep_return += float(reward)
-            done = terminated or truncated
+            obs, reward, terminated, truncated, info = env.step((mean if deterministic else sampled)[0].numpy())
+            ep_return, done = ep_return + float(reward), terminated or truncated
             path.append(obs[17:19])
         returns.append(ep_return)
         distances.append(final_distance(info))
-        paths.append(np.array(path))
+        paths.append(np.array(path))  # the object's xy at every step
     distances = np.asarray(distances)
-    return {
-        "return": float(np.mean(returns)),
-        "final_distance": float(distances.mean()),
-        "final_distance_std": float(distances.std()),
-        "success_rate": float((distances < success_dist).mean()),
-        "distances": distances,
-        "returns": np.asarray(returns),
-        "paths": paths,  # the object's xy at every step of each episode
-    }
+    return {"return": float(np.mean(returns)), "final_distance": float(distances.mean()),
+            "final_distance_std": float(distances.std()), "success_rate": float((distances < success_dist).mean()),
+            "distances": distances, "returns": np.asarray(returns), "paths": paths}  # fmt: skip
 
 
-# ---------------------------------------------------------------------------------------------------------------
-# run bookkeeping
+class Evaluator:
+    """Evaluates a policy on the plain env with deterministic and sampled actions; logs and keeps eval/{name}_*.
+    Episodes start from the run's seed (fixed start) or from fresh seeds (`--random-starts`), the same each time."""
+
+    def __init__(self, args: Args, writer: SummaryWriter | None):
+        self.env = make_env(args.env_id, args.seed)
+        self.generator = torch.Generator().manual_seed(args.seed + 12345)  # sampled actions, off the training RNG
+        self.writer, self.seed, self.random_starts = writer, args.seed, args.random_starts
+        self.success_distance, self.seconds, self.final = args.success_distance, 0.0, {}  # final: latest of each tag
+
+    def reset_seed(self, episode: int) -> int:
+        return 1_000_000 + 1000 * self.seed + episode if self.random_starts else self.seed
+
+    def __call__(self, name: str, actor: Actor, step: int, episodes: int) -> dict:
+        t, results = time.time(), {}
+        for deterministic, suffix in ((True, ""), (False, "_sampled")):
+            res = evaluate(actor, self.env, episodes, self.reset_seed, deterministic, self.generator,
+                           self.success_distance)  # fmt: skip
+            results.update({f"eval/{name}_{k}{suffix}": res[k] for k in ("return", "final_distance", "success_rate")})
+        for tag, value in results.items():
+            _ = self.writer is not None and self.writer.add_scalar(tag, value, step)
+        self.final.update(results)
+        self.seconds += time.time() - t
+        return results
 
 
 class Progress:
-    """One line per ~5% of a phase: steps, SPS and ETA, plus whatever the phase reports."""
+    """One line per ~5% of a phase: steps, SPS (evaluations excluded) and ETA, plus whatever the phase reports."""
 
     def __init__(self, phase: str, total: int):
-        self.phase, self.total, self.start = phase, total, time.time()
-        self.every = max(total // 20, 1)
-        self.excluded = 0.0  # seconds spent in evaluations, not counted in SPS
+        self.phase, self.total, self.start, self.every = phase, total, time.time(), max(total // 20, 1)
+        self.excluded = 0.0  # seconds spent in evaluations
 
     def sps(self, step: int) -> float:
         return step / max(time.time() - self.start - self.excluded, 1e-9)
 
     def __call__(self, step: int, **info):
-        if step % self.every and step != self.total:
-            return
-        sps = self.sps(step)
-        eta = (self.total - step) / max(sps, 1e-9)
-        extra = "".join(f" | {k} {v:.4g}" if isinstance(v, float) else f" | {k} {v}" for k, v in info.items())
-        print(
-            f"[{self.phase}] {step}/{self.total} {100 * step // self.total}% | {sps:,.0f} SPS | "
-            f"ETA {int(eta // 60)}m{int(eta % 60):02d}s{extra}",
-            flush=True,
-        )
+        if step % self.every == 0 or step == self.total:
+            sps = self.sps(step)
+            eta = (self.total - step) / max(sps, 1e-9)
+            extra = "".join(f" | {k} {v:.4g}" if isinstance(v, float) else f" | {k} {v}" for k, v in info.items())
+            print(f"[{self.phase}] {step}/{self.total} {100 * step // self.total}% | {sps:,.0f} SPS | "
+                  f"ETA {int(eta // 60)}m{int(eta % 60):02d}s{extra}", flush=True)  # fmt: skip
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# the oracle: SAC on the environment reward (oracle_train.py runs the same SAC; a test keeps the two identical)
+
+
+def train_oracle(args: Args, writer: SummaryWriter, device: torch.device):
+    env = make_env(args.env_id, args.seed)
+    obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
+    actor = Actor(obs_dim, act_dim, args.hidden_size, env.action_space.low, env.action_space.high).to(device)
+    qf = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
+    qf_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
+    qf_target.load_state_dict(qf.state_dict())
+    q_optimizer = torch.optim.Adam(qf.parameters(), lr=args.oracle_q_lr)
+    actor_optimizer = torch.optim.Adam(actor.parameters(), lr=args.oracle_policy_lr)
+    log_ent_coef = torch.zeros(1, device=device, requires_grad=True)  # SAC's entropy coefficient, autotuned
+    ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.oracle_q_lr)
+    n = args.oracle_total_timesteps
+    b_obs, b_next = torch.zeros(n, obs_dim, device=device), torch.zeros(n, obs_dim, device=device)
+    b_act, b_rew, b_term = torch.zeros(n, act_dim, device=device), torch.zeros(n, device=device), torch.zeros(n)
+    progress, reset_seed = Progress("oracle", n), None if args.oracle_random_starts else args.seed
+    obs, _ = env.reset(seed=args.seed)
+    obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
+    ep_return, last_return = 0.0, float("nan")
+    for step in range(n):
+        if step < args.oracle_learning_starts:
+            action = env.action_space.sample()
+        else:
+            with torch.no_grad():
+                action = actor.get_action(obs_t.unsqueeze(0))[0][0].cpu().numpy()
+        next_obs, reward, terminated, truncated, info = env.step(action)
+        next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
+        b_obs[step], b_next[step], b_act[step] = obs_t, next_t, torch.as_tensor(action)
+        b_rew[step], b_term[step] = float(reward), float(terminated)
+        ep_return += float(reward)
+        if terminated or truncated:
+            writer.add_scalar("oracle/episodic_return", ep_return, step)
+            writer.add_scalar("oracle/final_distance", final_distance(info), step)
+            last_return, ep_return = ep_return, 0.0
+            next_obs, _ = env.reset(seed=reset_seed)
+            next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
+        obs_t = next_t
+        if step >= args.oracle_learning_starts:
+            idx = torch.randint(0, step + 1, (args.oracle_batch_size,), device=device)
+            with torch.no_grad():
+                next_a, next_logp, _ = actor.get_action(b_next[idx])
+                v_next = qf_target(b_next[idx], next_a).min(0).values - log_ent_coef.detach().exp() * next_logp
+                target = b_rew[idx] + (1.0 - b_term[idx]) * args.oracle_gamma * v_next
+            q_loss = (qf(b_obs[idx], b_act[idx]) - target.unsqueeze(0)).pow(2).mean(-1).sum()
+            q_optimizer.zero_grad(set_to_none=True)
+            q_loss.backward()
+            q_optimizer.step()
+            if step % args.oracle_policy_frequency == 0:
+                update_actor(qf, actor, b_obs[idx], log_ent_coef, actor_optimizer, ent_coef_optimizer, -float(act_dim))
+            soft_update(qf_target, qf, args.tau)
+            if (step + 1) % args.log_frequency == 0:
+                writer.add_scalar("oracle/qf_loss", q_loss.item(), step + 1)
+                writer.add_scalar("oracle/SPS", progress.sps(step + 1), step + 1)
+        progress(step + 1, **{"return": last_return})
+    env.close()
+    return actor, qf, n / max(time.time() - progress.start, 1e-9)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# the phases of Algorithm 1
+
+
+class Diverged(Exception):
+    """The sleep loss became NaN or inf."""
+
+
+def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer, evaluator, writer, device):
+    """The day: SAC-style TAMER (Eq. 1, gamma = 0) on the teacher's yes/no feedback (Eq. 4), all remembered."""
+    obs_dim, act_dim = buffer.obs.shape[1], buffer.actions.shape[1]
+    h_net = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
+    tamer_actor = Actor(obs_dim, act_dim, args.hidden_size, env.action_space.low, env.action_space.high).to(device)
+    h_optimizer = torch.optim.Adam(h_net.parameters(), lr=args.tamer_h_lr)
+    actor_optimizer = torch.optim.Adam(tamer_actor.parameters(), lr=args.tamer_policy_lr)
+    log_ent_coef = torch.zeros(1, device=device, requires_grad=True)  # the actor's entropy coefficient, autotuned
+    ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.tamer_h_lr)
+    h_loss, n = torch.zeros((), device=device), args.tamer_total_timesteps
+    print(f"[tamer] {n} env steps, feedback alpha {args.feedback_alpha_start} -> {args.feedback_alpha_end}", flush=True)
+    teacher = Teacher(args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window,
+                      args.feedback_budget, seed=args.seed + 7919)  # fmt: skip
+    progress, reset_seed = Progress("tamer", n), None if args.random_starts else args.seed
+    obs, _ = env.reset(seed=args.seed)
+    obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
+    ep_start, ep_return, ep_length, last_return = 0, 0.0, 0, float("nan")
+    for step in range(n):
+        feedback_alpha = args.feedback_alpha_start + (args.feedback_alpha_end - args.feedback_alpha_start) * step / max(
+            n - 1, 1
+        )  # the teacher gets stricter
+        if step < args.tamer_learning_starts:
+            action_t = torch.as_tensor(env.action_space.sample(), device=device)
+        else:
+            with torch.no_grad():
+                action_t = tamer_actor.get_action(obs_t.unsqueeze(0))[0][0]
+        # ALGO LOGIC: the teacher watches (s, a): the perfect answer (Eq. 4), then the person's (Teacher)
+        taught = not teacher.gone  # after the budget is spent, TAMER has nothing to learn from
+        with torch.no_grad():
+            q_star_sa, q_star_best = oracle_q(oracle_actor, oracle_qf, obs_t, action_t)
+        h_star = oracle_feedback(q_star_sa, q_star_best, feedback_alpha).item() if taught else 0.0
+        buffer.feedback[teacher(step, h_star)] = 1.0
+        next_obs, reward, terminated, truncated, info = env.step(action_t.cpu().numpy())
+        next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
+        buffer.obs[step], buffer.next_obs[step], buffer.actions[step] = obs_t, next_t, action_t
+        buffer.terminated[step], buffer.size = float(terminated), step + 1
+        ep_return, ep_length = ep_return + float(reward), ep_length + 1
+        last_step = step == n - 1 or (teacher.gone and args.budget_ends_forward_phase)
+        if terminated or truncated or last_step:  # tag the trajectory; a cut-off last one by where it stands
+            success = buffer.tag_episode(ep_start, step + 1, final_distance(info), args.success_distance)
+            charts = {"episodic_return": ep_return, "episodic_length": ep_length,
+                      "final_distance": final_distance(info), "episode_success": float(success)}  # fmt: skip
+            for tag, value in charts.items():
+                writer.add_scalar(f"charts/{tag}", value, step + 1)
+            last_return, ep_return, ep_length, ep_start = ep_return, 0.0, 0, step + 1
+            next_obs, _ = env.reset(seed=reset_seed)
+            next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
+        obs_t = next_t
+
+        if step >= args.tamer_learning_starts and taught:
+            idx = torch.randint(0, step + 1, (args.tamer_batch_size,), device=device)
+            h_loss = tamer_loss(h_net, buffer.obs[idx], buffer.actions[idx], buffer.feedback[idx])
+            h_optimizer.zero_grad(set_to_none=True)
+            h_loss.backward()
+            h_optimizer.step()
+            if step % args.tamer_policy_frequency == 0:  # the actor maximises H, SAC-style
+                update_actor(h_net, tamer_actor, buffer.obs[idx], log_ent_coef, actor_optimizer, ent_coef_optimizer,
+                             -float(act_dim))  # fmt: skip
+        # TRY NOT TO MODIFY: logging and periodic evaluation
+        if (step + 1) % args.log_frequency == 0 or last_step:
+            scalars = {"losses/tamer_loss": h_loss.item(), "losses/tamer_entropy_coef": log_ent_coef.exp().item(),
+                       "feedback/positive": teacher.positives, "feedback/positive_rate": teacher.positives / (step + 1),
+                       "feedback/alpha": feedback_alpha, "charts/SPS": progress.sps(step + 1)}  # fmt: skip
+            for tag, value in scalars.items():
+                writer.add_scalar(tag, value, step + 1)
+        report = {"return": last_return}
+        if (step + 1) % args.eval_frequency == 0 or last_step:
+            t_eval = time.time()
+            report["eval return"] = evaluator("tamer", tamer_actor, step + 1, args.periodic_eval_episodes)[
+                "eval/tamer_return"]  # fmt: skip
+            progress.excluded += time.time() - t_eval
+        progress(step + 1, **report)
+        if last_step:
+            break
+
+    positives, n = teacher.positives, buffer.size
+    n_success = sum(d < args.success_distance for _, _, d in buffer.episodes)
+    print(f"[tamer] feedback +1 on {positives}/{n} steps ({positives / n:.1%}); "
+          f"{n_success}/{len(buffer.episodes)} episodes tagged success", flush=True)  # fmt: skip
+    return h_net, tamer_actor, {
+        "feedback/positive": positives, "feedback/perfect_positive": teacher.perfect_positives, "feedback/steps": n,
+        "feedback/positive_rate": positives / n, "sleep/success_episodes": int(n_success),
+        "sleep/episodes": len(buffer.episodes)}  # fmt: skip
+
+
+def sleep_phase(args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator, writer, device):
+    """The night: offline IQ-Learn (Eq. 2) on the buffer, the successful trajectories as the expert set."""
+    expert_idx, fallback_episodes = buffer.expert_indices()
+    if fallback_episodes:
+        print(f"[sleep] warning: no successful episode; using the {fallback_episodes} episodes that ended closest to "
+              "the goal as the expert set", flush=True)  # fmt: skip
+    print(f"[sleep] {expert_idx.numel()} expert transitions, {buffer.size} in the buffer", flush=True)
+    obs_dim, act_dim = buffer.obs.shape[1], buffer.actions.shape[1]
+    q_net = QEnsemble(obs_dim, act_dim, args.hidden_size, n=1).to(device)
+    q_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=1).to(device)
+    q_target.load_state_dict(q_net.state_dict())
+    low, high = tamer_actor.action_bias - tamer_actor.action_scale, tamer_actor.action_bias + tamer_actor.action_scale
+    inform_actor = Actor(obs_dim, act_dim, args.hidden_size, low, high).to(device)
+    if args.sleep_init_actor_from_tamer:
+        inform_actor.load_state_dict(tamer_actor.state_dict())
+    q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_q_lr)
+    inform_optimizer = torch.optim.Adam(inform_actor.parameters(), lr=args.sleep_policy_lr)
+
+    n, B, total = buffer.size, args.sleep_batch_size, args.sleep_gradient_steps
+    is_expert = torch.cat([torch.zeros(B, dtype=torch.bool), torch.ones(B, dtype=torch.bool)]).to(device)
+    names = ("losses/iq_loss", "losses/iq_expert_term", "losses/iq_value_term", "losses/iq_chi2_term",
+             "losses/inform_actor_loss")  # fmt: skip
+    stats = {"sleep/expert_transitions": int(expert_idx.numel()), "sleep/expert_fallback": int(fallback_episodes > 0)}
+    losses, progress = {}, Progress("sleep", total)
+    for step in range(total):
+        replay = torch.randint(0, n, (B,), device=device)
+        expert = expert_idx[torch.randint(0, expert_idx.numel(), (B,), device=device)]
+        idx = torch.cat([replay, expert])
+        loss, terms = iq_loss(q_net, q_target, buffer.obs[idx], buffer.actions[idx], buffer.next_obs[idx],
+                              buffer.terminated[idx], is_expert, args.sleep_gamma, args.sleep_temperature,
+                              args.sleep_chi2_coef, inform_actor)  # fmt: skip
+        q_optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        q_optimizer.step()
+        pi_loss, _ = actor_loss(q_net, inform_actor, buffer.obs[replay], args.sleep_temperature)
+        inform_optimizer.zero_grad(set_to_none=True)
+        pi_loss.backward()
+        inform_optimizer.step()
+        q_net.zero_grad(set_to_none=True)
+        soft_update(q_target, q_net, args.tau)
+
+        # TRY NOT TO MODIFY: logging (one host sync per 100 steps to catch divergence) and periodic evaluation
+        log_now = (step + 1) % args.log_frequency == 0 or step == total - 1
+        if log_now or (step + 1) % 100 == 0:
+            values = torch.stack([loss, *terms, pi_loss]).tolist()
+            if not all(map(math.isfinite, values)):
+                last = ", ".join(f"{k.split('/')[1]} {v:.4g}" for k, v in losses.items())
+                raise Diverged(f"the sleep loss diverged (NaN or inf) by gradient step {step + 1}; last finite losses: "
+                               f"{last or 'none yet'}; try a lower --sleep-q-lr or --sleep-policy-lr")  # fmt: skip
+            losses = dict(zip(names, values, strict=True))
+        for tag, value in (*losses.items(), ("sleep/SPS", progress.sps(step + 1))) if log_now else ():
+            writer.add_scalar(tag, value, step + 1)
+        if (step + 1) % args.sleep_eval_frequency == 0 or step == total - 1:
+            t_eval = time.time()
+            res = evaluator("inform", inform_actor, step + 1, args.periodic_eval_episodes)
+            progress.excluded += time.time() - t_eval
+            progress(step + 1, **{"iq_loss": losses.get("losses/iq_loss"), "eval return": res["eval/inform_return"]})
+        else:
+            progress(step + 1, iq_loss=losses.get("losses/iq_loss", float("nan")))
+    return q_net, inform_actor, {**stats, **losses}
+
+
+def recovered_reward_stats(args: Args, buffer: ReplayBuffer, q_net: QEnsemble, inform_actor: Actor) -> dict:
+    """Eq. 3 on the buffer: the mean recovered reward of success and of failure transitions, for the record."""
+    reward_fn = RecoveredReward(q_net, inform_actor, args.sleep_gamma, args.sleep_temperature, samples=4)
+    b = [x[: buffer.size].cpu().numpy() for x in (buffer.obs, buffer.actions, buffer.next_obs, buffer.terminated)]
+    r_all, succ = reward_fn(*b), buffer.success[: buffer.size].cpu().numpy()
+    return {
+        "sleep/recovered_reward_success_mean": float(r_all[succ].mean()) if succ.any() else float("nan"),
+        "sleep/recovered_reward_failure_mean": float(r_all[~succ].mean()) if (~succ).any() else float("nan"),
+    }
+
+
+def obstacle_test(args: Args, policies: dict, generator: torch.Generator) -> tuple[dict, dict, dict]:
+    """The robustness test: each policy on the obstacle variant, every episode from the run's initial state, sampled
+    actions. Returns the metrics, the final distances, and the object's xy path of one deterministic episode per
+    policy with and without the boxes (Fig. 5a)."""
+    start, goal = start_and_goal(args.env_id, args.seed)
+    boxes = obstacle_positions(args.obstacle_layout, start, goal)
+    results = {
+        "obstacle/box_positions": boxes.round(4).tolist(),
+        "obstacle/min_box_distance_to_path": min(distance_to_segment(b, start, goal) for b in boxes),
+    }
+    distances, paths = {}, {"boxes": boxes, "start": start, "goal": goal}
+    env, plain = make_env(args.env_id, args.seed, obstacles=boxes), make_env(args.env_id, args.seed)
+    at_start = lambda episode: args.seed  # noqa: E731
+    for name, actor in policies.items():
+        res = evaluate(actor, env, args.obstacle_episodes, at_start, False, generator, args.success_distance)
+        det = evaluate(actor, env, 1, at_start, True, generator, args.success_distance)
+        det_plain = evaluate(actor, plain, 1, at_start, True, torch.Generator(), args.success_distance)
+        paths[f"{name}_obstacle"], paths[f"{name}_plain"] = det["paths"][0], det_plain["paths"][0]
+        distances[name] = res["distances"]
+        for key in ("final_distance", "final_distance_std", "success_rate", "return"):
+            results[f"eval/obstacle/{name}_{key}"] = res[key]
+        results[f"eval/obstacle/{name}_final_distance_deterministic"] = det["final_distance"]
+    env.close()
+    plain.close()
+    return results, distances, paths
+
+
+def authors_test(args: Args, policies: dict, generator: torch.Generator) -> dict:
+    """The authors' test: sampled actions, every episode from the run's initial state, on the plain env."""
+    env, results = make_env(args.env_id, args.seed), {}
+    for name, actor in policies.items():
+        res = evaluate(actor, env, args.authors_test_episodes, lambda ep: args.seed, False, generator,
+                       args.success_distance)  # fmt: skip
+        for key in ("return", "final_distance", "success_rate"):
+            results[f"eval/authors_test/{name}_{key}"] = res[key]
+    env.close()
+    return results
+
+
+def main(args: Args, oracle_ckpt: dict | None) -> dict:
+    run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
+    run_start = time.time()
+    random.seed(args.seed)
+    np.random.seed(args.seed)
+    torch.manual_seed(args.seed)
+    torch.backends.cudnn.deterministic = args.torch_deterministic
+    if args.torch_deterministic:
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # CUDA matmuls refuse determinism without it
+    torch.use_deterministic_algorithms(args.torch_deterministic)
+    torch.set_num_threads(args.num_threads)
+    device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
+
+    received = stop_on_signals()  # SIGTERM (Slurm's cancel and time limit, kill) stops the run as Ctrl-C does
+    run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
+    writer = SummaryWriter(run_dir)
+    writer.add_text(
+        "hyperparameters",
+        "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
+    )
+    print(f"run dir: {run_dir}", flush=True)
+    env, evaluator = make_env(args.env_id, args.seed), Evaluator(args, writer)
+    obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
+    summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
+    status, phase, end_step = "completed", "oracle", args.tamer_total_timesteps + args.sleep_gradient_steps
+    try:
+        # ---- oracle: the simulated teacher (SPEC section 5)
+        t0 = time.time()
+        if oracle_ckpt is not None:
+            oracle_actor, oracle_qf = oracle_from_checkpoint(oracle_ckpt, device)
+            steps = oracle_ckpt.get("training_steps", "?")
+            print(f"[oracle] loaded {oracle_ckpt['path']} ({steps} SAC steps)", flush=True)
+        else:
+            print(f"[oracle] training SAC on the env reward for {args.oracle_total_timesteps} steps", flush=True)
+            oracle_actor, oracle_qf, summary["sps/oracle"] = train_oracle(args, writer, device)
+            if args.save_model:
+                save_oracle(f"{run_dir}/oracle.pt", args, oracle_actor, oracle_qf, env.action_space)
+        for p in (*oracle_actor.parameters(), *oracle_qf.parameters()):
+            p.requires_grad_(False)
+        summary["time/oracle_s"] = time.time() - t0
+        evaluator("oracle", oracle_actor, 0, args.periodic_eval_episodes)
+
+        # ---- forward phase ("day"): TAMER with simulated feedback, every transition remembered
+        phase, t0, eval_s0 = "tamer", time.time(), evaluator.seconds
+        buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, act_dim, device)
+        h_net, tamer_actor, stats = forward_phase(args, env, oracle_actor, oracle_qf, buffer, evaluator, writer, device)
+        summary.update(stats)
+        summary["time/tamer_s"] = time.time() - t0 - (evaluator.seconds - eval_s0)
+        summary["sps/tamer"] = summary["feedback/steps"] / max(summary["time/tamer_s"], 1e-9)
+        if args.save_model:
+            save_actor(f"{run_dir}/tamer_actor.pt", tamer_actor, env_id=args.env_id)
+            save_critic(f"{run_dir}/tamer_h.pt", h_net, obs_dim, act_dim, env_id=args.env_id)
+
+        # ---- sleep phase ("night"): offline IQ-Learn on the buffer, no environment steps
+        phase, t0, eval_s0 = "sleep", time.time(), evaluator.seconds
+        q_net, inform_actor, stats = sleep_phase(args, buffer, tamer_actor, evaluator, writer, device)
+        summary.update(stats)
+        summary["time/sleep_s"] = time.time() - t0 - (evaluator.seconds - eval_s0)
+        summary["sps/sleep"] = args.sleep_gradient_steps / max(summary["time/sleep_s"], 1e-9)
+        if args.save_model:
+            save_actor(f"{run_dir}/inform_actor.pt", inform_actor, env_id=args.env_id)
+            save_critic(f"{run_dir}/inform_critic.pt", q_net, obs_dim, act_dim, env_id=args.env_id,
+                        gamma=args.sleep_gamma, temperature=args.sleep_temperature)  # fmt: skip
+
+        # ---- the recovered reward (Eq. 3), then the final evaluation and the obstacle robustness test
+        phase = "reward"
+        summary.update(recovered_reward_stats(args, buffer, q_net, inform_actor))
+        phase, policies = "eval", {"oracle": oracle_actor, "tamer": tamer_actor, "inform": inform_actor}
+        print("[eval] final evaluation", flush=True)
+        for name, actor in policies.items():
+            evaluator(name, actor, end_step, args.eval_episodes)
+        t = time.time()
+        obstacle, distances, paths = obstacle_test(args, policies, evaluator.generator)
+        summary.update(obstacle)
+        np.savez(f"{run_dir}/obstacle_distances.npz", **distances)
+        np.savez(f"{run_dir}/obstacle_paths.npz", **paths)
+        summary.update(authors_test(args, policies, evaluator.generator))
+        for tag, value in summary.items():
+            if tag.startswith(("eval/obstacle/", "eval/authors_test/", "obstacle/min")):
+                writer.add_scalar(tag, value, end_step)
+        evaluator.seconds += time.time() - t
+    except KeyboardInterrupt:
+        status = "interrupted"
+        received.append("SIGINT")  # KeyboardInterrupt without our handler is Ctrl-C
+        print(f"interrupted ({received[0]}) during the {phase} phase; what finished is saved in {run_dir}",
+              file=sys.stderr)  # fmt: skip
+    except Diverged as e:
+        status = "diverged"
+        print(f"error: {e}", file=sys.stderr)
+
+    summary = {**evaluator.final, **summary, "time/eval_s": evaluator.seconds,
+               "oracle_path": oracle_ckpt["path"] if oracle_ckpt is not None else None,
+               "wall_time_s": time.time() - run_start, "seed": args.seed, "script": os.path.basename(__file__),
+               "status": status, "args": asdict(args)}  # fmt: skip
+    if status != "completed":
+        summary["phase"] = phase
+    if status == "interrupted":
+        summary["signal"] = received[0]
+    write_json_atomic(f"{run_dir}/summary.json", summary)
+    env.close()
+    evaluator.env.close()
+    writer.close()
+    print_results(summary, run_dir)
+    return summary
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# TRY NOT TO MODIFY: the armour. Checks before anything is written, checkpoints, files, signals, --evaluate
+
+
+class InputError(Exception):
+    """Bad input from the user: a flag value, a file. Reported as one line, before anything is written."""
+
+
+NON_NEGATIVE_INTS = ("seed", "teacher_delay", "feedback_budget")  # every other integer flag must be >= 1
+FLOAT_RANGES = {
+    "tau": "(0, 1]",
+    "sleep_chi2_coef": "[0, inf)",
+    **dict.fromkeys(
+        (
+            "feedback_alpha_start",
+            "feedback_alpha_end",
+            "sleep_gamma",
+            "oracle_gamma",
+            "teacher_noise",
+            "teacher_sparsity",
+        ),
+        "[0, 1]",
+    ),
+}
+# every other float flag (learning rates, temperature, success distance) must be in (0, inf)  # fmt: skip
+
+
+def check_args(args: Args) -> None:
+    """What tyro cannot know: the env id, ranges, flags that exclude each other. Raises InputError."""
+    if args.env_id not in ENV_IDS:
+        raise InputError(f"unknown --env-id {args.env_id!r}; this script trains on one of {', '.join(ENV_IDS)}")
+    if args.env_id == "Pusher-v4" and mujoco_major() >= 3:
+        raise InputError("Pusher-v4 needs mujoco<3 (Gymnasium issue 950); use --env-id Pusher-v5, or run in a "
+                         "separate venv with `pip install mujoco==2.3.7`")  # fmt: skip
+    for f in fields(args):
+        value, flag, low = getattr(args, f.name), "--" + f.name.replace("_", "-"), int(f.name not in NON_NEGATIVE_INTS)
+        if f.type in (int, int | None) and value is not None and value < low:
+            raise InputError(f"{flag} must be >= {low}, got {value}")
+        interval = FLOAT_RANGES.get(f.name, "(0, inf)") if f.type is float else None
+        if interval and not (
+            (value >= 0.0 if interval[0] == "[" else value > 0.0)  # NaN fails both tests
+            and (value <= 1.0 if interval.endswith("1]") else value < math.inf)
+        ):
+            raise InputError(f"{flag} must be in {interval}, got {value}")  # fmt: skip
+    if args.tamer_learning_starts >= args.tamer_total_timesteps:
+        raise InputError(f"--tamer-learning-starts ({args.tamer_learning_starts}) must be below "
+                         f"--tamer-total-timesteps ({args.tamer_total_timesteps}), or H is never trained")  # fmt: skip
+    if max(args.tamer_batch_size, args.sleep_batch_size) > args.tamer_total_timesteps:
+        raise InputError(f"--tamer-batch-size ({args.tamer_batch_size}) and --sleep-batch-size "
+                         f"({args.sleep_batch_size}) must not exceed --tamer-total-timesteps "
+                         f"({args.tamer_total_timesteps}), the size of the buffer")  # fmt: skip
+    if args.oracle_path is not None and args.train_oracle:
+        raise InputError("--oracle-path and --train-oracle exclude each other; pass one of them")
+
+
+def mujoco_major() -> int:
+    import mujoco
+
+    return int(mujoco.__version__.split(".")[0])
+
+
+def shipped_oracle_paths(env_id: str) -> list[str]:
+    """Where the shipped teacher may be: beside the script (a clone) and under the working directory (a copy)."""
+    name = os.path.join("oracles", f"{env_id}__sac_oracle.pt")
+    return list(dict.fromkeys([os.path.join(REPO_DIR, name), os.path.abspath(name)]))
+
+
+def load_oracle(args: Args) -> dict | None:
+    """The oracle checkpoint to use (--oracle-path, else the shipped one), or None to train one here."""
+    path = args.oracle_path
+    if path is None and not args.train_oracle:
+        path = next((p for p in shipped_oracle_paths(args.env_id) if os.path.isfile(p)), None)
+        if path is None:  # a copied script: say so before an hour of training starts
+            print(f"[oracle] no shipped teacher found (looked for {' and '.join(shipped_oracle_paths(args.env_id))}); "
+                  f"training one here for {args.oracle_total_timesteps} env steps, about "
+                  f"{args.oracle_total_timesteps / 100 / 60:.0f} min on one core at ~100 steps/s. To skip this, pass "
+                  "--oracle-path PATH (a checkpoint of oracle_train.py, e.g. the repo's oracles/), or --train-oracle "
+                  "to silence this note", file=sys.stderr, flush=True)  # fmt: skip
+    if path is not None:
+        return {**read_checkpoint(path, "--oracle-path", args.env_id), "path": path}
+    if args.oracle_batch_size > args.oracle_total_timesteps:
+        raise InputError(f"--oracle-batch-size ({args.oracle_batch_size}) exceeds --oracle-total-timesteps "
+                         f"({args.oracle_total_timesteps})")  # fmt: skip
+    if args.oracle_learning_starts >= args.oracle_total_timesteps:
+        raise InputError(f"--oracle-learning-starts ({args.oracle_learning_starts}) must be below "
+                         f"--oracle-total-timesteps ({args.oracle_total_timesteps})")  # fmt: skip
+    return None
+
+
+def env_shapes(env_id: str) -> tuple[int, int]:
+    env = gym.make(env_id)
+    shapes = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
+    env.close()
+    return shapes
+
+
+def read_checkpoint(path: str, flag: str, env_id: str) -> dict:
+    """An oracle (--oracle-path) or a saved actor (--evaluate: tamer_actor.pt, inform_actor.pt or an oracle) that fits
+    env_id, read with torch.load(weights_only=True): tensors and plain values only, never code. InputError otherwise."""
+    if not os.path.isfile(path):
+        hint = " (train one with oracle_train.py)" if flag == "--oracle-path" else ""
+        raise InputError(f"{flag} {path}: no such file{hint}")
+    try:
+        ckpt = torch.load(path, weights_only=True, map_location="cpu")
+    except Exception as e:
+        message = f"cannot be read as a weights-only torch checkpoint ({type(e).__name__})"
+        raise InputError(f"{flag} {path}: {message}") from None
+    oracle = flag == "--oracle-path"
+    networks = ("actor_state_dict", "qf_state_dict") if oracle else ("actor_state_dict" if "actor_state_dict" in
+                                                                        ckpt else "state_dict",)  # fmt: skip
+    required = ("env_id", "kwargs", *networks, "action_low", "action_high")
+    if not isinstance(ckpt, dict) or any(k not in ckpt for k in required) or not isinstance(ckpt["kwargs"], dict):
+        raise InputError(f"{flag} {path}: not an {'oracle' if oracle else 'actor'} checkpoint (needs keys "
+                         f"{', '.join(required)})")  # fmt: skip
+    if ckpt["env_id"] != env_id:
+        raise InputError(f"{flag} {path}: trained on {ckpt['env_id']}, not {env_id}; pass --env-id")
+    kw, (obs_dim, act_dim) = ckpt["kwargs"], env_shapes(env_id)
+    if (kw.get("obs_dim"), kw.get("act_dim")) != (obs_dim, act_dim):
+        raise InputError(f"{flag} {path}: shapes obs {kw.get('obs_dim')} act {kw.get('act_dim')} do not match "
+                         f"{env_id} (obs {obs_dim}, act {act_dim})")  # fmt: skip
+    try:
+        oracle_from_checkpoint(ckpt, torch.device("cpu")) if oracle else actor_from_checkpoint(ckpt)
+    except Exception as e:
+        raise InputError(f"{flag} {path}: the networks do not load ({type(e).__name__}: "
+                         f"{' '.join(str(e).split())[:100]})") from None  # fmt: skip
+    return ckpt
+
+
+def oracle_from_checkpoint(ckpt: dict, device: torch.device) -> tuple[Actor, QEnsemble]:
+    kw = ckpt["kwargs"]
+    actor = Actor(kw["obs_dim"], kw["act_dim"], kw["hidden"], ckpt["action_low"], ckpt["action_high"]).to(device)
+    actor.load_state_dict(ckpt["actor_state_dict"])
+    qf = QEnsemble(kw["obs_dim"], kw["act_dim"], kw["hidden"], n=2).to(device)
+    qf.load_state_dict(ckpt["qf_state_dict"])
+    return actor, qf
+
+
+def actor_from_checkpoint(ckpt: dict) -> Actor:  # a saved actor, or an oracle's
+    kw = ckpt["kwargs"]
+    actor = Actor(kw["obs_dim"], kw["act_dim"], kw["hidden"], ckpt["action_low"], ckpt["action_high"])
+    actor.load_state_dict(ckpt["actor_state_dict" if "actor_state_dict" in ckpt else "state_dict"])
+    return actor
 
 
 def make_run_dir(run_name: str) -> str:
@@ -743,601 +1113,59 @@ def state_dict_cpu(net: nn.Module) -> dict:
 
 def save_actor(path: str, actor: Actor, **extra) -> None:
     kwargs = {"obs_dim": actor.fc1.in_features, "act_dim": actor.fc_mean.out_features, "hidden": actor.fc1.out_features}
-    low = (actor.action_bias - actor.action_scale).cpu()
-    high = (actor.action_bias + actor.action_scale).cpu()
-    save_atomic(
-        {"state_dict": state_dict_cpu(actor), "kwargs": kwargs, "action_low": low, "action_high": high, **extra}, path
-    )
+    low, high = (actor.action_bias - actor.action_scale).cpu(), (actor.action_bias + actor.action_scale).cpu()
+    save_atomic({"state_dict": state_dict_cpu(actor), "kwargs": kwargs, "action_low": low, "action_high": high,
+                 **extra}, path)  # fmt: skip
 
 
-def save_critic(path: str, q_net: QEnsemble, **extra) -> None:
-    fc1 = q_net.fc1.weight
-    kwargs = {"obs_dim": None, "act_dim": None, "hidden": fc1.shape[2], "n": q_net.n}
-    kwargs.update(extra.pop("dims"))
+def save_critic(path: str, q_net: QEnsemble, obs_dim: int, act_dim: int, **extra) -> None:
+    kwargs = {"obs_dim": obs_dim, "act_dim": act_dim, "hidden": q_net.fc1.weight.shape[2], "n": q_net.n}
     save_atomic({"state_dict": state_dict_cpu(q_net), "kwargs": kwargs, **extra}, path)
 
 
-# ---------------------------------------------------------------------------------------------------------------
-# the oracle: SAC on the environment reward (same networks and checkpoint format as oracle_train.py)
+def save_oracle(path: str, args: Args, actor: Actor, qf: QEnsemble, action_space: gym.spaces.Box) -> None:
+    """oracle_train.py's format, so --oracle-path loads either."""
+    obs_dim, act_dim = actor.fc1.in_features, actor.fc_mean.out_features
+    save_atomic({"algorithm": "sac", "env_id": args.env_id, "obs_shape": [obs_dim], "act_shape": [act_dim],
+                 "kwargs": {"obs_dim": obs_dim, "act_dim": act_dim, "hidden": args.hidden_size},
+                 "action_low": torch.as_tensor(action_space.low), "action_high": torch.as_tensor(action_space.high),
+                 "actor_state_dict": state_dict_cpu(actor), "qf_state_dict": state_dict_cpu(qf),
+                 "training_steps": args.oracle_total_timesteps, "training_seed": args.seed,
+                 "random_starts": args.oracle_random_starts}, path)  # fmt: skip
 
 
-def train_oracle(args: Args, writer: SummaryWriter, device: torch.device):
-    env = make_env(args.env_id, args.seed)
-    obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
-    actor = Actor(obs_dim, act_dim, args.hidden_size, env.action_space.low, env.action_space.high).to(device)
-    qf = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
-    qf_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
-    qf_target.load_state_dict(qf.state_dict())
-    q_opt = torch.optim.Adam(qf.parameters(), lr=args.oracle_q_lr)
-    pi_opt = torch.optim.Adam(actor.parameters(), lr=args.oracle_policy_lr)
-    log_alpha = torch.zeros(1, device=device, requires_grad=True)
-    a_opt = torch.optim.Adam([log_alpha], lr=args.oracle_q_lr)
-    target_entropy = -float(act_dim)
-    n = args.oracle_total_timesteps
-    b_obs, b_next = torch.zeros(n, obs_dim, device=device), torch.zeros(n, obs_dim, device=device)
-    b_act, b_rew, b_term = torch.zeros(n, act_dim, device=device), torch.zeros(n, device=device), torch.zeros(n)
-    progress = Progress("oracle", n)
-    reset_seed = None if args.oracle_random_starts else args.seed
-    obs, _ = env.reset(seed=args.seed)
-    obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
-    ep_return, last_return = 0.0, float("nan")
-    for step in range(n):
-        if step < args.oracle_learning_starts:
-            action = env.action_space.sample()
-        else:
-            with torch.no_grad():
-                action = actor.get_action(obs_t.unsqueeze(0))[0][0].cpu().numpy()
-        next_obs, reward, terminated, truncated, info = env.step(action)
-        next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
-        b_obs[step], b_next[step], b_act[step] = obs_t, next_t, torch.as_tensor(action)
-        b_rew[step], b_term[step] = float(reward), float(terminated)
-        ep_return += float(reward)
-        if terminated or truncated:
-            writer.add_scalar("oracle/episodic_return", ep_return, step)
-            writer.add_scalar("oracle/final_distance", final_distance(info), step)
-            last_return, ep_return = ep_return, 0.0
-            next_obs, _ = env.reset(seed=reset_seed)
-            next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
-        obs_t = next_t
-        if step >= args.oracle_learning_starts:
-            idx = torch.randint(0, step + 1, (args.oracle_batch_size,), device=device)
-            alpha = log_alpha.detach().exp()
-            with torch.no_grad():
-                next_a, next_logp, _ = actor.get_action(b_next[idx])
-                v_next = qf_target(b_next[idx], next_a).min(0).values - alpha * next_logp
-                target = b_rew[idx] + (1.0 - b_term[idx]) * args.oracle_gamma * v_next
-            q_loss = (qf(b_obs[idx], b_act[idx]) - target.unsqueeze(0)).pow(2).mean(-1).sum()
-            q_opt.zero_grad(set_to_none=True)
-            q_loss.backward()
-            q_opt.step()
-            if step % args.oracle_policy_frequency == 0:
-                pi_loss, logp = actor_loss(qf, actor, b_obs[idx], alpha)
-                pi_opt.zero_grad(set_to_none=True)
-                pi_loss.backward()
-                pi_opt.step()
-                qf.zero_grad(set_to_none=True)
-                alpha_loss = (-log_alpha.exp() * (logp.detach() + target_entropy)).mean()
-                a_opt.zero_grad(set_to_none=True)
-                alpha_loss.backward()
-                a_opt.step()
-            soft_update(qf_target, qf, args.tau)
-            if (step + 1) % args.log_frequency == 0:
-                writer.add_scalar("oracle/qf_loss", q_loss.item(), step + 1)
-                writer.add_scalar("oracle/SPS", progress.sps(step + 1), step + 1)
-        progress(step + 1, **{"return": last_return})
-    env.close()
-    return actor, qf, n / max(time.time() - progress.start, 1e-9)
-
-
-def oracle_from_checkpoint(ckpt: dict, device: torch.device):
-    kw = ckpt["kwargs"]
-    actor = Actor(kw["obs_dim"], kw["act_dim"], kw["hidden"], ckpt["action_low"], ckpt["action_high"]).to(device)
-    actor.load_state_dict(ckpt["actor_state_dict"])
-    qf = QEnsemble(kw["obs_dim"], kw["act_dim"], kw["hidden"], n=2).to(device)
-    qf.load_state_dict(ckpt["qf_state_dict"])
-    return actor, qf
-
-
-# ---------------------------------------------------------------------------------------------------------------
-# the phases of Algorithm 1
-
-
-class Diverged(Exception):
-    """The sleep loss became NaN or inf."""
-
-
-class ReplayBuffer:
-    """Every forward-phase transition (s, a, s', h, terminated), preallocated, and the success tag of its episode."""
-
-    def __init__(self, capacity: int, obs_dim: int, act_dim: int, device: torch.device):
-        self.obs = torch.zeros(capacity, obs_dim, device=device)
-        self.next_obs = torch.zeros(capacity, obs_dim, device=device)
-        self.actions = torch.zeros(capacity, act_dim, device=device)
-        self.feedback = torch.zeros(capacity, device=device)
-        self.terminated = torch.zeros(capacity, device=device)
-        self.success = torch.zeros(capacity, dtype=torch.bool, device=device)
-        self.episodes: list[tuple[int, int, float]] = []  # (first step, end step, final object-goal distance)
-        self.size = 0  # transitions stored (fewer than the capacity when the teacher's budget ends the day early)
-
-    def tag_episode(self, start: int, end: int, distance: float, success_distance: float) -> bool:
-        """Tag the whole trajectory at its end: a success if the object ended within `success_distance`."""
-        self.success[start:end] = distance < success_distance
-        self.episodes.append((start, end, distance))
-        return distance < success_distance
-
-    def expert_indices(self, fallback_fraction: float = 0.1) -> tuple[torch.Tensor, int]:
-        """The success set's transitions and 0; with no success, the transitions of the episodes that ended closest
-        to the goal and how many episodes those are."""
-        idx = self.success.nonzero().squeeze(-1)
-        if idx.numel() > 0:
-            return idx, 0
-        k = max(1, int(len(self.episodes) * fallback_fraction))
-        closest = sorted(self.episodes, key=lambda e: e[2])[:k]
-        return torch.cat([torch.arange(s, e, device=self.success.device) for s, e, _ in closest]), k
-
-
-class Evaluator:
-    """Evaluates a policy on the plain env with deterministic and sampled actions; logs and keeps eval/{name}_*.
-
-    Initial states follow the run's protocol: the run's seed for every episode (fixed start), or a fresh seed per
-    episode (`--random-starts`), the same episodes at every evaluation."""
-
-    def __init__(self, args: Args, writer: SummaryWriter | None):
-        self.env = make_env(args.env_id, args.seed)
-        self.generator = torch.Generator().manual_seed(args.seed + 12345)  # sampled actions, off the training RNG
-        self.writer, self.seed, self.random_starts = writer, args.seed, args.random_starts
-        self.success_distance = args.success_distance
-        self.seconds = 0.0
-        self.final: dict[str, float] = {}  # the latest value of every tag
-
-    def reset_seed(self, episode: int) -> int:
-        return 1_000_000 + 1000 * self.seed + episode if self.random_starts else self.seed
-
-    def __call__(self, name: str, actor: Actor, step: int, episodes: int) -> dict:
-        t = time.time()
-        results = {}
-        for deterministic, suffix in ((True, ""), (False, "_sampled")):
-            res = evaluate(
-                actor, self.env, episodes, self.reset_seed, deterministic, self.generator, self.success_distance
-            )
-            for key in ("return", "final_distance", "success_rate"):
-                results[f"eval/{name}_{key}{suffix}"] = res[key]
-        if self.writer is not None:
-            for tag, value in results.items():
-                self.writer.add_scalar(tag, value, step)
-        self.final.update(results)
-        self.seconds += time.time() - t
-        return results
-
-
-def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer, evaluator, writer, device):
-    """The day: SAC-style TAMER (Eq. 1, gamma = 0) on the teacher's yes/no feedback (Eq. 4), all remembered."""
-    obs_dim, act_dim = buffer.obs.shape[1], buffer.actions.shape[1]
-    low, high = env.action_space.low, env.action_space.high
-    h_net = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
-    tamer_actor = Actor(obs_dim, act_dim, args.hidden_size, low, high).to(device)
-    h_opt = torch.optim.Adam(h_net.parameters(), lr=args.tamer_q_lr)
-    pi_opt = torch.optim.Adam(tamer_actor.parameters(), lr=args.tamer_policy_lr)
-    log_alpha = torch.zeros(1, device=device, requires_grad=True)
-    a_opt = torch.optim.Adam([log_alpha], lr=args.tamer_q_lr)
-    target_entropy = -float(act_dim)
-    h_loss = torch.zeros((), device=device)
-
-    n = args.tamer_total_timesteps
-    print(f"[tamer] {n} env steps, feedback alpha {args.feedback_alpha_start} -> {args.feedback_alpha_end}", flush=True)
-    teacher = Teacher(args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window,
-                      args.feedback_budget, seed=args.seed + 7919)  # fmt: skip
-    progress = Progress("tamer", n)
-    reset_seed = None if args.random_starts else args.seed
-    obs, _ = env.reset(seed=args.seed)
-    obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
-    ep_start, ep_return, ep_length, last_return = 0, 0.0, 0, float("nan")
-    for step in range(n):
-        alpha_t = args.feedback_alpha_start + (args.feedback_alpha_end - args.feedback_alpha_start) * step / max(
-            n - 1, 1
-        )
-        if step < args.tamer_learning_starts:
-            action_t = torch.as_tensor(env.action_space.sample(), device=device)
-        else:
-            with torch.no_grad():
-                action_t = tamer_actor.get_action(obs_t.unsqueeze(0))[0][0]
-        taught = not teacher.gone  # after the budget is spent, TAMER has nothing to learn from
-        with torch.no_grad():  # the teacher watches (s, a): the perfect answer (Eq. 4), then the person's
-            a_star = oracle_actor.get_action(obs_t.unsqueeze(0))[2][0]
-            q_star = oracle_qf(obs_t.expand(2, -1), torch.stack([action_t, a_star])).min(0).values
-            h_star = oracle_feedback(q_star[0], q_star[1], alpha_t).item() if taught else 0.0
-            buffer.feedback[teacher(step, h_star)] = 1.0
-        next_obs, reward, terminated, truncated, info = env.step(action_t.cpu().numpy())
-        next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
-        buffer.obs[step], buffer.next_obs[step], buffer.actions[step] = obs_t, next_t, action_t
-        buffer.terminated[step], buffer.size = float(terminated), step + 1
-        ep_return += float(reward)
-        ep_length += 1
-        last_step = step == n - 1 or (teacher.gone and args.budget_ends_forward_phase)
-        if terminated or truncated or last_step:
-            # a cut-off last episode is judged by where it stands
-            success = buffer.tag_episode(ep_start, step + 1, final_distance(info), args.success_distance)
-            writer.add_scalar("charts/episodic_return", ep_return, step + 1)
-            writer.add_scalar("charts/episodic_length", ep_length, step + 1)
-            writer.add_scalar("charts/final_distance", final_distance(info), step + 1)
-            writer.add_scalar("charts/episode_success", float(success), step + 1)
-            last_return, ep_return, ep_length, ep_start = ep_return, 0.0, 0, step + 1
-            next_obs, _ = env.reset(seed=reset_seed)
-            next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
-        obs_t = next_t
-
-        if step >= args.tamer_learning_starts and taught:
-            idx = torch.randint(0, step + 1, (args.tamer_batch_size,), device=device)
-            h_loss = tamer_loss(h_net, buffer.obs[idx], buffer.actions[idx], buffer.feedback[idx])
-            h_opt.zero_grad(set_to_none=True)
-            h_loss.backward()
-            h_opt.step()
-            if step % args.tamer_policy_frequency == 0:
-                pi_loss, logp = actor_loss(h_net, tamer_actor, buffer.obs[idx], log_alpha.detach().exp())
-                pi_opt.zero_grad(set_to_none=True)
-                pi_loss.backward()
-                pi_opt.step()
-                h_net.zero_grad(set_to_none=True)
-                alpha_loss = (-log_alpha.exp() * (logp.detach() + target_entropy)).mean()
-                a_opt.zero_grad(set_to_none=True)
-                alpha_loss.backward()
-                a_opt.step()
-        if (step + 1) % args.log_frequency == 0 or last_step:
-            positives = teacher.positives
-            writer.add_scalar("losses/tamer_loss", h_loss.item(), step + 1)
-            writer.add_scalar("losses/tamer_entropy_coef", log_alpha.exp().item(), step + 1)
-            writer.add_scalar("feedback/positive", positives, step + 1)
-            writer.add_scalar("feedback/positive_rate", positives / (step + 1), step + 1)
-            writer.add_scalar("feedback/alpha", alpha_t, step + 1)
-            writer.add_scalar("charts/SPS", progress.sps(step + 1), step + 1)
-        if (step + 1) % args.eval_frequency == 0 or last_step:
-            t_eval = time.time()
-            res = evaluator("tamer", tamer_actor, step + 1, args.periodic_eval_episodes)
-            progress.excluded += time.time() - t_eval
-            progress(step + 1, **{"return": last_return, "eval return": res["eval/tamer_return"]})
-        else:
-            progress(step + 1, **{"return": last_return})
-        if last_step:
-            break
-
-    positives, n = teacher.positives, buffer.size
-    n_success = sum(d < args.success_distance for _, _, d in buffer.episodes)
-    print(
-        f"[tamer] feedback +1 on {positives}/{n} steps ({positives / n:.1%}); "
-        f"{n_success}/{len(buffer.episodes)} episodes tagged success",
-        flush=True,
-    )
-    stats = {
-        "feedback/positive": positives,
-        "feedback/perfect_positive": teacher.perfect_positives,
-        "feedback/steps": n,
-        "feedback/positive_rate": positives / n,
-        "sleep/success_episodes": int(n_success),
-        "sleep/episodes": len(buffer.episodes),
-    }
-    return h_net, tamer_actor, stats
-
-
-def sleep_phase(args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator, writer, device):
-    """The night: offline IQ-Learn (Eq. 2) on the buffer, the successful trajectories as the expert set."""
-    expert_idx, fallback_episodes = buffer.expert_indices()
-    if fallback_episodes:
-        print(
-            f"[sleep] warning: no successful episode; using the {fallback_episodes} episodes that ended closest to "
-            "the goal as the expert set",
-            flush=True,
-        )
-    print(f"[sleep] {expert_idx.numel()} expert transitions, {buffer.size} in the buffer", flush=True)
-    obs_dim, act_dim = buffer.obs.shape[1], buffer.actions.shape[1]
-    q_net = QEnsemble(obs_dim, act_dim, args.hidden_size, n=1).to(device)
-    q_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=1).to(device)
-    q_target.load_state_dict(q_net.state_dict())
-    inform_actor = Actor(
-        obs_dim, act_dim, args.hidden_size, tamer_actor.action_bias - tamer_actor.action_scale,
-        tamer_actor.action_bias + tamer_actor.action_scale,
-    ).to(device)  # fmt: skip
-    if args.sleep_init_actor_from_tamer:
-        inform_actor.load_state_dict(tamer_actor.state_dict())
-    q_opt = torch.optim.Adam(q_net.parameters(), lr=args.sleep_q_lr)
-    inf_opt = torch.optim.Adam(inform_actor.parameters(), lr=args.sleep_policy_lr)
-
-    n, B, total = buffer.size, args.sleep_batch_size, args.sleep_gradient_steps
-    is_expert = torch.cat([torch.zeros(B, dtype=torch.bool), torch.ones(B, dtype=torch.bool)]).to(device)
-    names = ("losses/iq_loss", "losses/iq_expert_term", "losses/iq_value_term", "losses/iq_chi2_term")
-    names += ("losses/inform_actor_loss",)
-    stats = {"sleep/expert_transitions": int(expert_idx.numel()), "sleep/expert_fallback": int(fallback_episodes > 0)}
-    losses: dict[str, float] = {}
-    progress = Progress("sleep", total)
-    for step in range(total):
-        replay = torch.randint(0, n, (B,), device=device)
-        expert = expert_idx[torch.randint(0, expert_idx.numel(), (B,), device=device)]
-        idx = torch.cat([replay, expert])
-        loss, expert_term, value_term, chi2_term = iq_loss(
-            q_net, q_target, inform_actor, buffer.obs[idx], buffer.actions[idx], buffer.next_obs[idx],
-            buffer.terminated[idx], is_expert, args.sleep_gamma, args.sleep_temperature, args.sleep_chi2_coef,
-        )  # fmt: skip
-        q_opt.zero_grad(set_to_none=True)
-        loss.backward()
-        q_opt.step()
-        pi_loss, _ = actor_loss(q_net, inform_actor, buffer.obs[replay], args.sleep_temperature)
-        inf_opt.zero_grad(set_to_none=True)
-        pi_loss.backward()
-        inf_opt.step()
-        q_net.zero_grad(set_to_none=True)
-        soft_update(q_target, q_net, args.tau)
-
-        log_now = (step + 1) % args.log_frequency == 0 or step == total - 1
-        if log_now or (step + 1) % 100 == 0:  # one host sync per 100 steps to catch divergence
-            values = torch.stack([loss, expert_term, value_term, chi2_term, pi_loss.detach()]).tolist()
-            if not all(map(math.isfinite, values)):
-                last = ", ".join(f"{k.split('/')[1]} {v:.4g}" for k, v in losses.items())
-                raise Diverged(
-                    f"the sleep loss diverged (NaN or inf) by gradient step {step + 1}; last finite losses: "
-                    f"{last or 'none yet'}; try a lower --sleep-q-lr or --sleep-policy-lr"
-                )
-            losses = dict(zip(names, values, strict=True))
-        if log_now:
-            for tag, value in losses.items():
-                writer.add_scalar(tag, value, step + 1)
-            writer.add_scalar("sleep/SPS", progress.sps(step + 1), step + 1)
-        if (step + 1) % args.sleep_eval_frequency == 0 or step == total - 1:
-            t_eval = time.time()
-            res = evaluator("inform", inform_actor, step + 1, args.periodic_eval_episodes)
-            progress.excluded += time.time() - t_eval
-            progress(step + 1, **{"iq_loss": losses.get("losses/iq_loss"), "eval return": res["eval/inform_return"]})
-        else:
-            progress(step + 1, iq_loss=losses.get("losses/iq_loss", float("nan")))
-    return q_net, inform_actor, {**stats, **losses}
-
-
-def recovered_reward_stats(args: Args, buffer: ReplayBuffer, q_net: QEnsemble, inform_actor: Actor) -> dict:
-    """Eq. 3 on the buffer: the mean recovered reward of success and of failure transitions, for the record."""
-    reward_fn = RecoveredReward(q_net, inform_actor, args.sleep_gamma, args.sleep_temperature, samples=4)
-    b = [x[: buffer.size].cpu().numpy() for x in (buffer.obs, buffer.actions, buffer.next_obs, buffer.terminated)]
-    r_all, succ = reward_fn(*b), buffer.success[: buffer.size].cpu().numpy()
-    return {
-        "sleep/recovered_reward_success_mean": float(r_all[succ].mean()) if succ.any() else float("nan"),
-        "sleep/recovered_reward_failure_mean": float(r_all[~succ].mean()) if (~succ).any() else float("nan"),
-    }
-
-
-def obstacle_test(args: Args, policies: dict, generator: torch.Generator) -> tuple[dict, dict, dict]:
-    """The robustness test: every policy on the obstacle variant, all episodes from the run's initial state.
-
-    Returns the metrics, the per-episode final distances, and the object's xy path of one deterministic episode per
-    policy with and without the boxes (Fig. 5a)."""
-    start, goal = start_and_goal(args.env_id, args.seed)
-    boxes = obstacle_positions(args.obstacle_layout, start, goal)
-    results = {
-        "obstacle/box_positions": boxes.round(4).tolist(),
-        "obstacle/min_box_distance_to_path": min(distance_to_segment(b, start, goal) for b in boxes),
-    }
-    distances, paths = {}, {"boxes": boxes, "start": start, "goal": goal}
-    env, plain = make_env(args.env_id, args.seed, obstacles=boxes), make_env(args.env_id, args.seed)
-    for name, actor in policies.items():
-        # the same initial state for every episode (the run's seed); sampled actions give the spread
-        res = evaluate(
-            actor, env, args.obstacle_episodes, lambda ep: args.seed, False, generator, args.success_distance
-        )
-        det = evaluate(actor, env, 1, lambda ep: args.seed, True, generator, args.success_distance)
-        det_plain = evaluate(actor, plain, 1, lambda ep: args.seed, True, torch.Generator(), args.success_distance)
-        paths[f"{name}_obstacle"], paths[f"{name}_plain"] = det["paths"][0], det_plain["paths"][0]
-        distances[name] = res["distances"]
-        results[f"eval/obstacle/{name}_final_distance"] = res["final_distance"]
-        results[f"eval/obstacle/{name}_final_distance_std"] = res["final_distance_std"]
-        results[f"eval/obstacle/{name}_success_rate"] = res["success_rate"]
-        results[f"eval/obstacle/{name}_return"] = res["return"]
-        results[f"eval/obstacle/{name}_final_distance_deterministic"] = det["final_distance"]
-    env.close()
-    plain.close()
-    return results, distances, paths
-
-
-def authors_test(args: Args, policies: dict, generator: torch.Generator) -> dict:
-    """The authors' test: sampled actions, every episode from the run's initial state, on the plain env."""
-    env, results = make_env(args.env_id, args.seed), {}
-    for name, actor in policies.items():
-        res = evaluate(
-            actor, env, args.authors_test_episodes, lambda ep: args.seed, False, generator, args.success_distance
-        )
-        for key in ("return", "final_distance", "success_rate"):
-            results[f"eval/authors_test/{name}_{key}"] = res[key]
-    env.close()
-    return results
-
-
-# ---------------------------------------------------------------------------------------------------------------
-
-
-def main(args: Args, oracle_ckpt: dict | None) -> dict:
-    run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
-    run_start = time.time()
-    random.seed(args.seed)
-    np.random.seed(args.seed)
-    torch.manual_seed(args.seed)
-    torch.backends.cudnn.deterministic = args.torch_deterministic
-    if args.torch_deterministic:
-        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # CUDA matmuls refuse determinism without it
-    torch.use_deterministic_algorithms(args.torch_deterministic)
-    torch.set_num_threads(args.num_threads)
-    device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
-
-    received = []  # SIGTERM (Slurm's cancel and time limit, kill) stops the run as Ctrl-C does
+def stop_on_signals() -> list[str]:
+    """SIGTERM, and SIGINT unless it is ignored (nohup, `&`), raise KeyboardInterrupt; the list gets the name."""
+    received = []
 
     def stop(signum, frame):
         received.append(signal.Signals(signum).name)
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, stop)
-    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # an ignored SIGINT (nohup, &) stays ignored
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         signal.signal(signal.SIGINT, stop)
-    run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
-    writer = SummaryWriter(run_dir)
-    writer.add_text(
-        "hyperparameters",
-        "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
-    )
-    print(f"run dir: {run_dir}", flush=True)
-    env = make_env(args.env_id, args.seed)
-    evaluator = Evaluator(args, writer)
-    obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
-    dims = {"obs_dim": obs_dim, "act_dim": act_dim}
-    summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
-    end_step = args.tamer_total_timesteps + args.sleep_gradient_steps
-    status, phase = "completed", "oracle"
-    try:
-        # ---- oracle: the simulated teacher (SPEC section 5)
-        t0 = time.time()
-        if oracle_ckpt is not None:
-            oracle_actor, oracle_qf = oracle_from_checkpoint(oracle_ckpt, device)
-            print(
-                f"[oracle] loaded {oracle_ckpt['path']} ({oracle_ckpt.get('training_steps', '?')} SAC steps)",
-                flush=True,
-            )
-        else:
-            print(f"[oracle] training SAC on the env reward for {args.oracle_total_timesteps} steps", flush=True)
-            oracle_actor, oracle_qf, summary["sps/oracle"] = train_oracle(args, writer, device)
-            if args.save_model:
-                save_atomic(
-                    {
-                        "algorithm": "sac",
-                        "env_id": args.env_id,
-                        "obs_shape": [obs_dim],
-                        "act_shape": [act_dim],
-                        "kwargs": {**dims, "hidden": args.hidden_size},
-                        "action_low": torch.as_tensor(env.action_space.low),
-                        "action_high": torch.as_tensor(env.action_space.high),
-                        "actor_state_dict": state_dict_cpu(oracle_actor),
-                        "qf_state_dict": state_dict_cpu(oracle_qf),
-                        "training_steps": args.oracle_total_timesteps,
-                        "training_seed": args.seed,
-                        "random_starts": args.oracle_random_starts,
-                    },
-                    f"{run_dir}/oracle.pt",
-                )
-        for p in (*oracle_actor.parameters(), *oracle_qf.parameters()):
-            p.requires_grad_(False)
-        summary["time/oracle_s"] = time.time() - t0
-        evaluator("oracle", oracle_actor, 0, args.periodic_eval_episodes)
+    return received
 
-        # ---- forward phase ("day"): TAMER with simulated feedback, every transition remembered
-        phase, t0, eval_s0 = "tamer", time.time(), evaluator.seconds
-        buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, act_dim, device)
-        h_net, tamer_actor, stats = forward_phase(args, env, oracle_actor, oracle_qf, buffer, evaluator, writer, device)
-        summary.update(stats)
-        summary["time/tamer_s"] = time.time() - t0 - (evaluator.seconds - eval_s0)
-        summary["sps/tamer"] = summary["feedback/steps"] / max(summary["time/tamer_s"], 1e-9)
-        if args.save_model:
-            save_actor(f"{run_dir}/tamer_actor.pt", tamer_actor, env_id=args.env_id)
-            save_critic(f"{run_dir}/tamer_h.pt", h_net, dims=dims, env_id=args.env_id)
 
-        # ---- sleep phase ("night"): offline IQ-Learn on the buffer, no environment steps
-        phase, t0, eval_s0 = "sleep", time.time(), evaluator.seconds
-        q_net, inform_actor, stats = sleep_phase(args, buffer, tamer_actor, evaluator, writer, device)
-        summary.update(stats)
-        summary["time/sleep_s"] = time.time() - t0 - (evaluator.seconds - eval_s0)
-        summary["sps/sleep"] = args.sleep_gradient_steps / max(summary["time/sleep_s"], 1e-9)
-        if args.save_model:
-            save_actor(f"{run_dir}/inform_actor.pt", inform_actor, env_id=args.env_id)
-            save_critic(f"{run_dir}/inform_critic.pt", q_net, dims=dims, env_id=args.env_id,
-                        gamma=args.sleep_gamma, temperature=args.sleep_temperature)  # fmt: skip
-
-        # ---- the recovered reward (Eq. 3), then the final evaluation and the obstacle robustness test
-        phase = "reward"
-        summary.update(recovered_reward_stats(args, buffer, q_net, inform_actor))
-        phase = "eval"
-        policies = {"oracle": oracle_actor, "tamer": tamer_actor, "inform": inform_actor}
-        print("[eval] final evaluation", flush=True)
-        for name, actor in policies.items():
-            evaluator(name, actor, end_step, args.eval_episodes)
-        t = time.time()
-        obstacle, distances, paths = obstacle_test(args, policies, evaluator.generator)
-        summary.update(obstacle)
-        np.savez(f"{run_dir}/obstacle_distances.npz", **distances)
-        np.savez(f"{run_dir}/obstacle_paths.npz", **paths)
-        summary.update(authors_test(args, policies, evaluator.generator))
-        for tag, value in summary.items():
-            if tag.startswith(("eval/obstacle/", "eval/authors_test/", "obstacle/min")):
-                writer.add_scalar(tag, value, end_step)
-        evaluator.seconds += time.time() - t
-    except KeyboardInterrupt:
-        status = "interrupted"
-        received.append("SIGINT")  # KeyboardInterrupt without our handler is Ctrl-C
-        print(
-            f"interrupted ({received[0]}) during the {phase} phase; what finished is saved in {run_dir}",
-            file=sys.stderr,
-        )
-    except Diverged as e:
-        status = "diverged"
-        print(f"error: {e}", file=sys.stderr)
-
-    summary = {
-        **evaluator.final,
-        **summary,
-        "time/eval_s": evaluator.seconds,
-        "oracle_path": oracle_ckpt["path"] if oracle_ckpt is not None else None,
-        "wall_time_s": time.time() - run_start,
-        "seed": args.seed,
-        "script": os.path.basename(__file__),
-        "status": status,
-        "args": asdict(args),
-    }
-    if status != "completed":
-        summary["phase"] = phase
-    if status == "interrupted":
-        summary["signal"] = received[0]
-    write_json_atomic(f"{run_dir}/summary.json", summary)
-    env.close()
-    evaluator.env.close()
-    writer.close()
-    if status == "completed":
-        for name in POLICIES:
-            print(
-                f"{name:>6}: return {summary[f'eval/{name}_return']:.2f} "
-                f"(sampled {summary[f'eval/{name}_return_sampled']:.2f})"
-                f" | final distance {summary[f'eval/{name}_final_distance']:.3f} | success "
-                f"{summary[f'eval/{name}_success_rate']:.2f} | obstacle distance "
-                f"{summary[f'eval/obstacle/{name}_final_distance']:.3f} +- "
-                f"{summary[f'eval/obstacle/{name}_final_distance_std']:.3f}",
-                flush=True,
-            )
+def print_results(summary: dict, run_dir: str) -> None:
+    if summary["status"] == "completed":
+        for p in POLICIES:
+            e = {k[len("eval/") :].replace(p, "@"): v for k, v in summary.items() if k.startswith("eval/")}
+            print(f"{p:>6}: return {e['@_return']:.2f} (sampled {e['@_return_sampled']:.2f}) | final distance "
+                  f"{e['@_final_distance']:.3f} | success {e['@_success_rate']:.2f} | obstacle distance "
+                  f"{e['obstacle/@_final_distance']:.3f} +- {e['obstacle/@_final_distance_std']:.3f}",
+                  flush=True)  # fmt: skip
         print(" | ".join(f"{k} {v:.0f}" for k, v in summary.items() if k.startswith(("time/", "sps/"))), flush=True)
-    print(f"{status} in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json", flush=True)
-    return summary
-
-
-def load_policy(path: str, env_id: str) -> Actor:
-    """A saved actor (tamer_actor.pt, inform_actor.pt, or an oracle checkpoint); ValueError names the file."""
-    ckpt = read_checkpoint(path, "--evaluate")
-    if isinstance(ckpt, dict) and "actor_state_dict" in ckpt:  # an oracle checkpoint
-        ckpt = {**ckpt, "state_dict": ckpt["actor_state_dict"]}
-    required = ("state_dict", "kwargs", "action_low", "action_high")
-    if not isinstance(ckpt, dict) or any(k not in ckpt for k in required) or not isinstance(ckpt["kwargs"], dict):
-        raise ValueError(f"--evaluate {path}: not an actor checkpoint (tamer_actor.pt, inform_actor.pt or an oracle)")
-    if ckpt.get("env_id") != env_id:
-        raise ValueError(
-            f"--evaluate {path}: the policy was trained on {ckpt.get('env_id')}, not {env_id}; pass --env-id"
-        )
-    obs_dim, act_dim = env_shapes(env_id)
-    kw = ckpt["kwargs"]
-    if (kw.get("obs_dim"), kw.get("act_dim")) != (obs_dim, act_dim):
-        raise ValueError(
-            f"--evaluate {path}: shapes obs {kw.get('obs_dim')} act {kw.get('act_dim')} do not match {env_id}"
-        )
-    try:
-        actor = Actor(kw["obs_dim"], kw["act_dim"], kw["hidden"], ckpt["action_low"], ckpt["action_high"])
-        actor.load_state_dict(ckpt["state_dict"])
-    except Exception as e:
-        raise ValueError(f"--evaluate {path}: the network does not load ({type(e).__name__})") from None
-    return actor
+    print(f"{summary['status']} in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json", flush=True)
 
 
 def evaluate_saved(args: Args) -> dict:
-    """Re-evaluate a saved policy with the final evaluation's protocol: --eval-episodes episodes, deterministic and
-    sampled actions, from the run's start (or random starts), plus the obstacle test; writes nothing."""
+    """--evaluate: a saved policy under the final evaluation's protocol (--eval-episodes, deterministic and sampled
+    actions, the run's start or random starts) and the obstacle test; writes nothing."""
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.num_threads)
-    actor = load_policy(args.evaluate, args.env_id)
+    actor = actor_from_checkpoint(read_checkpoint(args.evaluate, "--evaluate", args.env_id))
     evaluator = Evaluator(args, writer=None)
     metrics = evaluator("policy", actor, 0, args.eval_episodes)
     obstacle, _, _ = obstacle_test(args, {"policy": actor}, evaluator.generator)
@@ -1345,43 +1173,20 @@ def evaluate_saved(args: Args) -> dict:
     return {**metrics, **obstacle}
 
 
-def parse_args() -> Args:
-    """tyro's command line, with tyro's multi-line error box shortened to one line."""
-    captured = io.StringIO()
-    try:
-        with contextlib.redirect_stderr(captured):
-            return tyro.cli(Args)
-    except SystemExit as e:
-        if e.code == 0:  # --help
-            raise
-        message = []
-        for line in captured.getvalue().splitlines()[1:]:  # the first line is the box's title bar
-            text = line.strip().strip("│╰╯").strip()
-            if not text or set(text) <= set("─"):
-                if message:
-                    break
-                continue
-            message.append(text)
-        raise ValueError(" ".join(message) + " (see --help)") from None
-
-
 if __name__ == "__main__":
+    args = tyro.cli(Args)
     try:
-        args = parse_args()
+        check_args(args)
         if args.evaluate is not None:
-            check_args(args, load_oracle=False)
             try:
                 print(json.dumps(evaluate_saved(args), indent=2))
             except KeyboardInterrupt:
                 sys.exit(130)  # evaluating writes nothing, so there is nothing to keep
             sys.exit(0)
-        oracle_ckpt = check_args(args)
-    except ValueError as e:
+        oracle_ckpt = load_oracle(args)
+    except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
     summary = main(args, oracle_ckpt)
-    sys.exit(
-        {"completed": 0, "interrupted": 143 if summary.get("signal") == "SIGTERM" else 130, "diverged": 1}[
-            summary["status"]
-        ]
-    )
+    sys.exit({"completed": 0, "interrupted": 143 if summary.get("signal") == "SIGTERM" else 130, "diverged": 1}[
+        summary["status"]])  # fmt: skip

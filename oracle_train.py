@@ -1,7 +1,8 @@
 """Train the simulated teacher (the oracle) for INFORM (SPEC section 5).
 
 Pusher: a SAC agent (Haarnoja et al. 2018, CleanRL's sac_continuous_action.py) trained on the
-environment reward from random initial states, so that it is an expert from any start. The
+environment reward from random initial states, so that it is an expert from any start: step for step the SAC of
+`inform_sac_pusher.py --train-oracle` (a test trains both with one seed and compares the networks). The
 final checkpoint holds state_dicts only (actor and twin critics) plus the arguments to rebuild
 them, the env id, the observation and action shapes, the training steps and a 100-episode
 evaluation; `inform_sac_pusher.py --oracle-path` loads it with torch.load(weights_only=True).
@@ -29,8 +30,6 @@ Examples:
     python oracle_train.py --env-id KnoxStoneMaze-v0 --method dqn --maze-dqn-timesteps 20000
 """
 
-import contextlib
-import io
 import json
 import math
 import os
@@ -160,79 +159,69 @@ class Args:
 
 
 class InputError(Exception):
-    """Bad input from the user (a flag value, a file): reported as one line, before anything is written."""
+    """Bad input from the user: a flag value, a file. Reported as one line, before anything is written."""
 
 
-def validate_args(args: Args) -> str | None:
-    """Return a one-line error message, or None when the arguments are usable."""
+def check_args(args: Args) -> None:
+    """What tyro cannot know: the env id, the method, ranges, files. Raises InputError."""
     if args.env_id not in SUPPORTED_ENV_IDS:
-        return f"unknown --env-id {args.env_id!r}; supported: {', '.join(SUPPORTED_ENV_IDS)}"
+        raise InputError(f"unknown --env-id {args.env_id!r}; supported: {', '.join(SUPPORTED_ENV_IDS)}")
     methods = METHODS["pusher" if args.env_id in PUSHER_IDS else "maze"]
     if args.method is not None and args.method not in methods:
-        return f"--method {args.method} does not apply to {args.env_id}; choose one of {', '.join(methods)}"
+        raise InputError(f"--method {args.method} does not apply to {args.env_id}; choose one of {', '.join(methods)}")
     if not 0 <= args.seed < 2**32:
-        return f"--seed must be in [0, 2**32), got {args.seed}"
+        raise InputError(f"--seed must be in [0, 2**32), got {args.seed}")
     if args.num_threads < 1 or args.hidden_size < 1:
-        return f"--num-threads ({args.num_threads}) and --hidden-size ({args.hidden_size}) must be positive"
+        raise InputError(f"--num-threads ({args.num_threads}) and --hidden-size ({args.hidden_size}) must be positive")
     if not (args.policy_lr > 0.0 and args.q_lr > 0.0 and args.alpha > 0.0):
-        return "--policy-lr, --q-lr and --alpha must be > 0"
+        raise InputError("--policy-lr, --q-lr and --alpha must be > 0")
     if args.output_path is not None and (not args.output_path or os.path.isdir(args.output_path)):
-        return f"--output-path {args.output_path!r} must name a file (it is empty or a directory)"
+        raise InputError(f"--output-path {args.output_path!r} must name a file (it is empty or a directory)")
     if args.resume is not None and args.env_id not in PUSHER_IDS:
-        return "--resume continues a SAC (Pusher) run; the maze methods train in seconds and have no training state"
+        raise InputError("--resume continues a SAC (Pusher) run; the maze methods train in seconds and have no "
+                         "training state")  # fmt: skip
     if args.maze_episodes < 1 or not 0.0 < args.maze_alpha <= 1.0 or not 0.0 <= args.maze_epsilon <= 1.0:
-        return "--maze-episodes must be >= 1, --maze-alpha in (0, 1] and --maze-epsilon in [0, 1]"
-    error = validate_maze_dqn_args(args)
-    if error is not None:
-        return error
+        raise InputError("--maze-episodes must be >= 1, --maze-alpha in (0, 1] and --maze-epsilon in [0, 1]")
+    check_maze_dqn_args(args)
     if args.env_id == "Pusher-v4":
         import mujoco
 
         if int(mujoco.__version__.split(".")[0]) >= 3:
-            return (
-                f"Pusher-v4 needs mujoco<3 (installed: {mujoco.__version__}); "
-                "use --env-id Pusher-v5 or `pip install mujoco==2.3.7` in a separate venv"
-            )
-    for name in ("total_timesteps", "batch_size", "eval_frequency", "eval_episodes", "final_eval_episodes"):
+            raise InputError(f"Pusher-v4 needs mujoco<3 (installed: {mujoco.__version__}); use --env-id Pusher-v5 "
+                             "or `pip install mujoco==2.3.7` in a separate venv")  # fmt: skip
+    positive = ["total_timesteps", "batch_size", "eval_frequency", "eval_episodes", "final_eval_episodes"]
+    positive += ["learning_starts", "log_frequency", "checkpoint_frequency", "policy_frequency", "buffer_size"]
+    for name in positive:
         if getattr(args, name) <= 0:
-            return f"--{name.replace('_', '-')} must be positive (got {getattr(args, name)})"
-    for name in ("learning_starts", "log_frequency", "checkpoint_frequency", "policy_frequency", "buffer_size"):
-        if getattr(args, name) <= 0:
-            return f"--{name.replace('_', '-')} must be positive (got {getattr(args, name)})"
+            raise InputError(f"--{name.replace('_', '-')} must be positive (got {getattr(args, name)})")
     if args.batch_size > args.total_timesteps:
-        return f"--batch-size {args.batch_size} is larger than --total-timesteps {args.total_timesteps}"
+        raise InputError(f"--batch-size {args.batch_size} is larger than --total-timesteps {args.total_timesteps}")
     if not 0.0 < args.tau <= 1.0:
-        return f"--tau must be in (0, 1], got {args.tau}"
+        raise InputError(f"--tau must be in (0, 1], got {args.tau}")
     if not 0.0 <= args.gamma <= 1.0:
-        return f"--gamma must be in [0, 1], got {args.gamma}"
+        raise InputError(f"--gamma must be in [0, 1], got {args.gamma}")
     if args.resume is not None and not os.path.isfile(args.resume):
-        return f"--resume {args.resume}: no such file"
-    return None
+        raise InputError(f"--resume {args.resume}: no such file")
 
 
-def validate_maze_dqn_args(args: Args) -> str | None:
-    """The --maze-dqn-* flags; a one-line error message, or None."""
+def check_maze_dqn_args(args: Args) -> None:
+    """The --maze-dqn-* flags; raises InputError."""
     for name in ("timesteps", "hidden", "buffer_size", "batch_size", "train_frequency", "target_network_frequency"):
         value = getattr(args, f"maze_dqn_{name}")
         if value < 1:
-            return f"--maze-dqn-{name.replace('_', '-')} must be a positive integer (got {value})"
+            raise InputError(f"--maze-dqn-{name.replace('_', '-')} must be a positive integer (got {value})")
     if args.maze_dqn_learning_starts < 0:
-        return f"--maze-dqn-learning-starts must be >= 0 (got {args.maze_dqn_learning_starts})"
+        raise InputError(f"--maze-dqn-learning-starts must be >= 0 (got {args.maze_dqn_learning_starts})")
     if not args.maze_dqn_learning_rate > 0.0 or not args.maze_dqn_exploration_fraction > 0.0:
-        return "--maze-dqn-learning-rate and --maze-dqn-exploration-fraction must be > 0"
+        raise InputError("--maze-dqn-learning-rate and --maze-dqn-exploration-fraction must be > 0")
     if not 0.0 <= args.maze_dqn_end_e <= 1.0 or not 0.0 <= args.maze_dqn_start_e <= 1.0:
-        return "--maze-dqn-start-e and --maze-dqn-end-e must be in [0, 1]"
+        raise InputError("--maze-dqn-start-e and --maze-dqn-end-e must be in [0, 1]")
     if args.maze_dqn_batch_size > args.maze_dqn_timesteps:
-        return (
-            f"--maze-dqn-batch-size {args.maze_dqn_batch_size} is larger than "
-            f"--maze-dqn-timesteps {args.maze_dqn_timesteps}"
-        )
+        raise InputError(f"--maze-dqn-batch-size {args.maze_dqn_batch_size} is larger than --maze-dqn-timesteps "
+                         f"{args.maze_dqn_timesteps}")  # fmt: skip
     if args.maze_dqn_learning_starts >= args.maze_dqn_timesteps:
-        return (
-            f"--maze-dqn-learning-starts ({args.maze_dqn_learning_starts}) must be below --maze-dqn-timesteps "
-            f"({args.maze_dqn_timesteps}), or the DQN never learns"
-        )
-    return None
+        raise InputError(f"--maze-dqn-learning-starts ({args.maze_dqn_learning_starts}) must be below "
+                         f"--maze-dqn-timesteps ({args.maze_dqn_timesteps}), or the DQN never learns")  # fmt: skip
 
 
 def make_env(env_id: str, seed: int) -> gym.Env:
@@ -242,8 +231,10 @@ def make_env(env_id: str, seed: int) -> gym.Env:
     return env
 
 
+# The networks and the soft update are copied verbatim from inform_sac_pusher.py (CleanRL style: repeated across
+# files); tests/test_pusher.py checks that the copies agree and that both scripts train the same oracle.
 class BatchedLinear(nn.Module):
-    """`n` independent linear layers applied in one batched matmul: x [n, B, in] -> [n, B, out]."""
+    """`n` independent linear layers in one batched matmul: x [n, B, in] -> [n, B, out]."""
 
     def __init__(self, n: int, in_features: int, out_features: int):
         super().__init__()
@@ -257,8 +248,8 @@ class BatchedLinear(nn.Module):
         return torch.baddbmm(self.bias, x, self.weight)
 
 
-class TwinCritic(nn.Module):
-    """Two Q networks as one module; forward returns [2, B]."""
+class QEnsemble(nn.Module):
+    """`n` Q (or H) networks as one module: twin critics with n=2, the sleep critic with n=1. Returns [n, B]."""
 
     def __init__(self, obs_dim: int, act_dim: int, hidden: int = 256, n: int = 2):
         super().__init__()
@@ -275,7 +266,7 @@ class TwinCritic(nn.Module):
 
 
 class Actor(nn.Module):
-    """CleanRL's SAC actor: tanh-squashed Gaussian rescaled to the action bounds."""
+    """CleanRL's SAC actor: a tanh-squashed Gaussian rescaled to the action bounds."""
 
     def __init__(self, obs_dim: int, act_dim: int, hidden: int = 256, action_low=None, action_high=None):
         super().__init__()
@@ -291,34 +282,39 @@ class Actor(nn.Module):
     def forward(self, obs: torch.Tensor):
         x = F.relu(self.fc1(obs))
         x = F.relu(self.fc2(x))
-        mean = self.fc_mean(x)
         log_std = torch.tanh(self.fc_logstd(x))
-        log_std = LOG_STD_MIN + 0.5 * (LOG_STD_MAX - LOG_STD_MIN) * (log_std + 1)
-        return mean, log_std
+        return self.fc_mean(x), LOG_STD_MIN + 0.5 * (LOG_STD_MAX - LOG_STD_MIN) * (log_std + 1)
 
-    def get_action(self, obs: torch.Tensor):
-        """Return (sampled action, its log-prob [B], deterministic mean action)."""
+    def get_action(self, obs: torch.Tensor, generator: torch.Generator | None = None):
+        """(sampled action, its log-prob [B], mean action); `generator` keeps evaluation off the training RNG."""
         mean, log_std = self(obs)
-        std = log_std.exp()
-        eps = torch.randn_like(mean)
-        x_t = mean + std * eps
+        eps = torch.randn(mean.shape, generator=generator, device=mean.device)
+        x_t = mean + log_std.exp() * eps
         y_t = torch.tanh(x_t)
-        action = y_t * self.action_scale + self.action_bias
         log_prob = -0.5 * eps.pow(2) - log_std - 0.5 * math.log(2 * math.pi)
         log_prob = log_prob - torch.log(self.action_scale * (1 - y_t.pow(2)) + 1e-6)
-        return action, log_prob.sum(-1), torch.tanh(mean) * self.action_scale + self.action_bias
+        mean_action = torch.tanh(mean) * self.action_scale + self.action_bias
+        return y_t * self.action_scale + self.action_bias, log_prob.sum(-1), mean_action
+
+
+def soft_update(target: nn.Module, source: nn.Module, tau: float) -> None:
+    with torch.no_grad():
+        for param, target_param in zip(source.parameters(), target.parameters(), strict=True):
+            target_param.lerp_(param, tau)
 
 
 @torch.inference_mode()
 def evaluate(actor: Actor, env_id: str, episodes: int, seed: int, device: torch.device) -> dict:
-    """Deterministic (mean-action) episodes from random starts: return, final distance, success."""
-    env = gym.make(env_id)
+    """Deterministic (mean-action) episodes from random starts: return, final distance, success. The unused sample
+    comes from its own generator, so evaluating never moves the training RNG."""
+    env, generator = gym.make(env_id), torch.Generator(device=device).manual_seed(seed)
     returns, distances = [], []
     for ep in range(episodes):
         obs, _ = env.reset(seed=seed + ep)
         done, ep_return, info = False, 0.0, {}
         while not done:
-            _, _, action = actor.get_action(torch.as_tensor(obs, dtype=torch.float32, device=device).unsqueeze(0))
+            obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device).unsqueeze(0)
+            _, _, action = actor.get_action(obs_t, generator)
             obs, reward, terminated, truncated, info = env.step(action[0].cpu().numpy())
             ep_return += float(reward)
             done = terminated or truncated
@@ -383,13 +379,26 @@ def read_training_state(path: str) -> dict:
     return state
 
 
+def new_run_dir(args: Args) -> str:
+    run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
+    run_dir, suffix = os.path.join("runs", run_name), 0
+    while os.path.exists(run_dir):
+        suffix += 1
+        run_dir = os.path.join("runs", f"{run_name}_{suffix}")
+    os.makedirs(run_dir)
+    return run_dir
+
+
 def train_sac(args: Args, resume_state: dict | None = None) -> None:
+    """SAC on the env reward (CleanRL's sac_continuous_action.py), step for step the SAC of inform_sac_pusher.py
+    --train-oracle (a test trains both and compares the networks), plus checkpoints, snapshots and --resume."""
     torch.set_num_threads(args.num_threads)
     device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
     random.seed(args.seed)
     np.random.seed(args.seed)
     torch.manual_seed(args.seed)
     torch.backends.cudnn.deterministic = args.torch_deterministic
+    torch.use_deterministic_algorithms(args.torch_deterministic)
 
     env = make_env(args.env_id, args.seed)
     obs_dim = int(np.prod(env.observation_space.shape))
@@ -397,15 +406,13 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     low, high = env.action_space.low, env.action_space.high
 
     actor = Actor(obs_dim, act_dim, args.hidden_size, low, high).to(device)
-    qf = TwinCritic(obs_dim, act_dim, args.hidden_size).to(device)
-    qf_target = TwinCritic(obs_dim, act_dim, args.hidden_size).to(device)
+    qf = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
+    qf_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
     qf_target.load_state_dict(qf.state_dict())
-    for p in qf_target.parameters():
-        p.requires_grad_(False)
     q_optimizer = torch.optim.Adam(qf.parameters(), lr=args.q_lr)
     actor_optimizer = torch.optim.Adam(actor.parameters(), lr=args.policy_lr)
     target_entropy = -float(act_dim)
-    log_alpha = torch.zeros(1, device=device, requires_grad=True)
+    log_alpha = torch.zeros(1, device=device, requires_grad=True)  # the entropy coefficient is exp(log_alpha)
     a_optimizer = torch.optim.Adam([log_alpha], lr=args.q_lr)
     if not args.autotune:
         log_alpha.data.fill_(math.log(args.alpha))
@@ -417,26 +424,20 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     buf_act = torch.zeros(size, act_dim, device=device)
     buf_rew = torch.zeros(size, device=device)
     buf_term = torch.zeros(size, device=device)
-    buf_n = 0
-    start_step = 0
-
+    buffers = {"buf_obs": buf_obs, "buf_next_obs": buf_next_obs, "buf_act": buf_act, "buf_rew": buf_rew,
+               "buf_term": buf_term}  # fmt: skip
+    modules = {"actor": actor, "qf": qf, "qf_target": qf_target, "q_optimizer": q_optimizer,
+               "actor_optimizer": actor_optimizer, "a_optimizer": a_optimizer}  # fmt: skip
+    buf_n = start_step = 0
     if args.resume is not None:
         run_dir = os.path.dirname(os.path.abspath(args.resume))
         try:
-            actor.load_state_dict(resume_state["actor"])
-            qf.load_state_dict(resume_state["qf"])
-            qf_target.load_state_dict(resume_state["qf_target"])
-            q_optimizer.load_state_dict(resume_state["q_optimizer"])
-            actor_optimizer.load_state_dict(resume_state["actor_optimizer"])
-            a_optimizer.load_state_dict(resume_state["a_optimizer"])
+            for key, module in modules.items():
+                module.load_state_dict(resume_state[key])
             log_alpha.data.copy_(resume_state["log_alpha"])
             buf_n = int(resume_state["buf_n"])
-            n = min(buf_n, size)
-            buf_obs[:n] = resume_state["buf_obs"][:n]
-            buf_next_obs[:n] = resume_state["buf_next_obs"][:n]
-            buf_act[:n] = resume_state["buf_act"][:n]
-            buf_rew[:n] = resume_state["buf_rew"][:n]
-            buf_term[:n] = resume_state["buf_term"][:n]
+            for key, buf in buffers.items():
+                buf[: min(buf_n, size)] = resume_state[key][: min(buf_n, size)]
             start_step = int(resume_state["global_step"])
             torch.set_rng_state(resume_state["torch_rng"])
         except (RuntimeError, ValueError, TypeError, KeyError, IndexError) as e:  # nothing is written before this
@@ -446,13 +447,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
         env.action_space.seed(args.seed + start_step)
         print(f"resumed from {args.resume} at step {start_step}", flush=True)
     else:
-        run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
-        run_dir = os.path.join("runs", run_name)
-        suffix = 0
-        while os.path.exists(run_dir):
-            suffix += 1
-            run_dir = os.path.join("runs", f"{run_name}_{suffix}")
-        os.makedirs(run_dir)
+        run_dir = new_run_dir(args)
     writer = SummaryWriter(run_dir)
     if args.resume is None:
         writer.add_text(
@@ -463,26 +458,14 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
 
     def save_training_state(global_step: int) -> None:
         n = min(buf_n, size)
-        atomic_save(
-            {
-                "actor": actor.state_dict(),
-                "qf": qf.state_dict(),
-                "qf_target": qf_target.state_dict(),
-                "q_optimizer": q_optimizer.state_dict(),
-                "actor_optimizer": actor_optimizer.state_dict(),
-                "a_optimizer": a_optimizer.state_dict(),
-                "log_alpha": log_alpha.detach().clone(),
-                "buf_n": buf_n,
-                "buf_obs": buf_obs[:n].clone(),
-                "buf_next_obs": buf_next_obs[:n].clone(),
-                "buf_act": buf_act[:n].clone(),
-                "buf_rew": buf_rew[:n].clone(),
-                "buf_term": buf_term[:n].clone(),
-                "global_step": global_step,
-                "torch_rng": torch.get_rng_state(),
-            },
-            os.path.join(run_dir, "training_state.pt"),
-        )
+        state = {key: module.state_dict() for key, module in modules.items()}
+        state.update({key: buf[:n].clone() for key, buf in buffers.items()})
+        state.update(log_alpha=log_alpha.detach().clone(), buf_n=buf_n, global_step=global_step,
+                     torch_rng=torch.get_rng_state())  # fmt: skip
+        atomic_save(state, os.path.join(run_dir, "training_state.pt"))
+
+    def save_oracle(step: int, evaluation: dict, path: str) -> None:
+        atomic_save(oracle_checkpoint(actor, qf, args, obs_dim, act_dim, low, high, step, evaluation), path)
 
     obs, _ = env.reset(seed=args.seed + start_step)  # random starts: seed once, then the env RNG runs on
     obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
@@ -491,9 +474,8 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     qf_loss = actor_loss = alpha_loss = torch.zeros((), device=device)
     last_eval = {}
     report_every = max(1, (args.total_timesteps - start_step) // 20)
-    global_step = start_step
     for global_step in range(start_step, args.total_timesteps):
-        if buf_n < args.learning_starts:
+        if global_step < args.learning_starts:
             action = env.action_space.sample()
         else:
             with torch.no_grad():
@@ -502,14 +484,10 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
         next_obs, reward, terminated, truncated, info = env.step(action)
         next_obs_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
         i = buf_n % size
-        buf_obs[i] = obs_t
-        buf_next_obs[i] = next_obs_t
-        buf_act[i] = torch.as_tensor(action, device=device)
-        buf_rew[i] = float(reward)
-        buf_term[i] = float(terminated)
+        buf_obs[i], buf_next_obs[i], buf_act[i] = obs_t, next_obs_t, torch.as_tensor(action, device=device)
+        buf_rew[i], buf_term[i] = float(reward), float(terminated)
         buf_n += 1
-        ep_return += float(reward)
-        ep_length += 1
+        ep_return, ep_length = ep_return + float(reward), ep_length + 1
         if terminated or truncated:
             writer.add_scalar("charts/episodic_return", ep_return, global_step)
             writer.add_scalar("charts/episodic_length", ep_length, global_step)
@@ -519,7 +497,8 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
             next_obs_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
         obs_t = next_obs_t
 
-        if buf_n >= args.learning_starts:
+        # ALGO LOGIC: one SAC update per env step, as inform_sac_pusher.py's train_oracle
+        if global_step >= args.learning_starts:
             idx = torch.randint(0, min(buf_n, size), (args.batch_size,), device=device)
             b_obs, b_next, b_act, b_rew, b_term = (
                 buf_obs[idx],
@@ -533,17 +512,14 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
                 next_act, next_logp, _ = actor.get_action(b_next)
                 min_q_next = qf_target(b_next, next_act).min(0).values - alpha * next_logp
                 target_q = b_rew + (1.0 - b_term) * args.gamma * min_q_next
-            qf_loss = (
-                F.mse_loss(qf(b_obs, b_act), target_q.unsqueeze(0).expand(2, -1), reduction="sum") / args.batch_size
-            )
+            qf_loss = (qf(b_obs, b_act) - target_q.unsqueeze(0)).pow(2).mean(-1).sum()  # summed over the twins
             q_optimizer.zero_grad(set_to_none=True)
             qf_loss.backward()
             q_optimizer.step()
 
             if global_step % args.policy_frequency == 0:
                 pi, logp, _ = actor.get_action(b_obs)
-                min_q_pi = qf(b_obs, pi).min(0).values
-                actor_loss = (alpha * logp - min_q_pi).mean()
+                actor_loss = (alpha * logp - qf(b_obs, pi).min(0).values).mean()
                 actor_optimizer.zero_grad(set_to_none=True)
                 actor_loss.backward()
                 actor_optimizer.step()
@@ -553,10 +529,9 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
                     a_optimizer.zero_grad(set_to_none=True)
                     alpha_loss.backward()
                     a_optimizer.step()
+            soft_update(qf_target, qf, args.tau)
 
-            with torch.no_grad():
-                torch._foreach_lerp_(list(qf_target.parameters()), list(qf.parameters()), args.tau)
-
+        # TRY NOT TO MODIFY: logging, evaluation, checkpoints
         step = global_step + 1
         if step % args.log_frequency == 0:
             sps = (step - step_last) / max(time.time() - t_last, 1e-9)
@@ -571,26 +546,16 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
             writer.add_scalar("eval/oracle_final_distance", last_eval["final_distance"], step)
             writer.add_scalar("eval/oracle_success_rate", last_eval["success_rate"], step)
         if step % report_every == 0 or step == args.total_timesteps:
-            elapsed = time.time() - t0
-            sps = (step - start_step) / max(elapsed, 1e-9)
+            sps = (step - start_step) / max(time.time() - t0, 1e-9)
             eta = (args.total_timesteps - step) / max(sps, 1e-9)
             ev = f" | eval return {last_eval['return']:.1f} dist {last_eval['final_distance']:.3f}" if last_eval else ""
-            print(
-                f"[oracle] {step}/{args.total_timesteps} {100 * step // args.total_timesteps}% | {sps:.0f} SPS"
-                f" | ETA {int(eta // 60)}m{int(eta % 60):02d}s{ev}",
-                flush=True,
-            )
+            print(f"[oracle] {step}/{args.total_timesteps} {100 * step // args.total_timesteps}% | {sps:.0f} SPS"
+                  f" | ETA {int(eta // 60)}m{int(eta % 60):02d}s{ev}", flush=True)  # fmt: skip
         if step % args.checkpoint_frequency == 0 or step == args.total_timesteps:
             save_training_state(step)
-            atomic_save(
-                oracle_checkpoint(actor, qf, args, obs_dim, act_dim, low, high, step, last_eval or {}),
-                os.path.join(run_dir, "oracle_latest.pt"),
-            )
+            save_oracle(step, last_eval or {}, os.path.join(run_dir, "oracle_latest.pt"))
             if step % args.snapshot_frequency == 0:  # kept, so the teacher can be chosen by a longer evaluation later
-                atomic_save(
-                    oracle_checkpoint(actor, qf, args, obs_dim, act_dim, low, high, step, last_eval or {}),
-                    os.path.join(run_dir, f"oracle_step{step:07d}.pt"),
-                )
+                save_oracle(step, last_eval or {}, os.path.join(run_dir, f"oracle_step{step:07d}.pt"))
         t_last, step_last = (time.time(), step) if step % args.log_frequency == 0 else (t_last, step_last)
 
     train_time = time.time() - t0
@@ -762,26 +727,6 @@ def train_maze(args: Args) -> None:
         print(f"oracle written to {args.output_path}", flush=True)
 
 
-def parse_args() -> Args:
-    """tyro's command line, with tyro's multi-line error box shortened to one line (an InputError)."""
-    captured = io.StringIO()
-    try:
-        with contextlib.redirect_stderr(captured):
-            return tyro.cli(Args)
-    except SystemExit as e:
-        if e.code == 0:  # --help
-            raise
-        message = []
-        for line in captured.getvalue().splitlines()[1:]:  # the first line is the box's title bar
-            text = line.strip().strip("│╰╯").strip()
-            if not text or set(text) <= set("─"):
-                if message:
-                    break
-                continue
-            message.append(text)
-        raise InputError(" ".join(message or ["cannot parse the command line"]) + " (see --help)") from None
-
-
 def main() -> None:
     received = []  # SIGTERM (Slurm's cancel and time limit, kill) stops training as Ctrl-C does
 
@@ -790,11 +735,9 @@ def main() -> None:
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, stop)
+    args = tyro.cli(Args)
     try:
-        args = parse_args()
-        error = validate_args(args)
-        if error is not None:
-            raise InputError(error)
+        check_args(args)
         is_pusher = args.env_id in PUSHER_IDS
         args.method = args.method or ("sac" if is_pusher else "value-iteration")
         args.output_path = args.output_path or os.path.join("oracles", f"{args.env_id}__{args.method}_oracle.pt")

@@ -79,7 +79,7 @@ def test_dqn_oracle_round_trips_and_teaches(run_script):
 def train_in_process(tmp_path, name: str, **kwargs) -> dict:
     """Run oracle_train's maze path in this process (no interpreter start-up) and read the checkpoint back."""
     args = ot.Args(output_path=str(tmp_path / name), **kwargs)
-    assert ot.validate_args(args) is None
+    ot.check_args(args)  # raises InputError on bad input
     ot.train_maze(args)
     return torch.load(tmp_path / name, weights_only=True)
 

@@ -149,8 +149,8 @@ def test_iq_loss_eq2_hand_computed_with_terminal():
     next_obs = torch.tensor([[2.0], [3.0], [4.0], [5.0]])
     terminated = torch.tensor([0.0, 1.0, 0.0, 0.0])  # the second transition ends the episode: y = 0
     is_expert = torch.tensor([False, False, True, True])
-    loss, expert, value, chi2 = isp.iq_loss(
-        StubQ(), StubQ(), StubActor(), obs, act, next_obs, terminated, is_expert, 0.9, 0.1, 0.5
+    loss, (expert, value, chi2) = isp.iq_loss(
+        StubQ(), StubQ(), obs, act, next_obs, terminated, is_expert, 0.9, 0.1, 0.5, StubActor()
     )
     # Q(s,a) = [1.5, 2, 4, 4]; V(x) = x + 0.1; y = (1 - done) 0.9 V(s') = [1.89, 0, 3.69, 4.59]
     # Q - y = [-0.39, 2, 0.31, -0.59]; V(s) - y = [-0.79, 2.1, -0.59, -0.49]
@@ -158,8 +158,8 @@ def test_iq_loss_eq2_hand_computed_with_terminal():
     assert value.item() == pytest.approx((-0.79 + 2.1 - 0.59 - 0.49) / 4, abs=1e-5)
     assert chi2.item() == pytest.approx(0.5 * (0.39**2 + 2**2 + 0.31**2 + 0.59**2) / 4, abs=1e-5)
     assert loss.item() == pytest.approx(0.14 + 0.0575 + 0.5745375, abs=1e-5)
-    _, _, _, chi2_off = isp.iq_loss(
-        StubQ(), StubQ(), StubActor(), obs, act, next_obs, terminated, is_expert, 0.9, 0.1, 0.0
+    _, (_, _, chi2_off) = isp.iq_loss(
+        StubQ(), StubQ(), obs, act, next_obs, terminated, is_expert, 0.9, 0.1, 0.0, StubActor()
     )
     assert chi2_off.item() == 0.0
 
@@ -350,14 +350,14 @@ def test_save_load_same_actions(tmp_path):
     torch.manual_seed(0)
     actor = isp.Actor(23, 7, 32, action_low=-2 * np.ones(7), action_high=2 * np.ones(7))
     isp.save_actor(str(tmp_path / "actor.pt"), actor, env_id="Pusher-v5")
-    loaded = isp.load_policy(str(tmp_path / "actor.pt"), "Pusher-v5")
+    loaded = isp.actor_from_checkpoint(isp.read_checkpoint(str(tmp_path / "actor.pt"), "--evaluate", "Pusher-v5"))
     obs = torch.randn(16, 23)
     a1, logp1, mean1 = actor.get_action(obs, torch.Generator().manual_seed(3))
     a2, logp2, mean2 = loaded.get_action(obs, torch.Generator().manual_seed(3))
     assert torch.equal(a1, a2) and torch.equal(logp1, logp2) and torch.equal(mean1, mean2)
     assert not (tmp_path / "actor.pt.tmp").exists()  # written atomically
-    with pytest.raises(ValueError, match="trained on Pusher-v5, not Pusher-v4"):
-        isp.load_policy(str(tmp_path / "actor.pt"), "Pusher-v4")
+    with pytest.raises(isp.InputError, match="trained on Pusher-v5, not Pusher-v4"):
+        isp.read_checkpoint(str(tmp_path / "actor.pt"), "--evaluate", "Pusher-v4")
 
 
 @pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")
@@ -438,7 +438,7 @@ def rollouts(env, policy, episodes, seed):
 def test_recovered_reward_ranks_oracle_above_random():
     torch.manual_seed(0)
     torch.set_num_threads(1)
-    ckpt = isp.load_oracle_checkpoint(SHIPPED, "Pusher-v5", 23, 7)
+    ckpt = isp.read_checkpoint(SHIPPED, "--oracle-path", "Pusher-v5")
     oracle_actor, _ = isp.oracle_from_checkpoint(ckpt, torch.device("cpu"))
     env = gym.make("Pusher-v5")
     env.action_space.seed(0)
@@ -460,8 +460,8 @@ def test_recovered_reward_ranks_oracle_above_random():
     is_expert = torch.cat([torch.zeros(B, dtype=torch.bool), torch.ones(B, dtype=torch.bool)])
     for _ in range(1500):  # the sleep phase on a hand-made buffer: oracle trajectories are the success set
         idx = torch.cat([torch.randint(0, len(obs), (B,)), torch.randint(0, n_expert, (B,))])
-        loss, *_ = isp.iq_loss(
-            q_net, q_target, actor, obs[idx], act[idx], nxt[idx], term[idx], is_expert, 0.99, 0.01, 0.5
+        loss, _ = isp.iq_loss(
+            q_net, q_target, obs[idx], act[idx], nxt[idx], term[idx], is_expert, 0.99, 0.01, 0.5, actor
         )
         q_opt.zero_grad()
         loss.backward()
@@ -515,13 +515,15 @@ BAD_FLAGS = [
     (["--teacher-delay", "-1"], "teacher-delay"),
     (["--credit-window", "0"], "credit-window"),
     (["--feedback-budget", "-3"], "feedback-budget"),
-    (["--obstacle-layout", "diagonal"], "obstacle-layout"),
+    (["--tau", "nan"], "--tau must be in (0, 1], got nan"),
+    (["--sleep-chi2-coef", "-0.1"], "--sleep-chi2-coef must be in [0, inf)"),
+    (["--oracle-path", "x.pt", "--train-oracle"], "exclude each other"),
 ]
 
 
 @pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")
 def test_bad_input_messages(tmp_path):
-    """Every bad input is rejected by check_args with a one-line message naming the flag or file."""
+    """Every bad input is rejected by check_args or load_oracle with a one-line message naming the flag or file."""
     paths = write_bad_checkpoints(tmp_path)
     cases = list(BAD_FLAGS)
     if isp.mujoco_major() >= 3:
@@ -529,8 +531,9 @@ def test_bad_input_messages(tmp_path):
     for flags, needle in cases:
         flags = [f.format(**paths) if f.startswith("{") else f for f in flags]
         args = tyro.cli(isp.Args, args=flags)
-        with pytest.raises(ValueError) as err:
+        with pytest.raises(isp.InputError) as err:
             isp.check_args(args)
+            isp.load_oracle(args)
         message = str(err.value)
         assert "\n" not in message and needle in message, (flags, message)
 
@@ -544,6 +547,68 @@ def test_bad_input_exits_before_creating_anything(tmp_path):
         lines = proc.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("error: "), (flags, proc.stderr)
         assert not (tmp_path / "runs").exists(), flags
+
+
+@pytest.mark.parametrize(
+    ("script", "flags", "phrase"),
+    [
+        ("inform_sac_pusher.py", ["--seed", "abc"], "Error parsing --seed"),
+        ("inform_sac_pusher.py", ["--obstacle-layout", "diagonal"], "invalid choice 'diagonal'"),
+        ("oracle_train.py", ["--total-timesteps", "1.5"], "Error parsing --total-timesteps"),
+    ],
+)
+def test_malformed_flags_get_tyros_message(tmp_path, script, flags, phrase):
+    """A flag tyro cannot parse: tyro's own message, a non-zero exit, no traceback, nothing written."""
+    proc = subprocess.run([sys.executable, os.path.join(REPO, script), *flags], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=120)  # fmt: skip
+    assert proc.returncode == 2 and phrase in proc.stderr, proc.stderr
+    assert "Traceback" not in proc.stderr and not list(tmp_path.iterdir()), proc.stderr
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# one SAC for the Pusher oracle, in two scripts (CleanRL repeats code across files): held together here
+
+
+def test_both_scripts_carry_the_same_networks():
+    import inspect
+
+    import oracle_train
+
+    for name in ("BatchedLinear", "QEnsemble", "Actor", "soft_update"):
+        assert inspect.getsource(getattr(isp, name)) == inspect.getsource(getattr(oracle_train, name)), name
+
+
+def test_both_scripts_train_the_same_oracle_and_load_each_others(tmp_path):
+    """inform_sac_pusher.py --train-oracle and oracle_train.py, one seed and budget: the same networks to the last
+    bit (oracle_train.py evaluates during training; that must not move its random stream). Each checkpoint loads
+    into the other script's networks and passes --oracle-path's checks."""
+    import oracle_train
+
+    sac = {"seed": "4", "hidden-size": "32"}
+    proc = run(tmp_path, *[x for k, v in sac.items() for x in (f"--{k}", v)], "--train-oracle",
+               "--oracle-total-timesteps", "400", "--oracle-learning-starts", "200", "--oracle-batch-size", "64",
+               "--tamer-total-timesteps", "300", "--tamer-learning-starts", "200", "--tamer-batch-size", "32",
+               "--sleep-gradient-steps", "10", "--sleep-batch-size", "32", "--eval-episodes", "1",
+               "--periodic-eval-episodes", "1", "--obstacle-episodes", "1", "--authors-test-episodes", "1")  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    (in_script,) = glob.glob(str(tmp_path / "runs" / "*" / "oracle.pt"))
+    proc = subprocess.run([sys.executable, os.path.join(REPO, "oracle_train.py"),
+                           *[x for k, v in sac.items() for x in (f"--{k}", v)], "--total-timesteps", "400",
+                           "--learning-starts", "200", "--batch-size", "64", "--eval-frequency", "150",
+                           "--eval-episodes", "1", "--final-eval-episodes", "1", "--output-path", "trained.pt"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    a = isp.read_checkpoint(in_script, "--oracle-path", "Pusher-v5")
+    b = isp.read_checkpoint(str(tmp_path / "trained.pt"), "--oracle-path", "Pusher-v5")
+    for key in ("actor_state_dict", "qf_state_dict"):
+        assert a[key].keys() == b[key].keys()
+        for name in a[key]:
+            assert torch.equal(a[key][name], b[key][name]), (key, name)
+    assert a["kwargs"] == b["kwargs"] and torch.equal(a["action_low"], b["action_low"])
+    assert a["training_steps"] == b["training_steps"] == 400
+    for ckpt in (a, b):  # each loads into oracle_train.py's networks too
+        oracle_train.Actor(**ckpt["kwargs"]).load_state_dict(ckpt["actor_state_dict"])
+        oracle_train.QEnsemble(**ckpt["kwargs"]).load_state_dict(ckpt["qf_state_dict"])
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -583,7 +648,7 @@ def test_oracle_train_pusher_smoke_and_resume(tmp_path):
         [sys.executable, script, *flags, "--total-timesteps", "400"], cwd=tmp_path, capture_output=True, text=True
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
-    ckpt = isp.load_oracle_checkpoint(str(tmp_path / "oracle.pt"), "Pusher-v5", 23, 7)
+    ckpt = isp.read_checkpoint(str(tmp_path / "oracle.pt"), "--oracle-path", "Pusher-v5")
     assert ckpt["training_steps"] == 400 and ckpt["evaluation"]["episodes"] == 2
     (state,) = glob.glob(str(tmp_path / "runs" / "*" / "training_state.pt"))
     proc = subprocess.run(
