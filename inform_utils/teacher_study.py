@@ -73,9 +73,14 @@ def mean_sd(values: np.ndarray, digits: int = 2) -> str:
     return f"{values.mean():.{digits}f} ± {values.std(ddof=1) if len(values) > 1 else 0.0:.{digits}f}"
 
 
+def no_sleep(runs: dict[int, dict]) -> int:
+    """Runs whose buffer held no successful episode: the sleep was skipped and INFORM's Q is its initialisation."""
+    return int((column(runs, "sleep/expert_transitions") == 0).sum())
+
+
 def robustness_table(runs) -> str:
     rows = ["| teacher | n | +1 signals | TAMER length | INFORM length | TAMER at 19 | INFORM at 19 | "
-            "TAMER all-starts | INFORM all-starts | INFORM >= TAMER |", "|" + " --- |" * 10]  # fmt: skip
+            "TAMER all-starts | INFORM all-starts | INFORM >= TAMER | no sleep |", "|" + " --- |" * 11]  # fmt: skip
     for _, label, name in ROBUSTNESS:
         if name not in runs:
             continue
@@ -85,7 +90,8 @@ def robustness_table(runs) -> str:
         n = len(r)
         rows.append(f"| {label} | {n} | {column(r, 'feedback/positive').mean():.0f} | {mean_sd(t_len, 1)} | "
                     f"{mean_sd(i_len, 1)} | {(t_len == OPTIMUM).sum()}/{n} | {(i_len == OPTIMUM).sum()}/{n} | "
-                    f"{mean_sd(t_all)} | {mean_sd(i_all)} | {(i_all >= t_all).sum()}/{n} |")  # fmt: skip
+                    f"{mean_sd(t_all)} | {mean_sd(i_all)} | {(i_all >= t_all).sum()}/{n} | "
+                    f"{no_sleep(r)} |")  # fmt: skip
     return "\n".join(rows)
 
 
@@ -129,8 +135,11 @@ def efficiency_table(runs) -> tuple[str, str]:
                 cells.append("-")
                 continue
             pos, length = r[s]["feedback/positive"], r[s]["eval/inform_episode_length"]
-            cells.append(f"{pos}: {length:.0f}" + (" *" if length == OPTIMUM else ""))
-            if length == OPTIMUM and s not in first:
+            slept = r[s]["sleep/expert_transitions"] > 0
+            cells.append(
+                f"{pos}: {length:.0f}" + (" *" if length == OPTIMUM else "") + ("" if slept else " (no sleep)")
+            )
+            if length == OPTIMUM and slept and s not in first:
                 first[s] = (pos, k)
         reached = sum(r[s]["eval/inform_episode_length"] == OPTIMUM for s in seeds if s in r)
         t_reached = sum(r[s]["eval/tamer_episode_length"] == OPTIMUM for s in seeds if s in r)
