@@ -230,7 +230,7 @@ def efficiency_figure(runs, path: str) -> None:
         colour = matplotlib.colormaps["viridis"](0.1 + 0.8 * i / max(len(sleep_runs(runs)) - 1, 1))
         ax.scatter(pos, length, color=colour, zorder=3, label=f"INFORM after sleeping at k = {k}")
     ax.axhline(OPTIMUM, color="black", ls="--", lw=0.8, label="optimum (19)")
-    ax.set(xscale="log", yscale="log", xlabel="+1 signals given by the teacher",
+    ax.set(xscale="log", ylim=(0, 210), xlabel="+1 signals given by the teacher",
            ylabel="greedy episode length from S (200 = never)",
            title="Feedback efficiency (perfect teacher, n = 5)")  # fmt: skip
     ax.legend(fontsize=7)
