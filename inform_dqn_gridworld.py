@@ -35,7 +35,12 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Polygon, Rectangle
 from torch.utils.tensorboard import SummaryWriter
 
-import gridworld_env
+try:
+    import gridworld_env
+except ModuleNotFoundError as e:  # a copy of this script without the maze beside it
+    if e.name != "gridworld_env":
+        raise
+    sys.exit("error: gridworld_env.py (the maze) is not importable: copy it next to this script, or run from the repo")
 
 MAZE_IDS = tuple(gridworld_env.ENV_IDS)
 POLICIES = ("oracle", "tamer", "inform")

@@ -486,3 +486,18 @@ def test_divergence_is_reported(run_script):
     assert "Traceback" not in result.stderr and "diverged" in result.stderr and "step" in result.stderr
     summary = json.load(open(os.path.join(only_run_dir(run_script.cwd), "summary.json")))
     assert summary["status"] == "diverged" and summary["phase"] == "sleep"
+
+
+def test_a_copied_script_asks_for_the_maze_module(tmp_path):
+    import shutil
+
+    shutil.copy(os.path.join(REPO, "inform_dqn_gridworld.py"), tmp_path / "my_inform.py")
+    proc = subprocess.run([sys.executable, "my_inform.py", "--seed", "1"], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=120, env={**os.environ, "PYTHONPATH": ""})  # fmt: skip
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr, proc.stderr
+    (line,) = proc.stderr.strip().splitlines()
+    assert line.startswith("error: ") and "gridworld_env.py" in line and "copy it next to this script" in line
+    shutil.copy(os.path.join(REPO, "gridworld_env.py"), tmp_path)  # with the maze beside it, the copy runs
+    proc = subprocess.run([sys.executable, "my_inform.py", "--help"], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=120, env={**os.environ, "PYTHONPATH": ""})  # fmt: skip
+    assert proc.returncode == 0 and "--teacher-noise" in proc.stdout, proc.stderr
