@@ -539,8 +539,9 @@ class Evaluator:
             res = evaluate(actor, self.env, episodes, self.reset_seed, deterministic, self.generator,
                            self.success_distance)  # fmt: skip
             results.update({f"eval/{name}_{k}{suffix}": res[k] for k in ("return", "final_distance", "success_rate")})
-        for tag, value in results.items():
-            _ = self.writer is not None and self.writer.add_scalar(tag, value, step)
+        if self.writer is not None:
+            for tag, value in results.items():
+                self.writer.add_scalar(tag, value, step)
         self.final.update(results)
         self.seconds += time.time() - t
         return results
