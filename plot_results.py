@@ -168,8 +168,9 @@ def completed_reward_runs(runs_dir: str, exp_name: str) -> dict:
 
 
 def fig6(runs: dict, path: str) -> None:
-    """Fig. 6 redrawn with every arm: training episode length against env steps, mean over agents and +-1 std, one
-    panel per episode budget; the optimum and TAMER's greedy policy on the wall maze (untrained there) as lines."""
+    """Fig. 6 redrawn with every arm: training episode length against env steps, mean over agents and the 25-75th
+    percentile band, one panel per episode budget; the optimum and TAMER's greedy policy on the wall maze (untrained
+    there) as lines."""
     budgets = sorted(runs)
     fig = Figure(figsize=(7 * len(budgets), 6), layout="constrained")
     axes = np.atleast_1d(fig.subplots(1, len(budgets), squeeze=False)[0])
@@ -188,9 +189,9 @@ def fig6(runs: dict, path: str) -> None:
             n, n_stay = summary[f"{arm}/n_agents"], summary[f"{arm}/n_stay_optimum"]
             median = summary[f"{arm}/steps_to_stay_optimum_median"]
             reached = f"{n_stay}/{n} stay at 25" + (f", median {median / 1000:.1f}k steps" if median else "")
-            mean, std = values.mean(0), values.std(0)
-            ax.plot(grid, mean, color=colour, ls=style, label=f"{reward_label}, {bootstrap_label}: {reached}")
-            ax.fill_between(grid, np.maximum(mean - std, 0), np.minimum(mean + std, 200), color=colour, alpha=0.1)
+            ax.plot(grid, values.mean(0), color=colour, ls=style, label=f"{reward_label}, {bootstrap_label}: {reached}")
+            lo, hi = np.percentile(values, [25, 75], axis=0)
+            ax.fill_between(grid, lo, hi, color=colour, alpha=0.1, lw=0)
         summary = next(iter(arms.values()))[1]
         ax.axhline(summary["optimum_episode_length"], color="black", ls=":", lw=1, label="optimum (25)")
         tamer = summary.get("eval/wall/tamer_episode_length_per_run") or []
@@ -199,7 +200,8 @@ def fig6(runs: dict, path: str) -> None:
             label = f"TAMER's greedy policy, untrained on the wall ({len(known)} runs, lengths {sorted(set(known))})"
             ax.axhline(np.mean(known), color="tab:orange", ls="-.", lw=1.5, label=label)
         ax.set(xlabel="environment steps", ylabel="training episode length", ylim=(0, 210))
-        ax.set_title(f"Wall maze (Fig. 6), {budget} episodes per agent; mean +-1 std over agents", fontsize=10)
+        ax.set_title(f"Wall maze (Fig. 6), {budget} episodes per agent: mean over agents, band 25-75th percentile",
+                     fontsize=10)  # fmt: skip
         ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), fontsize=8)
         ax.grid(alpha=0.3)
     fig.savefig(path, dpi=120)

@@ -228,7 +228,7 @@ def agent_metrics(run: dict, optimum: int, final_window: int, stability_window: 
 
 
 def censored_median(values: np.ndarray) -> float:
-    """Median over all agents, one that never reached counting as later than any that did (nan if over half never)."""
+    """Median over all agents, one that never reached counting as later than any that did (inf if over half never)."""
     return float(np.median(np.where(np.isfinite(values), values, np.inf)))
 
 

@@ -224,6 +224,21 @@ def test_ctrl_c_keeps_what_finished(tmp_path, monkeypatch):
     assert not glob.glob("runs/*/fig6.png")
 
 
+def test_fig6_of_plot_results_draws_every_arm(tmp_path, monkeypatch):
+    import plot_results
+
+    monkeypatch.chdir(tmp_path)
+    make_gridworld_run(tmp_path / "a")
+    for bootstrap in ("sampled", "max"):
+        args = args_for(reward_path=("a",), num_episodes=5, num_seeds=2, bootstrap=bootstrap, exp_name="fig6")
+        qrr.main(args, qrr.resolve_sources(args))
+    runs = plot_results.completed_reward_runs("runs", "fig6")
+    assert sorted(runs[5]) == ["max_bootstrap/env", "max_bootstrap/recovered_network", "sampled_bootstrap/env",
+                               "sampled_bootstrap/recovered_network"]  # fmt: skip
+    plot_results.fig6(runs, str(tmp_path / "fig6.png"))
+    assert (tmp_path / "fig6.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
 # the script: real processes ----------------------------------------------------------------------------------------
 def test_smoke_on_a_real_gridworld_run(run_script):
     """A tiny gridworld run; without --reward-path the script finds it, says so, and runs on its network."""
