@@ -845,7 +845,6 @@ def main(args: Args, oracle_ckpt: dict | None) -> dict:
     torch.set_num_threads(args.num_threads)
     device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
 
-    received = stop_on_signals()  # SIGTERM (Slurm's cancel and time limit, kill) stops the run as Ctrl-C does
     run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
     writer = SummaryWriter(run_dir)
     writer.add_text(
@@ -857,7 +856,8 @@ def main(args: Args, oracle_ckpt: dict | None) -> dict:
     obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
     summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
     status, phase, end_step = "completed", "oracle", args.tamer_total_timesteps + args.sleep_gradient_steps
-    try:
+    received = stop_on_signals()  # SIGTERM (Slurm's cancel and time limit, kill) stops the run as Ctrl-C does;
+    try:  # installed only here, so a signal always finds the except below that saves what finished
         # ---- oracle: the simulated teacher (SPEC section 5)
         t0 = time.time()
         if oracle_ckpt is not None:
