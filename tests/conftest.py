@@ -1,6 +1,10 @@
 import os
+import queue
+import signal
 import subprocess
 import sys
+import threading
+import time
 
 import pytest
 
@@ -23,6 +27,63 @@ def run_script(tmp_path):
 
     run.cwd = tmp_path
     return run
+
+
+def default_signals():
+    """In the child: SIGINT and SIGTERM at their defaults, whatever the test runner inherited (e.g. trap '' INT)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+class Child:
+    """A process whose output is read by threads, so that every wait is bounded; a failure shows its output."""
+
+    def __init__(self, cmd, cwd):
+        self.proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                     preexec_fn=default_signals)  # fmt: skip
+        self.out, self.err, self.lines = [], [], queue.Queue()
+        self.threads = [
+            threading.Thread(target=self._read, args=(self.proc.stdout, self.out, True), daemon=True),
+            threading.Thread(target=self._read, args=(self.proc.stderr, self.err, False), daemon=True),
+        ]
+        for thread in self.threads:
+            thread.start()
+
+    def _read(self, stream, store, to_queue):
+        for line in stream:
+            store.append(line)
+            if to_queue:
+                self.lines.put(line)
+        if to_queue:
+            self.lines.put(None)
+
+    def fail(self, why):
+        self.proc.kill()
+        self.proc.wait(30)
+        for thread in self.threads:
+            thread.join(10)
+        pytest.fail(f"{why}\n--- stdout ---\n{''.join(self.out)[-3000:]}\n--- stderr ---\n{''.join(self.err)[-3000:]}")
+
+    def wait_for_line(self, prefix, timeout=180):
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                line = self.lines.get(timeout=max(deadline - time.monotonic(), 0.01))
+            except queue.Empty:
+                self.fail(f"no line starting with {prefix!r} within {timeout}s")
+            if line is None:
+                self.fail(f"the process ended (code {self.proc.wait(30)}) before a line starting with {prefix!r}")
+            if line.startswith(prefix):
+                return line
+
+    def finish(self, timeout=120):
+        try:
+            self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.fail(f"still running {timeout}s after the signal")
+        for thread in self.threads:
+            thread.join(30)
+        return self.proc.returncode, "".join(self.out), "".join(self.err)
 
 
 FAKE_SCRIPT = '''

@@ -4,11 +4,9 @@ reward, bad input. Smoke runs use tiny budgets and run with cwd in a pytest tmp_
 import glob
 import json
 import os
-import queue
 import signal
 import subprocess
 import sys
-import threading
 import time
 
 import gymnasium as gym
@@ -20,6 +18,8 @@ import tyro
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
+
+from conftest import Child  # noqa: E402
 
 import inform_sac_pusher as isp  # noqa: E402
 
@@ -44,58 +44,6 @@ TINY = [
 
 def run(cwd, *flags, timeout=120):
     return subprocess.run([sys.executable, SCRIPT, *flags], cwd=cwd, capture_output=True, text=True, timeout=timeout)
-
-
-def default_signals():
-    # a child of a shell that ignores SIGINT (a background job) would inherit the ignored signal: restore both
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-
-
-class Child:
-    """A script run as a child process whose output is read on a thread, so every wait is bounded."""
-
-    def __init__(self, argv, cwd):
-        self.proc = subprocess.Popen(argv, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                     preexec_fn=default_signals)  # fmt: skip
-        self.lines, self.err = queue.Queue(), []
-        self.out = []
-        threading.Thread(target=self._pump, args=(self.proc.stdout, self.out, self.lines), daemon=True).start()
-        threading.Thread(target=self._pump, args=(self.proc.stderr, self.err, None), daemon=True).start()
-
-    @staticmethod
-    def _pump(stream, store, lines):
-        for line in stream:
-            store.append(line)
-            if lines is not None:
-                lines.put(line)
-
-    def wait_for(self, predicate, timeout=120.0) -> str:
-        deadline = time.time() + timeout
-        while time.time() < deadline:
-            try:
-                line = self.lines.get(timeout=0.5)
-            except queue.Empty:
-                if self.proc.poll() is not None and self.lines.empty():
-                    break
-                continue
-            if predicate(line):
-                return line
-        self.fail("the awaited output never came")
-
-    def finish(self, timeout=120.0) -> tuple[int, str]:
-        try:
-            self.proc.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            self.fail(f"did not exit within {timeout:.0f}s")
-        time.sleep(0.2)  # let the pumps drain
-        return self.proc.returncode, "".join(self.err)
-
-    def fail(self, why):
-        self.proc.kill()
-        self.proc.wait()
-        time.sleep(0.2)
-        pytest.fail(f"{why}\n--- stdout ---\n{''.join(self.out)[-3000:]}\n--- stderr ---\n{''.join(self.err)[-3000:]}")
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -366,9 +314,9 @@ def test_signal_ends_the_run_cleanly(tmp_path, phase, sig):
     flags = [*TINY, "--tamer-total-timesteps", "100000" if phase == "tamer" else "600"]
     flags += ["--sleep-gradient-steps", "100000", "--sleep-eval-frequency", "100000"]
     child = Child([sys.executable, SCRIPT, *flags], tmp_path)
-    child.wait_for(lambda line: line.startswith(f"[{phase}]"))
+    child.wait_for_line(f"[{phase}]", timeout=120)
     child.proc.send_signal(getattr(signal, sig))
-    returncode, stderr = child.finish()
+    returncode, _, stderr = child.finish()
     assert returncode == {"SIGINT": 130, "SIGTERM": 143}[sig] and "Traceback" not in stderr, stderr
     (run_dir,) = glob.glob(str(tmp_path / "runs" / "*"))
     with open(os.path.join(run_dir, "summary.json")) as f:
@@ -385,10 +333,10 @@ def test_sigterm_stops_a_run_started_in_the_background(tmp_path):
     flags = [*TINY, "--sleep-gradient-steps", "100000", "--sleep-eval-frequency", "100000"]
     shell = 'trap "" INT; "$0" "$@" & echo "pid $!"; wait $!'
     child = Child(["bash", "-c", shell, sys.executable, SCRIPT, *flags], tmp_path)
-    pid = int(child.wait_for(lambda line: line.startswith("pid ")).split()[1])
-    child.wait_for(lambda line: line.startswith("[sleep]"))
+    pid = int(child.wait_for_line("pid ", timeout=120).split()[1])
+    child.wait_for_line("[sleep]", timeout=120)
     os.kill(pid, signal.SIGTERM)
-    returncode, stderr = child.finish()
+    returncode, _, stderr = child.finish()
     assert returncode == 143 and "Traceback" not in stderr, stderr
     (run_dir,) = glob.glob(str(tmp_path / "runs" / "*"))
     with open(os.path.join(run_dir, "summary.json")) as f:
@@ -678,13 +626,13 @@ def test_oracle_train_signal_keeps_the_last_training_state(tmp_path, sig):
     flags += ["--checkpoint-frequency", "150", "--log-frequency", "50", "--total-timesteps", "100000"]
     flags += ["--eval-frequency", "100000", "--output-path", "oracle.pt"]
     child = Child([sys.executable, os.path.join(REPO, "oracle_train.py"), *flags], tmp_path)
-    run_dir = child.wait_for(lambda line: line.startswith("run dir:")).split(":", 1)[1].strip()
+    run_dir = child.wait_for_line("run dir:", timeout=120).split(":", 1)[1].strip()
     state = tmp_path / run_dir / "training_state.pt"
     deadline = time.time() + 120
     while not state.exists() and time.time() < deadline:  # the first state is saved at step 150
         time.sleep(0.2)
     child.proc.send_signal(getattr(signal, sig))
-    returncode, stderr = child.finish()
+    returncode, _, stderr = child.finish()
     assert returncode == {"SIGINT": 130, "SIGTERM": 143}[sig] and "Traceback" not in stderr, stderr
     assert len(stderr.strip().splitlines()) == 1 and "--resume" in stderr
     assert not (tmp_path / "oracle.pt").exists()

@@ -13,6 +13,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from conftest import default_signals
 
 import gridworld_env as g
 import q_learning_recovered_reward as qrr
@@ -288,10 +289,7 @@ def test_a_real_signal_keeps_what_finished(sig, code, tmp_path):
         cwd=tmp_path,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
-        preexec_fn=lambda: (
-            signal.signal(signal.SIGINT, signal.SIG_DFL),
-            signal.signal(signal.SIGTERM, signal.SIG_DFL),
-        ),
+        preexec_fn=default_signals,
     )
     read_until(proc, "run directory:", timeout=120)
     proc.send_signal(sig)

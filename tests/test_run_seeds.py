@@ -7,16 +7,11 @@ import sys
 import time
 
 import pytest
-from conftest import REPO
+from conftest import REPO, default_signals
 
 import run_seeds
 
 RUN_SEEDS = os.path.join(REPO, "run_seeds.py")
-
-
-def restore_default_signals():
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def calls(tmp_path) -> list[tuple[int, float]]:
@@ -164,7 +159,7 @@ def test_a_signal_stops_the_runs_which_save_and_are_rerun_on_resume(tmp_path, si
     cmd = [sys.executable, RUN_SEEDS, "--script", os.path.join(REPO, "inform_dqn_gridworld.py"), "--exp-name", "s",
            "--seeds", "1", "2", "--workers", "2", "--threads", "1", *TINY_BUT_LONG]  # fmt: skip
     proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=restore_default_signals)  # fmt: skip
+                            preexec_fn=default_signals)  # fmt: skip
     # both runs have made their run directories (a run of 100k steps then trains for minutes on this machine)
     logs = [tmp_path / "runs" / "logs" / f"s__{seed}.log" for seed in (1, 2)]
     wait_for(lambda: all(p.exists() and "run directory" in p.read_text() for p in logs), proc, 120, "both runs")
@@ -189,7 +184,7 @@ def test_sigterm_to_run_seeds_in_the_background_and_the_resume(tmp_path, fake_sc
     (tmp_path / "block").write_text("")
     cmd = f"{sys.executable} {RUN_SEEDS} --script fake.py --exp-name b --seeds 1 2 --workers 2"
     script = f"{cmd} > out.txt 2> err.txt & echo $! > pid.txt; wait $!; echo $? > rc.txt"
-    shell = subprocess.Popen(["bash", "-c", script], cwd=tmp_path, preexec_fn=restore_default_signals)
+    shell = subprocess.Popen(["bash", "-c", script], cwd=tmp_path, preexec_fn=default_signals)
     wait_for(lambda: len(calls(tmp_path)) == 2 and (tmp_path / "pid.txt").exists(), shell, 60, "both runs starting")
     wait_for(lambda: (tmp_path / "out.txt").exists(), shell, 10, "output")
     time.sleep(0.5)

@@ -11,7 +11,7 @@ import sys
 import time
 
 import pytest
-from conftest import REPO
+from conftest import REPO, default_signals
 
 pytestmark = pytest.mark.slurm
 RUN_SEEDS = os.path.join(REPO, "run_seeds.py")
@@ -140,8 +140,7 @@ def test_sigterm_to_run_seeds_cancels_its_jobs_and_a_rerun_resumes(tmp_path, fak
     cmd = [sys.executable, RUN_SEEDS, "--poll-seconds", "1", "--script", "fake.py", "--exp-name", "k", "--seeds", "1",
            "2", "--launcher", "slurm", "--slurm-time", "10"]  # fmt: skip
     proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: (signal.signal(signal.SIGINT, signal.SIG_DFL),
-                                                signal.signal(signal.SIGTERM, signal.SIG_DFL)))  # fmt: skip
+                            preexec_fn=default_signals)  # fmt: skip
     deadline = time.time() + 120
     while len(calls(tmp_path)) < 2 and time.time() < deadline and proc.poll() is None:
         time.sleep(0.2)

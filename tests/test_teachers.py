@@ -7,7 +7,6 @@ import math
 import os
 import re
 import select
-import signal
 import subprocess
 import sys
 import time
@@ -15,6 +14,7 @@ import time
 import numpy as np
 import pytest
 import torch
+from conftest import default_signals
 
 import inform_dqn_gridworld as inform
 
@@ -251,8 +251,7 @@ def test_human_through_a_pseudo_terminal(tmp_path):
     master, slave = pty.openpty()
     proc = subprocess.Popen([sys.executable, os.path.join(REPO, SCRIPT), *HUMAN], cwd=tmp_path, stdin=slave,
                             stdout=slave, stderr=subprocess.PIPE, close_fds=True,
-                            preexec_fn=lambda: (signal.signal(signal.SIGINT, signal.SIG_DFL),
-                                                signal.signal(signal.SIGTERM, signal.SIG_DFL)))  # fmt: skip
+                            preexec_fn=default_signals)  # fmt: skip
     os.close(slave)
     seen = b""
 
