@@ -58,6 +58,12 @@ SUPPORTED_ENV_IDS = PUSHER_IDS + MAZE_IDS
 METHODS = {"pusher": ("sac",), "maze": ("value-iteration", "q-learning", "dqn")}
 LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
 SUCCESS_DISTANCE = 0.08
+# Reset seeds of the evaluations. Training seeds its env once (--seed, or --seed + step on --resume) and then
+# draws its starts from the env's own RNG, so these fixed blocks are starts it never trains from. The periodic
+# evaluation uses the same block every time, so its numbers compare across steps and choose best.pt; the final
+# evaluation of the written oracle uses another block, so the choice is not judged on the starts it was chosen on.
+SELECTION_EVAL_SEED = 1_000_000
+FINAL_EVAL_SEED = 20_000
 TRAINING_STATE_KEYS = ("actor", "qf", "qf_target", "q_optimizer", "actor_optimizer", "a_optimizer", "log_alpha",
                        "buf_n", "buf_obs", "buf_next_obs", "buf_act", "buf_rew", "buf_term", "global_step",
                        "torch_rng")  # fmt: skip
@@ -108,11 +114,11 @@ class Args:
 
     # Evaluation, logging and checkpointing
     eval_frequency: int = 10000
-    """evaluate the deterministic policy every this many steps"""
-    eval_episodes: int = 10
-    """random-start episodes per periodic evaluation"""
+    """evaluate the deterministic policy every this many steps; the best evaluation's networks are kept as best.pt"""
+    eval_episodes: int = 100
+    """random-start episodes per periodic evaluation (the same reset seeds every time, never used in training)"""
     final_eval_episodes: int = 100
-    """random-start episodes of the final evaluation stored in the checkpoint"""
+    """random-start episodes of the final, held-out evaluation of the written oracle (other reset seeds again)"""
     log_frequency: int = 1000
     """log losses and SPS every this many steps"""
     checkpoint_frequency: int = 10000
@@ -467,6 +473,15 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     def save_oracle(step: int, evaluation: dict, path: str) -> None:
         atomic_save(oracle_checkpoint(actor, qf, args, obs_dim, act_dim, low, high, step, evaluation), path)
 
+    # the best evaluation so far (SB3's EvalCallback): success rate first, then final distance; a resumed run goes on
+    # from the best.pt in its run directory
+    best_path = os.path.join(run_dir, "best.pt")
+    best_key, best_step = (-1.0, -math.inf), None
+    if os.path.isfile(best_path):
+        best = torch.load(best_path, weights_only=True, map_location="cpu")
+        best_key = (best["evaluation"]["success_rate"], -best["evaluation"]["final_distance"])
+        best_step = best["training_steps"]
+
     obs, _ = env.reset(seed=args.seed + start_step)  # random starts: seed once, then the env RNG runs on
     obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
     ep_return, ep_length = 0.0, 0
@@ -541,14 +556,22 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
             writer.add_scalar("losses/alpha_loss", alpha_loss.item(), step)
             writer.add_scalar("charts/SPS", sps, step)
         if step % args.eval_frequency == 0 or step == args.total_timesteps:
-            last_eval = evaluate(actor, args.env_id, args.eval_episodes, 10_000 + step, device)
+            last_eval = evaluate(actor, args.env_id, args.eval_episodes, SELECTION_EVAL_SEED, device)
             writer.add_scalar("eval/oracle_return", last_eval["return"], step)
             writer.add_scalar("eval/oracle_final_distance", last_eval["final_distance"], step)
             writer.add_scalar("eval/oracle_success_rate", last_eval["success_rate"], step)
+            if (last_eval["success_rate"], -last_eval["final_distance"]) > best_key:
+                best_key, best_step = (last_eval["success_rate"], -last_eval["final_distance"]), step
+                save_oracle(step, {**last_eval, "reset_seed": SELECTION_EVAL_SEED}, best_path)
+            writer.add_scalar("eval/best_success_rate", best_key[0], step)
+            writer.add_scalar("eval/best_final_distance", -best_key[1], step)
         if step % report_every == 0 or step == args.total_timesteps:
             sps = (step - start_step) / max(time.time() - t0, 1e-9)
             eta = (args.total_timesteps - step) / max(sps, 1e-9)
-            ev = f" | eval return {last_eval['return']:.1f} dist {last_eval['final_distance']:.3f}" if last_eval else ""
+            ev = ""
+            if last_eval:
+                ev = (f" | eval return {last_eval['return']:.1f} dist {last_eval['final_distance']:.3f} success "
+                      f"{last_eval['success_rate']:.2f} | best {best_key[0]:.2f} / {-best_key[1]:.3f} at {best_step}")
             print(f"[oracle] {step}/{args.total_timesteps} {100 * step // args.total_timesteps}% | {sps:.0f} SPS"
                   f" | ETA {int(eta // 60)}m{int(eta % 60):02d}s{ev}", flush=True)  # fmt: skip
         if step % args.checkpoint_frequency == 0 or step == args.total_timesteps:
@@ -560,22 +583,33 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
 
     train_time = time.time() - t0
     env.close()
-    final_eval = evaluate(actor, args.env_id, args.final_eval_episodes, 20_000, device)
-    steps = max(start_step, args.total_timesteps)
+    # the oracle written is the best evaluation's networks (the last ones stay in oracle_latest.pt), judged again on
+    # held-out starts
+    best = torch.load(best_path, weights_only=True, map_location="cpu")
+    actor.load_state_dict(best["actor_state_dict"])
+    qf.load_state_dict(best["qf_state_dict"])
+    final_eval = evaluate(actor, args.env_id, args.final_eval_episodes, FINAL_EVAL_SEED, device)
     print(
-        f"[oracle] final eval over {args.final_eval_episodes} random-start episodes: return {final_eval['return']:.2f}"
-        f" +- {final_eval['return_std']:.2f} | final distance {final_eval['final_distance']:.4f}"
-        f" | success rate {final_eval['success_rate']:.2f} | train time {train_time:.0f}s (this session)",
+        f"[oracle] best evaluation at step {best['training_steps']}: success rate "
+        f"{best['evaluation']['success_rate']:.2f}, final distance {best['evaluation']['final_distance']:.4f} over "
+        f"{best['evaluation']['episodes']:.0f} episodes; held-out eval over {args.final_eval_episodes} other starts: "
+        f"return {final_eval['return']:.2f} +- {final_eval['return_std']:.2f} | final distance "
+        f"{final_eval['final_distance']:.4f} | success rate {final_eval['success_rate']:.2f} | train time "
+        f"{train_time:.0f}s (this session)",
         flush=True,
     )
+    steps = best["training_steps"]
     if args.save_model:
         ckpt = oracle_checkpoint(actor, qf, args, obs_dim, act_dim, low, high, steps, final_eval)
         ckpt["train_time_s_this_session"] = float(train_time)
+        ckpt["selection_evaluation"] = best["evaluation"]
+        ckpt["total_timesteps"] = max(start_step, args.total_timesteps)
         os.makedirs(os.path.dirname(os.path.abspath(args.output_path)), exist_ok=True)
         atomic_save(ckpt, args.output_path)
         with open(os.path.join(run_dir, "oracle_eval.json"), "w") as f:
             json.dump(
-                {"eval": final_eval, "steps": steps, "train_time_s": train_time, "args": asdict(args)}, f, indent=1
+                {"eval": final_eval, "selection_eval": best["evaluation"], "steps": steps, "train_time_s": train_time,
+                 "args": asdict(args)}, f, indent=1
             )
         print(f"oracle written to {args.output_path}", flush=True)
     writer.close()

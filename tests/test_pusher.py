@@ -557,7 +557,9 @@ def test_both_scripts_train_the_same_oracle_and_load_each_others(tmp_path):
                           cwd=tmp_path, capture_output=True, text=True, timeout=300)  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-2000:]
     a = isp.read_checkpoint(in_script, "--oracle-path", "Pusher-v5")
-    b = isp.read_checkpoint(str(tmp_path / "trained.pt"), "--oracle-path", "Pusher-v5")
+    (latest,) = glob.glob(str(tmp_path / "runs" / "*" / "oracle_latest.pt"))  # trained.pt is the best evaluation's
+    b = isp.read_checkpoint(latest, "--oracle-path", "Pusher-v5")
+    isp.read_checkpoint(str(tmp_path / "trained.pt"), "--oracle-path", "Pusher-v5")
     for key in ("actor_state_dict", "qf_state_dict"):
         assert a[key].keys() == b[key].keys()
         for name in a[key]:
@@ -607,7 +609,21 @@ def test_oracle_train_pusher_smoke_and_resume(tmp_path):
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
     ckpt = isp.read_checkpoint(str(tmp_path / "oracle.pt"), "--oracle-path", "Pusher-v5")
-    assert ckpt["training_steps"] == 400 and ckpt["evaluation"]["episodes"] == 2
+    assert ckpt["total_timesteps"] == 400 and ckpt["training_steps"] in (200, 400)
+    assert ckpt["evaluation"]["episodes"] == 2 and ckpt["selection_evaluation"]["episodes"] == 1
+    # best.pt is the evaluation with the highest success rate, then the smallest final distance, of those logged
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    (run_dir,) = glob.glob(str(tmp_path / "runs" / "*"))
+    events = EventAccumulator(run_dir).Reload()
+    success = {e.step: e.value for e in events.Scalars("eval/oracle_success_rate")}
+    distance = {e.step: e.value for e in events.Scalars("eval/oracle_final_distance")}
+    assert sorted(success) == [200, 400]
+    best_step = max(success, key=lambda step: (success[step], -distance[step]))
+    best = torch.load(os.path.join(run_dir, "best.pt"), weights_only=True)
+    assert best["training_steps"] == ckpt["training_steps"] == best_step
+    assert best["evaluation"]["final_distance"] == pytest.approx(distance[best_step], rel=1e-6)
+    assert best["evaluation"]["reset_seed"] == 1_000_000
     (state,) = glob.glob(str(tmp_path / "runs" / "*" / "training_state.pt"))
     proc = subprocess.run(
         [sys.executable, script, *flags, "--total-timesteps", "600", "--resume", state],
@@ -617,7 +633,7 @@ def test_oracle_train_pusher_smoke_and_resume(tmp_path):
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "resumed from" in proc.stdout
-    assert torch.load(tmp_path / "oracle.pt", weights_only=True)["training_steps"] == 600
+    assert torch.load(tmp_path / "oracle.pt", weights_only=True)["total_timesteps"] == 600
 
 
 @pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
