@@ -570,8 +570,10 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
             eta = (args.total_timesteps - step) / max(sps, 1e-9)
             ev = ""
             if last_eval:
-                ev = (f" | eval return {last_eval['return']:.1f} dist {last_eval['final_distance']:.3f} success "
-                      f"{last_eval['success_rate']:.2f} | best {best_key[0]:.2f} / {-best_key[1]:.3f} at {best_step}")
+                ev = (
+                    f" | eval return {last_eval['return']:.1f} dist {last_eval['final_distance']:.3f} success "
+                    f"{last_eval['success_rate']:.2f} | best {best_key[0]:.2f} / {-best_key[1]:.3f} at {best_step}"
+                )
             print(f"[oracle] {step}/{args.total_timesteps} {100 * step // args.total_timesteps}% | {sps:.0f} SPS"
                   f" | ETA {int(eta // 60)}m{int(eta % 60):02d}s{ev}", flush=True)  # fmt: skip
         if step % args.checkpoint_frequency == 0 or step == args.total_timesteps:
@@ -608,8 +610,15 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
         atomic_save(ckpt, args.output_path)
         with open(os.path.join(run_dir, "oracle_eval.json"), "w") as f:
             json.dump(
-                {"eval": final_eval, "selection_eval": best["evaluation"], "steps": steps, "train_time_s": train_time,
-                 "args": asdict(args)}, f, indent=1
+                {
+                    "eval": final_eval,
+                    "selection_eval": best["evaluation"],
+                    "steps": steps,
+                    "train_time_s": train_time,
+                    "args": asdict(args),
+                },
+                f,
+                indent=1,
             )
         print(f"oracle written to {args.output_path}", flush=True)
     writer.close()
