@@ -1,6 +1,6 @@
 """Tables and figures of the maze teacher study (SPEC section 10) from finished runs of inform_dqn_gridworld.py.
 
-    python inform_utils/teacher_study.py --runs-dir runs/teachers_study/runs --out docs/figures
+    python -m inform_utils.teacher_study --runs-dir runs/teachers_study/runs --out docs/figures
 
 Runs are grouped by their exp_name (see docs/teacher_notes.md for the commands that make them):
 - robustness: `base` (the perfect teacher), `noise{p}`, `sparsity{q}`, `delay{d}_w{k}`;

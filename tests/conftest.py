@@ -17,13 +17,11 @@ def run_script(tmp_path):
     """Run one of the repo's scripts in a fresh working directory, so its runs/ lands in tmp_path."""
 
     def run(script: str, *flags: str, timeout: float = 300) -> subprocess.CompletedProcess:
-        return subprocess.run(
-            [sys.executable, os.path.join(REPO, script), *flags],
-            cwd=tmp_path,
-            capture_output=True,
-            text=True,
-            timeout=timeout,
-        )
+        cmd, env = [sys.executable, os.path.join(REPO, script)], None
+        if script.startswith("inform_utils/"):  # the helpers run as modules: python -m inform_utils.run_seeds
+            cmd = [sys.executable, "-m", script.removesuffix(".py").replace("/", ".")]
+            env = {**os.environ, "PYTHONPATH": REPO}
+        return subprocess.run([*cmd, *flags], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=timeout)
 
     run.cwd = tmp_path
     return run

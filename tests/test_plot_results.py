@@ -2,7 +2,7 @@ import os
 
 from test_inform_gridworld import SCRIPT, TINY
 
-import plot_results
+from inform_utils import plot_results
 
 
 def test_maze_figures_from_real_runs(run_script, monkeypatch):

@@ -252,8 +252,9 @@ def test_smoke_oracle_path_and_determinism(tmp_path):
         assert metrics[det.format("policy")] == first[det.format(policy)]
     assert len(glob.glob(str(tmp_path / "a" / "runs" / "*"))) == 1  # evaluating writes no run
     # the obstacle statistics and Fig. 5a read the run
-    stats = subprocess.run([sys.executable, os.path.join(REPO, "pusher_obstacle_stats.py"), run_dir, "--fig5a",
-                            str(tmp_path / "fig5a.png")], capture_output=True, text=True, timeout=120)  # fmt: skip
+    stats_script = os.path.join(REPO, "inform_utils", "pusher_obstacle_stats.py")
+    stats = subprocess.run([sys.executable, stats_script, run_dir, "--fig5a", str(tmp_path / "fig5a.png")],
+                           capture_output=True, text=True, timeout=120)  # fmt: skip
     assert stats.returncode == 0, stats.stderr
     assert "INFORM closer than TAMER on" in stats.stdout and (tmp_path / "fig5a.png").stat().st_size > 10_000
 

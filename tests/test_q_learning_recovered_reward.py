@@ -226,7 +226,7 @@ def test_ctrl_c_keeps_what_finished(tmp_path, monkeypatch):
 
 
 def test_fig6_of_plot_results_draws_every_arm(tmp_path, monkeypatch):
-    import plot_results
+    from inform_utils import plot_results
 
     monkeypatch.chdir(tmp_path)
     make_gridworld_run(tmp_path / "a")

@@ -9,9 +9,9 @@ import time
 import pytest
 from conftest import REPO, default_signals
 
-import run_seeds
+from inform_utils import run_seeds
 
-RUN_SEEDS = os.path.join(REPO, "run_seeds.py")
+RUN_SEEDS = os.path.join(REPO, "inform_utils", "run_seeds.py")
 
 
 def calls(tmp_path) -> list[tuple[int, float]]:
@@ -81,8 +81,8 @@ def test_flag_values_and_recorded_args():
 
 
 def test_a_failed_run_is_reported_with_the_tail_of_its_log_and_the_table_has_the_rest(run_script, fake_script):
-    result = run_script("run_seeds.py", "--script", "fake.py", "--exp-name", "e", "--seeds", "1", "2", "--",
-                        "--fail-seed", "2")  # fmt: skip
+    result = run_script("inform_utils/run_seeds.py", "--script", "fake.py", "--exp-name", "e", "--seeds", "1", "2",
+                        "--", "--fail-seed", "2")  # fmt: skip
     assert result.returncode == 1, result.stdout + result.stderr
     assert "seed 2: failed" in result.stdout and "boom: seed 2 refuses to run" in result.stdout
     assert "e: 1 of 2 seeds finished, missing [2]" in result.stdout

@@ -14,7 +14,7 @@ import pytest
 from conftest import REPO, default_signals
 
 pytestmark = pytest.mark.slurm
-RUN_SEEDS = os.path.join(REPO, "run_seeds.py")
+RUN_SEEDS = os.path.join(REPO, "inform_utils", "run_seeds.py")
 GRIDWORLD = os.path.join(REPO, "inform_dqn_gridworld.py")
 
 

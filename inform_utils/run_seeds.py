@@ -5,9 +5,9 @@ flags, is not run again; an interrupted, failed or timed-out run is.
 
 In the spirit of CleanRL's benchmark utility.
 
-    python run_seeds.py --script inform_dqn_gridworld.py --exp-name fig3 --seeds 1 2 3 4 5 --workers 2
-    python run_seeds.py --script inform_sac_pusher.py --exp-name fig3 --seeds 1 2 3 -- --random-starts
-    python run_seeds.py --exp-name noise --grid teacher-noise=0,0.1,0.2 --launcher slurm --slurm-time 30
+    python -m inform_utils.run_seeds --script inform_dqn_gridworld.py --exp-name fig3 --seeds 1 2 3 4 5 --workers 2
+    python -m inform_utils.run_seeds --script inform_sac_pusher.py --exp-name fig3 --seeds 1 2 3 -- --random-starts
+    python -m inform_utils.run_seeds --exp-name noise --grid teacher-noise=0,0.1,0.2 --launcher slurm --slurm-time 30
 
 Stopping: SIGINT or SIGTERM (Ctrl-C, kill, a scheduler) is passed on to the runs, which save what finished and
 write summary.json with status interrupted; run_seeds then reports them and exits 130 / 143. With --launcher slurm

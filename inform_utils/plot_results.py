@@ -1,6 +1,6 @@
 """Draw the paper's figures from finished runs (their TensorBoard events, summary.json and saved arrays).
 
-    python plot_results.py --maze-exp fig3 --pusher-exp fig3 --out docs/figures
+    python -m inform_utils.plot_results --maze-exp fig3 --pusher-exp fig3 --out docs/figures
 
 Writes, each only when its runs exist:
 - fig3_maze.png: TAMER's greedy episode length against env steps, INFORM's against sleep steps, the oracle (Fig. 3);

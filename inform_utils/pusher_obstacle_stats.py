@@ -5,8 +5,8 @@ directory written by inform_sac_pusher.py, prints per-seed and pooled means and 
 Welch t-test (scipy.stats.ttest_ind, equal_var=False) of TAMER against INFORM final distances, on the pooled
 episodes and on the per-seed means.
 
-    python pusher_obstacle_stats.py runs/Pusher-v5__inform_sac_pusher__1__* runs/Pusher-v5__inform_sac_pusher__2__* \
-        runs/Pusher-v5__inform_sac_pusher__3__*
+    python -m inform_utils.pusher_obstacle_stats runs/Pusher-v5__inform_sac_pusher__1__* \
+        runs/Pusher-v5__inform_sac_pusher__2__* runs/Pusher-v5__inform_sac_pusher__3__*
 """
 
 import contextlib
