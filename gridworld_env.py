@@ -1,4 +1,4 @@
-"""The 30-cell maze of Knox & Stone as a Gymnasium environment (INFORM paper, Sec. IV-A; SPEC section 3).
+"""The 30-cell maze of Knox & Stone as a Gymnasium environment (INFORM paper, Sec. V-A; docs/protocol.md, "The maze").
 
     +--+--+--+--+--+--+
     | 0  1  2  3 S |G |        S = cell 4 = (row 0, col 4)

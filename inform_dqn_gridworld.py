@@ -2,11 +2,11 @@
 IQ-Learn on the remembered transitions ("sleep"), giving a far-sighted policy and a recovered reward.
 
 Reproduces the gridworld experiment of Tarakli & Di Nuovo, "Learning while Sleeping" (ICDL 2024), Algorithm 1,
-Fig. 3 (episode length of TAMER, INFORM and the expert). See SPEC.md sections 1-3 and 9.
+Fig. 3 (episode length of TAMER, INFORM and the expert). What the paper leaves open: docs/protocol.md.
 
     python inform_dqn_gridworld.py --seed 1
     python inform_dqn_gridworld.py --teacher-noise 0.2 --teacher-delay 1 --credit-window 2   # a human-like teacher
-    python inform_dqn_gridworld.py --teacher human --tamer-learning-starts 32   # teach it yourself (SPEC section 10)
+    python inform_dqn_gridworld.py --teacher human --tamer-learning-starts 32   # teach it yourself (docs/teachers.md)
 """
 
 import collections
@@ -95,7 +95,7 @@ class Args:
     success_max_steps: int = 30
     """an episode is tagged success if it reaches the goal in fewer than this many steps"""
 
-    # The teacher as a person (SPEC section 10); the defaults are the paper's perfect, instant, tireless teacher
+    # The teacher as a person (docs/protocol.md); the defaults are the paper's perfect, instant, tireless teacher
     teacher: Literal["oracle", "human"] = "oracle"
     """who answers: "oracle" (Eq. 4, distorted by the flags below) or "human" (you, in the terminal: y, Enter, q)"""
     teacher_noise: float = 0.0
@@ -255,10 +255,10 @@ def oracle_feedback(q_star_sa, q_star_best, alpha):  # Eq. 4, sign-safe
     return (q_star_sa >= q_star_best - (1.0 - alpha) * abs(q_star_best)) * 1.0
 
 
-# ALGO LOGIC: the teacher (SPEC section 10). Eq. 4 says what a perfect teacher would answer; a person distorts it.
+# ALGO LOGIC: the teacher (docs/protocol.md). Eq. 4 says what a perfect teacher would answer; a person distorts it.
 # Copy this class verbatim into both INFORM scripts (CleanRL style: repeated across files, never within one).
 class Teacher:
-    """A simulated person between Eq. 4 and the learner: noisy, sparse, late and limited (SPEC section 10).
+    """A simulated person between Eq. 4 and the learner: noisy, sparse, late and limited (paper Sec. VII's future work).
 
     Each call hands over the perfect teacher's answer h* (0 or 1) about the transition at buffer index `step` and
     returns the buffer indices that receive h = 1 now. In order: the judgement is flipped with probability
@@ -403,7 +403,7 @@ class Evaluator:
 
 
 class HumanTeacher:
-    """You as the teacher (SPEC section 10). The maze is drawn with the agent and its move; you answer on standard
+    """You as the teacher (docs/teachers.md). The maze is drawn with the agent and its move; you answer on standard
     input: y (+1), Enter (no feedback) or q (stop teaching: the sleep starts). The end of the input counts as q, so
     a pipe or a file of answers works as well as a keyboard."""
 

@@ -2,7 +2,7 @@
 IQ-Learn on the remembered transitions ("sleep") gives a far-sighted policy and a recovered reward.
 
 Tarakli & Di Nuovo, "Learning while Sleeping" (ICDL 2024): Algorithm 1, Fig. 3 and the obstacle robustness test; see
-SPEC.md sections 1, 2, 4, 5, 8 and 9. Every episode starts from the run's seed (the paper's protocol) unless
+docs/protocol.md for what the paper leaves open. Every episode starts from the run's seed (the paper's protocol) unless
 --random-starts. The teacher is the shipped oracles/{env_id}__sac_oracle.pt (from oracle_train.py), --oracle-path, or
 a SAC agent trained here (--train-oracle). The algorithm reads top to bottom down to `main`; the checks, files and
 --evaluate come after it.
@@ -37,7 +37,7 @@ ENV_IDS = ("Pusher-v5", "Pusher-v4")
 POLICIES = ("oracle", "tamer", "inform")
 LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
 REPO_DIR = os.path.dirname(os.path.abspath(__file__))
-# the robustness test's three 3 cm cubes on the table (SPEC section 4): the paper's positions (layout "paper"), the
+# the robustness test's three 3 cm cubes on the table (docs/protocol.md): the paper's positions (layout "paper"), the
 # paper's distance between neighbouring boxes (kept by layout "bisector"), their half-size and height
 OBSTACLE_POSITIONS = ((0.32, -0.20), (0.35, -0.23), (0.38, -0.26))
 OBSTACLE_SPACING, OBSTACLE_HALF_SIZE, OBSTACLE_Z = 0.0424, 0.015, -0.325
@@ -109,7 +109,7 @@ class Args:
     feedback_alpha_end: float = 0.992
     """alpha of Eq. 4 at the end of the forward phase (alpha rises linearly: the teacher gets stricter)"""
 
-    # The teacher as a person (SPEC section 10); the defaults are the paper's perfect, instant, tireless teacher
+    # The teacher as a person (docs/protocol.md); the defaults are the paper's perfect, instant, tireless teacher
     teacher_noise: float = 0.0
     """probability that the teacher's judgement is flipped (+1 <-> no feedback)"""
     teacher_sparsity: float = 1.0
@@ -330,10 +330,10 @@ def oracle_q(oracle_actor: Actor, oracle_qf: QEnsemble, obs: torch.Tensor, actio
     return q_star[0], q_star[1]
 
 
-# ALGO LOGIC: the teacher (SPEC section 10). Eq. 4 says what a perfect teacher would answer; a person distorts it.
+# ALGO LOGIC: the teacher (docs/protocol.md). Eq. 4 says what a perfect teacher would answer; a person distorts it.
 # Copy this class verbatim into both INFORM scripts (CleanRL style: repeated across files, never within one).
 class Teacher:
-    """A simulated person between Eq. 4 and the learner: noisy, sparse, late and limited (SPEC section 10).
+    """A simulated person between Eq. 4 and the learner: noisy, sparse, late and limited (paper Sec. VII's future work).
 
     Each call hands over the perfect teacher's answer h* (0 or 1) about the transition at buffer index `step` and
     returns the buffer indices that receive h = 1 now. In order: the judgement is flipped with probability
@@ -858,7 +858,7 @@ def main(args: Args, oracle_ckpt: dict | None) -> dict:
     status, phase, end_step = "completed", "oracle", args.tamer_total_timesteps + args.sleep_gradient_steps
     received = stop_on_signals()  # SIGTERM (Slurm's cancel and time limit, kill) stops the run as Ctrl-C does;
     try:  # installed only here, so a signal always finds the except below that saves what finished
-        # ---- oracle: the simulated teacher (SPEC section 5)
+        # ---- oracle: the simulated teacher (docs/protocol.md, "Oracles and the expert bar")
         t0 = time.time()
         if oracle_ckpt is not None:
             oracle_actor, oracle_qf = oracle_from_checkpoint(oracle_ckpt, device)

@@ -1,4 +1,4 @@
-"""Train the simulated teacher (the oracle) for INFORM (SPEC section 5).
+"""Train the simulated teacher (the oracle) for INFORM (docs/protocol.md, "Oracles and the expert bar").
 
 Pusher: a SAC agent (Haarnoja et al. 2018, CleanRL's sac_continuous_action.py) trained on the
 environment reward from random initial states, so that it is an expert from any start: step for step the SAC of

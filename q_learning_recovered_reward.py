@@ -1,7 +1,7 @@
 """Tabular agents on the wall maze, trained with INFORM's recovered reward or with the environment's own reward.
 
-Reproduces the reward experiment of Tarakli & Di Nuovo, "Learning while Sleeping" (ICDL 2024), Fig. 6 (SPEC.md
-sections 6, 7 and 9). INFORM learns a soft Q network on the plain maze (inform_dqn_gridworld.py saves it as
+Reproduces the reward experiment of Tarakli & Di Nuovo, "Learning while Sleeping" (ICDL 2024), Fig. 6 (Sec. VI-C;
+see docs/protocol.md). INFORM learns a soft Q network on the plain maze (inform_dqn_gridworld.py saves it as
 inform_q.pt). Its recovered reward (Eq. 3), r(s, a, s') = Q(s, a) - (1 - terminated) gamma V(s'), is evaluated on
 the transition the agent actually makes on the wall maze, which INFORM never saw, and trains fresh tabular agents
 there, next to agents trained on the environment reward (+1 at G). The TAMER network of the same gridworld run is
@@ -11,7 +11,7 @@ evaluated on the wall maze, untrained there, as the baseline.
     python q_learning_recovered_reward.py --reward-path runs/KnoxStoneMaze-v0__inform_dqn_gridworld__1__<t>
 
 Two tabular updates (`--bootstrap`), named for what they are:
-- `sampled` (default, the authors' update as SPEC section 6 describes it): target r + gamma Q(s', a') with a'
+- `sampled` (default, the authors' update as docs/protocol.md describes it): target r + gamma Q(s', a') with a'
   drawn epsilon-greedily from Q(s', .), a SARSA-like target. a' is drawn for the target only; the action taken at
   s' is drawn again (SARSA proper would take a'). Its fixed point is the epsilon-greedy policy's own values.
 - `max` (textbook Q-learning): target r + gamma max_a' Q(s', a').

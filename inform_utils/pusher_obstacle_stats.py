@@ -1,4 +1,4 @@
-"""Aggregate the Pusher obstacle robustness test over seeds (SPEC section 4, paper: INFORM closer, p < 0.0001).
+"""Aggregate the Pusher obstacle robustness test over seeds (paper Sec. VI-B: INFORM closer, p < 0.0001).
 
 Reads `obstacle_distances.npz` (per-episode final object-goal distances) and `summary.json` from each run
 directory written by inform_sac_pusher.py, prints per-seed and pooled means and standard deviations, and a

@@ -1,4 +1,4 @@
-"""Tables and figures of the maze teacher study (SPEC section 10) from finished runs of inform_dqn_gridworld.py.
+"""Tables and figures of the maze teacher study (docs/teacher_notes.md) from finished runs of inform_dqn_gridworld.py.
 
     python -m inform_utils.teacher_study --runs-dir runs/teachers_study/runs --out docs/figures
 

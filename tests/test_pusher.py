@@ -168,7 +168,7 @@ def test_bisector_boxes_sit_on_the_path_for_every_start(seed):
 
 def test_paper_boxes_are_on_the_path_only_for_the_authors_start():
     start, goal = isp.start_and_goal("Pusher-v5", 0)
-    assert np.allclose(start, [0.257, -0.338], atol=1e-3)  # the authors' reset seed 0 (SPEC section 4)
+    assert np.allclose(start, [0.257, -0.338], atol=1e-3)  # the authors' reset seed 0 (docs/protocol.md)
     paper = isp.obstacle_positions("paper", start, goal)
     assert isp.distance_to_segment(paper[1], start, goal) == pytest.approx(0.017, abs=1e-3)
     start, goal = isp.start_and_goal("Pusher-v5", 1)

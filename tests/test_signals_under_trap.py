@@ -1,5 +1,5 @@
 """The suite's SIGINT cases must not depend on how the suite is started: a background job of a non-interactive
-shell ignores SIGINT, and its children inherit that unless a test restores the default (issue 14)."""
+shell ignores SIGINT, and its children inherit that unless a test restores the default."""
 
 import os
 import subprocess

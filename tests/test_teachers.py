@@ -1,4 +1,4 @@
-"""The teacher model of SPEC section 10 (noise, sparsity, delay, credit window, budget) on hand-made sequences, and
+"""The teacher model of docs/protocol.md (noise, sparsity, delay, credit window, budget) on hand-made sequences, and
 the maze script's teacher flags and live-human mode end to end (through a pipe and through a pseudo-terminal)."""
 
 import glob
