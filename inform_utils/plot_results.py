@@ -87,9 +87,13 @@ def fig3(run_dirs: list[str], metric: str, ylabel: str, path: str, title: str) -
     band(night, sleep_steps, inform, "INFORM", COLOURS["inform"])
     oracle = np.mean([json.load(open(os.path.join(d, "summary.json")))[f"eval/oracle_{metric}"] for d in run_dirs])
     for ax in (day, night):
-        ax.axhline(oracle, color=COLOURS["oracle"], ls=":", lw=1.5, label="oracle", zorder=3)
-        ax.legend()
+        ax.axhline(oracle, color=COLOURS["oracle"], ls="--", lw=2, label="oracle", zorder=3)
+        ax.legend(loc="lower right")
         ax.grid(alpha=0.3)
+    # the axes share y: leave room above and below the oracle's line, so it never sits on the frame
+    low, high = day.get_ylim()
+    low, high = min(low, oracle), max(high, oracle)
+    day.set_ylim(low - 0.08 * (high - low), high + 0.08 * (high - low))
     day.set(xlabel="environment steps (forward phase)", ylabel=ylabel, title=f"{title}: day (TAMER)")
     night.set(xlabel="gradient steps (sleep phase, no env steps)", title=f"{title}: sleep (INFORM)")
     fig.tight_layout()

@@ -68,6 +68,12 @@ class Args:
     """where the script writes its runs (relative to the working directory)"""
     logs_dir: str = "runs/logs"
     """where each run's stdout and stderr go (Slurm: {logs_dir}/slurm, named by job id)"""
+    results_dir: str | None = None
+    """keep a copy of each completed run here (e.g. results/v4paper), to commit: its files up to --keep-max-mb each,
+    not its subfolders; runs kept here count as finished, so the same command resumes a sweep where it stopped"""
+    keep_max_mb: float = 5.0
+    """the largest file of a run copied into --results-dir (a Pusher run's summary, obstacle files, events and
+    networks are each under 2 MB)"""
     script_args: tyro.conf.Positional[list[str]] = field(default_factory=list)
     """extra flags for every run, after a `--`"""
 
@@ -171,9 +177,11 @@ def run_flags(args: Args, run: Run) -> dict[str, list[str] | bool]:
 def newest_summary(args: Args, run: Run, completed: bool = True, since: float = 0.0) -> tuple[str, dict] | None:
     """The newest summary.json of this script, experiment, seed and flags (completed only, unless told otherwise;
     two scripts may share an experiment name: each summary.json names the script that wrote it)."""
-    pattern = os.path.join(args.runs_dir, f"*__{args.exp_name}__{run.seed}__*", "summary.json")
+    paths = []
+    for folder in filter(None, (args.runs_dir, args.results_dir)):
+        paths += glob.glob(os.path.join(folder, f"*__{args.exp_name}__{run.seed}__*", "summary.json"))
     flags = run_flags(args, run)
-    for path in sorted(glob.glob(pattern), key=os.path.getmtime, reverse=True):
+    for path in sorted(paths, key=os.path.getmtime, reverse=True):
         if os.path.getmtime(path) < since:
             break
         with open(path) as f:
@@ -211,6 +219,31 @@ def outcome_from_run(args: Args, run: Run, code: int | None, since: float) -> Ou
     if summary.get("status"):
         return Outcome("failed", f"exit {code}, status {summary['status']}")
     return Outcome("failed", f"exit {code}, no summary.json" if code is not None else "no summary.json")
+
+
+def keep(args: Args, run: Run, since: float) -> None:
+    """Copy a completed run's files into --results-dir/{run name}/ (all at once: a half-copied run never counts)."""
+    found = newest_summary(args, run, since=since)
+    if args.results_dir is None or found is None:
+        return
+    run_dir = os.path.dirname(found[0])
+    dest = os.path.join(args.results_dir, os.path.basename(run_dir))
+    if os.path.abspath(run_dir) == os.path.abspath(dest) or os.path.exists(dest):
+        return
+    tmp, skipped = dest + ".tmp", []
+    shutil.rmtree(tmp, ignore_errors=True)
+    os.makedirs(tmp)
+    for name in sorted(os.listdir(run_dir)):
+        path = os.path.join(run_dir, name)
+        if not os.path.isfile(path):
+            continue
+        if os.path.getsize(path) > args.keep_max_mb * 2**20:
+            skipped.append(f"{name} ({os.path.getsize(path) / 2**20:.0f} MB)")
+            continue
+        shutil.copy2(path, tmp)
+    os.replace(tmp, dest)
+    print(f"{run}: kept in {dest}" + (f" (not copied, over --keep-max-mb: {', '.join(skipped)})" if skipped else ""),
+          flush=True)  # fmt: skip
 
 
 def tail(path: str, n: int = 8) -> list[str]:
@@ -285,6 +318,8 @@ def run_local(args: Args, todo: list[Run], stop: Stop) -> dict[Run, Outcome]:
                 stop.procs.discard(p)
         outcomes[run] = outcome = outcome_from_run(args, run, code, start)
         outcome.stderr_path = log
+        if outcome.status == "completed":
+            keep(args, run, start)
         counts = {s: sum(o.status == s for o in outcomes.values()) for s in ("completed", "interrupted", "failed")}
         print(f"{run}: {outcome.status} (exit {code}) after {time.time() - start:.0f}s (log: {log}) "
               f"[{len(outcomes)}/{len(todo)} finished: {counts['completed']} done, {counts['failed']} failed, "
@@ -435,6 +470,8 @@ def run_slurm(args: Args, todo: list[Run], stop: Stop) -> dict[Run, Outcome]:
                         outcome = Outcome("not started", f"job {job.job_id} cancelled", outcome.stderr_path)
                     outcomes[run] = outcome
                     print(f"{run}: {outcome.status} (job {job.job_id}, stderr: {outcome.stderr_path})", flush=True)
+                    if outcome.status == "completed":
+                        keep(args, run, since)
             pending = sum(states.get(job.job_id) == "PENDING" for job in jobs.values())
             completed = sum(o.status == "completed" for o in outcomes.values())
             progress = (
@@ -567,6 +604,10 @@ def parse_args() -> Args:
 def validate(args: Args) -> None:
     if args.workers < 1 or args.threads < 0 or not args.seeds:
         raise ValueError("--workers must be >= 1, --threads >= 0, and --seeds non-empty")
+    if not args.keep_max_mb > 0:
+        raise ValueError(f"--keep-max-mb must be > 0, got {args.keep_max_mb}")
+    if args.results_dir is not None and os.path.exists(args.results_dir) and not os.path.isdir(args.results_dir):
+        raise ValueError(f"--results-dir {args.results_dir}: exists and is not a directory")
     if not os.path.isfile(args.script):
         raise ValueError(f"{args.script}: no such script")
     grid_points(args.grid, args.script_args)

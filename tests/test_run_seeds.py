@@ -1,6 +1,7 @@
 import glob
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -34,6 +35,37 @@ def test_runs_seeds_once_and_resumes(tmp_path, monkeypatch, fake_script):
     assert [s for s, _ in calls(tmp_path)] == [1, 2, 3, 4]  # finished seeds were not run again
     saved = json.load(open(os.path.join("runs", "t__table.json")))
     assert saved["table"]["eval/x"]["n"] == 4
+
+
+def test_results_dir_keeps_completed_runs_and_resumes_after_runs_is_gone(tmp_path, monkeypatch, fake_script):
+    """A new session starts without runs/: the runs kept in --results-dir still count, and the table uses them."""
+    monkeypatch.chdir(tmp_path)
+    kept = str(tmp_path / "results" / "k")
+    run_seeds.main(run_seeds.Args(script="fake.py", exp_name="k", seeds=[1, 2], results_dir=kept))
+    assert sorted(os.listdir(kept)) == sorted(d for d in os.listdir("runs") if "__k__" in d)
+    for run_dir in os.listdir(kept):
+        assert os.listdir(os.path.join(kept, run_dir)) == ["summary.json"]
+    shutil.rmtree("runs")
+    table = run_seeds.main(run_seeds.Args(script="fake.py", exp_name="k", seeds=[1, 2, 3], results_dir=kept))[""]
+    assert [s for s, _ in calls(tmp_path)] == [1, 2, 3]  # seeds 1 and 2 were found in results/, not run again
+    assert table["eval/x"]["n"] == 3 and len(os.listdir(kept)) == 3
+
+
+def test_keep_copies_the_run_files_up_to_the_size_limit(tmp_path, monkeypatch, fake_script):
+    monkeypatch.chdir(tmp_path)
+    args = run_seeds.Args(script="fake.py", exp_name="s", seeds=[1], results_dir="results/s", keep_max_mb=1.0)
+    run_seeds.main(args)
+    (run_dir,) = [os.path.join("runs", d) for d in os.listdir("runs") if "__s__1__" in d]
+    kept = os.path.join("results", "s", os.path.basename(run_dir))
+    assert os.listdir(kept) == ["summary.json"]
+    shutil.rmtree(kept)
+    with open(os.path.join(run_dir, "small.npz"), "wb") as f:
+        f.write(b"x" * 2**20)  # exactly the limit: kept
+    with open(os.path.join(run_dir, "big.pt"), "wb") as f:
+        f.write(b"x" * (2**20 + 1))
+    os.makedirs(os.path.join(run_dir, "videos"))
+    run_seeds.keep(args, run_seeds.Run(1, ()), since=0.0)
+    assert sorted(os.listdir(kept)) == ["small.npz", "summary.json"]
 
 
 def test_a_run_of_another_script_with_the_same_exp_name_does_not_count(tmp_path, monkeypatch, fake_script):
