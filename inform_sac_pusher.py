@@ -127,7 +127,7 @@ class Args:
     # Sleep phase: offline IQ-Learn (Eq. 2), no environment steps
     sleep_gradient_steps: int = 5000
     """gradient steps of the sleep phase; at the 200k forward budget the measured sleep curve was best early (3% below
-    the oracle after 2k steps, 8% after 5k) and drifted later (27% below at 13k): docs/pusher_notes.md"""
+    the oracle after 2k steps, 8% after 5k) and drifted later (38% below at 13k): docs/pusher_notes.md"""
     sleep_batch_size: int = 256
     """transitions from the success set, and as many from the whole buffer, per step"""
     sleep_q_lr: float = 3e-4
