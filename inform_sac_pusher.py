@@ -1204,6 +1204,8 @@ def video_camera() -> dict:
 def check_video(env_id: str) -> None:
     """Before anything is written: pick the headless GL backend (egl when MUJOCO_GL is unset and there is no display),
     render one frame, and find ffmpeg. InputError, one line, if either is missing."""
+    import warnings
+
     if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
         os.environ["MUJOCO_GL"] = "egl"
     try:
@@ -1214,10 +1216,12 @@ def check_video(env_id: str) -> None:
         raise InputError(f"--capture-video writes mp4 with imageio-ffmpeg, which is missing ({type(e).__name__}): "
                          "pip install imageio-ffmpeg==0.8.1") from None  # fmt: skip
     try:
-        env = make_env(env_id, 0, render_mode="rgb_array", width=16, height=16)
-        env.reset(seed=0)
-        frame = env.render()
-        env.close()
+        with warnings.catch_warnings():  # a failing backend warns before it raises: one line is enough
+            warnings.simplefilter("ignore")
+            env = make_env(env_id, 0, render_mode="rgb_array", width=16, height=16)
+            env.reset(seed=0)
+            frame = env.render()
+            env.close()
     except Exception as e:
         raise InputError(f"--capture-video: MuJoCo cannot render with MUJOCO_GL={os.environ.get('MUJOCO_GL')} "
                          f"({type(e).__name__}); install EGL (Debian: apt-get install libegl1 libegl-mesa0) or "

@@ -836,10 +836,12 @@ def check_video(env_id: str) -> None:
         raise InputError(f"--capture-video writes mp4 with imageio-ffmpeg, which is missing ({type(e).__name__}): "
                          "pip install imageio-ffmpeg==0.8.1") from None  # fmt: skip
     try:
-        env = video_env(env_id, size=16)
-        env.reset(seed=0)
-        frame = env.render()[-1]
-        env.close()
+        with warnings.catch_warnings():  # a failing backend warns before it raises: one line is enough
+            warnings.simplefilter("ignore")
+            env = video_env(env_id, size=16)
+            env.reset(seed=0)
+            frame = env.render()[-1]
+            env.close()
     except Exception as e:
         raise InputError(f"--capture-video: MuJoCo cannot render with MUJOCO_GL={os.environ.get('MUJOCO_GL')} "
                          f"({type(e).__name__}); install EGL (Debian: apt-get install libegl1 libegl-mesa0) or "
