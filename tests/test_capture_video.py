@@ -126,6 +126,25 @@ def test_tiny_pusher_run_films_the_evaluation_and_changes_no_number(tmp_path):
     inform = read_mp4(os.path.join(run_dir, "videos", "inform_obstacle.mp4"))
     assert inform.shape == (101, isp.VIDEO_SIZE, isp.VIDEO_SIZE, 3)
     assert blue_pixels(inform[0]) > 100 and red_pixels(inform[0]) > 100
+    # the README's picture from the run's saved actors: named after the run, under ~2 MB, every other frame
+    gif = make_gifs(tmp_path, "--pusher-run", run_dir)
+    assert os.path.basename(gif) == "Pusher-v5_tamer_vs_inform_seed1_tamer600_sleep200.gif"
+    assert os.path.getsize(gif) < 2_000_000 and gif_frames(gif) == 51
+
+
+def make_gifs(tmp_path, *flags) -> str:
+    cmd = [sys.executable, "-m", "inform_utils.make_gifs", *flags, "--out-dir", str(tmp_path / "gifs")]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env={**os.environ, "PYTHONPATH": REPO})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    (gif,) = glob.glob(str(tmp_path / "gifs" / "*.gif"))
+    return gif
+
+
+def gif_frames(path) -> int:
+    from PIL import Image
+
+    with Image.open(path) as gif:
+        return gif.n_frames
 
 
 def test_oracle_train_films_the_teacher(tmp_path):
@@ -197,3 +216,7 @@ def test_tiny_maze_run_draws_the_greedy_episodes_and_changes_no_number(tmp_path)
         assert videos[f"{p}_plain_{g.START}"]["episode_length"] == numbers[f"eval/{p}_episode_length"]
         assert videos[f"{p}_wall_{g.START}"]["episode_length"] == numbers[f"eval/wall/{p}_episode_length"]
         assert {v["start_cell"] for k, v in videos.items() if k.startswith(f"{p}_starts")} == set(g.START_SET[::3])
+    gif = make_gifs(tmp_path, "--maze-run", run_dir)
+    assert os.path.basename(gif) == "KnoxStoneMaze-v0_tamer_vs_inform_seed1_tamer2k_sleep200.gif"
+    longest = {v: max(videos[f"{p}_{v}_{g.START}"]["frames"] for p in ("tamer", "inform")) for v in ("plain", "wall")}
+    assert os.path.getsize(gif) < 2_000_000 and gif_frames(gif) == longest["plain"] + longest["wall"]
