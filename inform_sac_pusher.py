@@ -1189,7 +1189,7 @@ def evaluate_saved(args: Args) -> dict:
 # --capture-video: headless MuJoCo frames (MUJOCO_GL, as MuJoCo documents it) written as mp4 by imageio-ffmpeg, the
 # ffmpeg that Gymnasium's RecordVideo reaches through moviepy. A fixed camera in the model (mujoco 2.3.7 cannot set a
 # free camera's lookat) looks down on the table from behind the goal: arm, object (white), goal (red), boxes (blue).
-VIDEO_CAMERA = {"lookat": (0.35, -0.22, -0.3), "distance": 1.1, "elevation": -75.0}  # metres, degrees
+VIDEO_CAMERA = {"lookat": (0.42, -0.2, -0.3), "distance": 1.0, "elevation": -75.0}  # metres, degrees
 VIDEO_SIZE = 480  # pixels, square; a multiple of 16, as H.264 wants
 
 

@@ -779,7 +779,7 @@ def train_maze(args: Args) -> None:
 
 # --capture-video: as inform_sac_pusher.py films its policies (video_camera and write_video are copied verbatim; a test
 # keeps them identical): headless MuJoCo (MUJOCO_GL), a fixed camera added to the model, mp4 by imageio-ffmpeg.
-VIDEO_CAMERA = {"lookat": (0.35, -0.22, -0.3), "distance": 1.1, "elevation": -75.0}  # metres, degrees
+VIDEO_CAMERA = {"lookat": (0.42, -0.2, -0.3), "distance": 1.0, "elevation": -75.0}  # metres, degrees
 VIDEO_SIZE = 480  # pixels, square; a multiple of 16, as H.264 wants
 VIDEO_EPISODES = 3
 
