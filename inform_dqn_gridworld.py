@@ -60,6 +60,9 @@ class Args:
     """if toggled, use CUDA when available (these tiny networks are faster on the CPU)"""
     num_threads: int = 1
     """torch CPU threads (one is fastest for networks this small)"""
+    capture_video: bool = False
+    """draw TAMER's and INFORM's final greedy episodes (plain maze, wall maze, a few start cells) as GIFs into
+    runs/{run}/videos/"""
     save_model: bool = True
     """whether to save the H and Q networks and the recovered reward table into the run directory"""
     env_id: str = "KnoxStoneMaze-v0"
@@ -810,6 +813,8 @@ def main(args: Args) -> dict:
         evaluator("oracle", q_star.argmax(1), summary["feedback/steps"])
         evaluator("tamer", greedy_actions(h_net, device), summary["feedback/steps"])
         evaluator("inform", greedy_actions(q_net, device), args.sleep_gradient_steps)
+        if args.capture_video:  # after the evaluation: drawing changes no number
+            record_videos(run_dir, {"tamer": greedy_actions(h_net, device), "inform": greedy_actions(q_net, device)})
         if args.teacher == "human":
             for name, net in (("TAMER (what you taught)", h_net), ("INFORM (after the sleep)", q_net)):
                 print(
@@ -848,6 +853,99 @@ def evaluate_saved(path: str, success_max_steps: int) -> dict:
     metrics = evaluator("policy", greedy_actions(load_q_network(path), torch.device("cpu")), 0)
     evaluator.close()
     return metrics
+
+
+# --capture-video: the greedy episodes drawn as the recovered-reward figure draws the maze, written as GIFs by Pillow
+VIDEO_START_CELLS = gridworld_env.START_SET[::3]  # a few of the authors' generalisation starts: 7, 12, 17, 22
+VIDEO_MAZES = {"plain": "KnoxStoneMaze-v0", "wall": "KnoxStoneMazeWall-v0"}
+
+
+def greedy_episode(policy: np.ndarray, variant: str, start: int) -> tuple[list[int], int, bool]:
+    """One greedy episode in the registered maze, as `evaluate` runs it: the cells to draw (the start, then each
+    step's, up to G or the first cell seen before: a deterministic policy then loops until the time limit), the
+    episode length, and whether G was reached."""
+    env = gym.make(VIDEO_MAZES[variant])
+    obs, _ = env.reset(options={"start_cell": start})
+    cells, length, terminated, truncated = [start], 0, False, False
+    while not (terminated or truncated):
+        obs, _, terminated, truncated, info = env.step(policy[int(obs.argmax())])
+        length += 1
+        if cells[-1] != gridworld_env.GOAL and cells.count(cells[-1]) == 1:  # no loop yet: draw this step too
+            cells.append(info["cell"])
+    env.close()
+    return cells, length, bool(terminated)
+
+
+def maze_frames(cells: list[int], variant: str, title: str, length: int, reached: bool) -> list[np.ndarray]:
+    """RGB frames of the agent walking `cells` (its path so far as a line); the last frame says how it ended."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig = Figure(figsize=(3.2, 3.4), dpi=80)
+    canvas, ax = FigureCanvasAgg(fig), fig.subplots()
+    fig.subplots_adjust(0.02, 0.02, 0.98, 0.86)
+    for r, c in gridworld_env.CELLS:
+        ax.add_patch(Rectangle((c, r), 1, 1, facecolor="white", edgecolor="0.85"))
+    for r, c in gridworld_env.BLOCKED:
+        ax.add_patch(Rectangle((c, r), 1, 1, facecolor="0.25"))
+    for wall in gridworld_env.VARIANT_WALLS[variant]:
+        (r1, c1), (r2, c2) = sorted(wall)
+        xs, ys = ([c2, c2], [r1, r1 + 1]) if r1 == r2 else ([c1, c1 + 1], [r2, r2])
+        ax.plot(xs, ys, color="black", lw=3)
+    for cell, label in ((gridworld_env.START, "S"), (gridworld_env.GOAL, "G")):
+        r, c = gridworld_env.CELLS[cell]
+        ax.text(c + 0.5, r + 0.5, label, ha="center", va="center", fontsize=12, weight="bold", color="0.55")
+    ax.set(xlim=(0, gridworld_env.COLS), ylim=(gridworld_env.ROWS, 0), aspect="equal", xticks=[], yticks=[])
+    (path,) = ax.plot([], [], color="tab:blue", lw=2, alpha=0.6)
+    (agent,) = ax.plot([], [], "o", color="tab:red", ms=14)
+    heading = ax.set_title("", fontsize=9)
+    frames = []
+    for t in range(len(cells)):
+        xs = [gridworld_env.CELLS[cell][1] + 0.5 for cell in cells[: t + 1]]
+        ys = [gridworld_env.CELLS[cell][0] + 0.5 for cell in cells[: t + 1]]
+        path.set_data(xs, ys)
+        agent.set_data(xs[-1:], ys[-1:])
+        ending = f"reaches G in {length} steps" if reached else f"loops: never reaches G ({length} steps)"
+        heading.set_text(f"{title}\n" + (ending if t == len(cells) - 1 else f"step {t}"))
+        canvas.draw()
+        frames.append(np.asarray(canvas.buffer_rgba())[..., :3].copy())
+    return frames
+
+
+def write_gif(path: str, frames: list[np.ndarray], durations_ms: list[int]) -> None:
+    """An endlessly looping GIF, written to a temporary name and renamed."""
+    from PIL import Image
+
+    images = [Image.fromarray(frame) for frame in frames]
+    images[0].save(path + ".tmp", format="GIF", save_all=True, append_images=images[1:], loop=0,
+                   duration=durations_ms)  # fmt: skip
+    os.replace(path + ".tmp", path)
+
+
+def record_videos(run_dir: str, policies: dict[str, np.ndarray]) -> dict:
+    """--capture-video: each greedy table policy from S on the plain and the wall maze, and from VIDEO_START_CELLS on
+    the plain maze one after the other, as videos/{policy}_{plain,wall,starts}.gif; videos/videos.json says how
+    each episode ended."""
+    os.makedirs(f"{run_dir}/videos", exist_ok=True)
+    record, t0 = {}, time.time()
+    for name, policy in policies.items():
+        episodes = [("plain", "plain", gridworld_env.START), ("wall", "wall", gridworld_env.START)]
+        episodes += [("starts", "plain", start) for start in VIDEO_START_CELLS]
+        frames = {}
+        for clip, variant, start in episodes:
+            cells, length, reached = greedy_episode(policy, variant, start)
+            maze = "wall maze" if variant == "wall" else "maze"
+            title = f"{name.upper()}, {maze}, from {'S' if start == gridworld_env.START else f'cell {start}'}"
+            episode = maze_frames(cells, variant, title, length, reached)
+            frames.setdefault(clip, []).extend((frame, 1500 if t == len(episode) - 1 else 250)
+                                               for t, frame in enumerate(episode))  # the end is held  # fmt: skip
+            record[f"{name}_{clip}_{start}"] = {"file": f"{name}_{clip}.gif", "variant": variant, "start_cell": start,
+                                                "episode_length": length, "reached_goal": reached,
+                                                "frames": len(cells)}  # fmt: skip
+        for clip, timed in frames.items():
+            write_gif(f"{run_dir}/videos/{name}_{clip}.gif", [f for f, _ in timed], [ms for _, ms in timed])
+    write_json_atomic(f"{run_dir}/videos/videos.json", record)
+    print(f"[video] {len(record)} greedy episodes drawn in {time.time() - t0:.1f}s: {run_dir}/videos/", flush=True)
+    return record
 
 
 def parse_args() -> Args:

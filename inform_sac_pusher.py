@@ -56,6 +56,9 @@ class Args:
     """if toggled, use CUDA when available (these small networks are fast enough on one CPU thread)"""
     num_threads: int = 1
     """torch CPU threads"""
+    capture_video: bool = False
+    """film the final deterministic episode of the oracle, TAMER and INFORM, plain and with the boxes, into
+    runs/{run}/videos/ (headless MuJoCo: MUJOCO_GL, egl when unset and there is no display)"""
     save_model: bool = True
     """whether to save the oracle (when trained here), TAMER and INFORM networks into the run directory"""
     env_id: str = "Pusher-v5"
@@ -168,24 +171,27 @@ class Args:
 # environments: Pusher, and Pusher with the robustness test's boxes
 
 
-def make_env(env_id: str, seed: int, obstacles=None) -> gym.Env:
-    """Plain Pusher, or with boxes at the xy `obstacles` (built at run time from the installed model)."""
-    if obstacles is None:
+def make_env(env_id: str, seed: int, obstacles=None, **render) -> gym.Env:
+    """Plain Pusher, or with boxes at the xy `obstacles` (built at run time from the installed model). With `render`
+    (--capture-video: render_mode, width, height) the model also gets the camera of the videos."""
+    if obstacles is None and not render:
         env = gym.make(env_id)
     elif env_id == "Pusher-v5":
-        env = gym.make(env_id, xml_file=obstacle_xml(env_id, obstacles))
+        render = {**render, "camera_name": "inform_video"} if render else render
+        env = gym.make(env_id, xml_file=obstacle_xml(env_id, obstacles, camera=bool(render)), **render)
     else:  # Pusher-v4 has no xml_file argument: same class, model file swapped at construction
         from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
         from gymnasium.envs.mujoco.pusher_v4 import PusherEnv
 
-        xml, space = obstacle_xml(env_id, obstacles), gym.spaces.Box(-np.inf, np.inf, (23,), np.float64)
+        xml, space = obstacle_xml(env_id, obstacles, bool(render)), gym.spaces.Box(-np.inf, np.inf, (23,), np.float64)
+        render = {**render, "camera_name": "inform_video"} if render else render
 
         class PusherObstacleV4(PusherEnv):
             def __init__(self, **kwargs):
                 gym.utils.EzPickle.__init__(self, **kwargs)
                 MujocoEnv.__init__(self, xml, 5, observation_space=space, **kwargs)
 
-        env = gym.wrappers.TimeLimit(PusherObstacleV4(), max_episode_steps=100)
+        env = gym.wrappers.TimeLimit(PusherObstacleV4(**render), max_episode_steps=100)
     env.action_space.seed(seed)
     env.observation_space.seed(seed)
     return env
@@ -194,17 +200,20 @@ def make_env(env_id: str, seed: int, obstacles=None) -> gym.Env:
 _OBSTACLE_DIR: list[str] = []  # one temporary directory per process, removed at exit
 
 
-def obstacle_xml(env_id: str, positions) -> str:
-    """Pusher's own model (never modified) plus the boxes, written to a file that outlives the env's construction
-    (EzPickle re-creates the env from it); returns its path."""
+def obstacle_xml(env_id: str, positions, camera: bool = False) -> str:
+    """Pusher's own model (never modified) plus the boxes (and the videos' camera), written to a file that outlives
+    the env's construction (EzPickle re-creates the env from it); returns its path."""
     import gymnasium.envs.mujoco as gym_mujoco
 
     name = "pusher_v5.xml" if env_id == "Pusher-v5" else "pusher.xml"
     tree, h = ET.parse(os.path.join(os.path.dirname(gym_mujoco.__file__), "assets", name)), OBSTACLE_HALF_SIZE
-    for i, (x, y) in enumerate(positions):
+    for i, (x, y) in enumerate(() if positions is None else positions):
         ET.SubElement(tree.getroot().find("worldbody"), "geom", {
             "name": f"obstacle_{i}", "type": "box", "size": f"{h} {h} {h}", "pos": f"{x:.6f} {y:.6f} {OBSTACLE_Z}",
             "contype": "1", "conaffinity": "1", "rgba": "0.2 0.2 0.8 1"})  # fmt: skip
+    if camera:  # the videos' camera, and no shadows: they triple the time of a frame in software OpenGL
+        ET.SubElement(tree.getroot().find("worldbody"), "camera", video_camera())
+        ET.SubElement(ET.SubElement(tree.getroot(), "visual"), "quality", {"shadowsize": "0"})
     if not _OBSTACLE_DIR:
         _OBSTACLE_DIR.append(tempfile.mkdtemp(prefix="inform_pusher_obstacle_"))
         atexit.register(shutil.rmtree, _OBSTACLE_DIR[0], True)
@@ -925,6 +934,9 @@ def main(args: Args, oracle_ckpt: dict | None) -> dict:
             if tag.startswith(("eval/obstacle/", "eval/authors_test/", "obstacle/min")):
                 writer.add_scalar(tag, value, end_step)
         evaluator.seconds += time.time() - t
+        if args.capture_video:  # after every number is in: filming changes none of them
+            phase = "video"
+            record_videos(args, policies, paths["boxes"], evaluator.reset_seed(0), run_dir)
     except KeyboardInterrupt:
         status = "interrupted"
         received.append("SIGINT")  # KeyboardInterrupt without our handler is Ctrl-C
@@ -1186,10 +1198,102 @@ def evaluate_saved(args: Args) -> dict:
     return {**metrics, **obstacle}
 
 
+# --capture-video: headless MuJoCo frames (MUJOCO_GL, as MuJoCo documents it) written as mp4 by imageio-ffmpeg, the
+# ffmpeg that Gymnasium's RecordVideo reaches through moviepy. A fixed camera in the model (mujoco 2.3.7 cannot set a
+# free camera's lookat) looks down on the table from behind the goal: arm, object (white), goal (red), boxes (blue).
+VIDEO_CAMERA = {"lookat": (0.42, -0.2, -0.3), "distance": 1.0, "elevation": -75.0}  # metres, degrees
+VIDEO_SIZE = 480  # pixels, square; a multiple of 16, as H.264 wants
+
+
+def video_camera() -> dict:
+    """The camera's MJCF attributes: VIDEO_CAMERA's distance from its lookat, seen from +x (image up is -x)."""
+    (x, y, z), d, el = VIDEO_CAMERA["lookat"], VIDEO_CAMERA["distance"], math.radians(VIDEO_CAMERA["elevation"])
+    pos = f"{x + d * math.cos(el):.4f} {y} {z - d * math.sin(el):.4f}"
+    xyaxes = f"0 1 0 {math.sin(el):.4f} 0 {math.cos(el):.4f}"
+    return {"name": "inform_video", "mode": "fixed", "pos": pos, "xyaxes": xyaxes}
+
+
+def check_video(env_id: str) -> None:
+    """Before anything is written: pick the headless GL backend (egl when MUJOCO_GL is unset and there is no display),
+    render one frame, and find ffmpeg. InputError, one line, if either is missing."""
+    import warnings
+
+    if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+        os.environ["MUJOCO_GL"] = "egl"
+    try:
+        import imageio_ffmpeg
+
+        imageio_ffmpeg.get_ffmpeg_exe()
+    except Exception as e:
+        raise InputError(f"--capture-video writes mp4 with imageio-ffmpeg, which is missing ({type(e).__name__}): "
+                         "pip install imageio-ffmpeg==0.8.1") from None  # fmt: skip
+    try:
+        with warnings.catch_warnings():  # a failing backend warns before it raises: one line is enough
+            warnings.simplefilter("ignore")
+            env = make_env(env_id, 0, render_mode="rgb_array", width=16, height=16)
+            env.reset(seed=0)
+            frame = env.render()
+            env.close()
+    except Exception as e:
+        raise InputError(f"--capture-video: MuJoCo cannot render with MUJOCO_GL={os.environ.get('MUJOCO_GL')} "
+                         f"({type(e).__name__}); install EGL (Debian: apt-get install libegl1 libegl-mesa0) or "
+                         "OSMesa (apt-get install libosmesa6, then MUJOCO_GL=osmesa)") from None  # fmt: skip
+    if not isinstance(frame, np.ndarray) or frame.shape != (16, 16, 3):
+        raise InputError(f"--capture-video: MuJoCo rendered no image with MUJOCO_GL={os.environ.get('MUJOCO_GL')}")
+
+
+def video_env(env_id: str, seed: int, obstacles=None, size: int = VIDEO_SIZE) -> gym.Env:
+    """The evaluation env, rendering every reset and step into a list (Gymnasium's RenderCollection)."""
+    return gym.wrappers.RenderCollection(make_env(env_id, seed, obstacles, render_mode="rgb_array", width=size,
+                                                  height=size))  # fmt: skip
+
+
+def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
+    """H.264 mp4, written to a temporary name and renamed: an interrupted write leaves no half-written video."""
+    import imageio_ffmpeg
+
+    tmp = path[: -len(".mp4")] + ".tmp.mp4"  # ffmpeg reads the container from the extension
+    try:
+        writer = imageio_ffmpeg.write_frames(tmp, frames[0].shape[1::-1], fps=fps, codec="libx264", quality=6,
+                                             macro_block_size=16, ffmpeg_log_level="error")  # fmt: skip
+        writer.send(None)
+        for frame in frames:
+            writer.send(np.ascontiguousarray(frame))
+        writer.close()
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def record_videos(args: Args, policies: dict, boxes: np.ndarray, reset_seed: int, run_dir: str) -> dict:
+    """--capture-video: each policy's deterministic episode as the final evaluation runs it (from `reset_seed`) and
+    as the obstacle test runs it (the run's start, the boxes), by the same `evaluate`, with a generator of its own so
+    no other random stream moves. Writes videos/{policy}[_obstacle].mp4 and videos/videos.json (frames, final
+    distance and reset seed of each)."""
+    os.makedirs(f"{run_dir}/videos", exist_ok=True)
+    record, t = {}, time.time()
+    for suffix, obstacles, seed in (("", None, reset_seed), ("_obstacle", boxes, args.seed)):
+        env = video_env(args.env_id, args.seed, obstacles)
+        for name, actor in policies.items():
+            res = evaluate(actor, env, 1, lambda ep, s=seed: s, True, torch.Generator(), args.success_distance)
+            frames = env.render()
+            write_video(f"{run_dir}/videos/{name}{suffix}.mp4", frames, env.metadata["render_fps"])
+            record[f"{name}{suffix}"] = {"file": f"{name}{suffix}.mp4", "frames": len(frames),
+                                         "size": list(frames[0].shape), "final_distance": res["final_distance"],
+                                         "reset_seed": seed}  # fmt: skip
+        env.close()
+    write_json_atomic(f"{run_dir}/videos/videos.json", record)
+    print(f"[video] {len(record)} episodes filmed in {time.time() - t:.1f}s: {run_dir}/videos/", flush=True)
+    return record
+
+
 if __name__ == "__main__":
     args = tyro.cli(Args)
     try:
         check_args(args)
+        if args.capture_video:
+            check_video(args.env_id)
         if args.evaluate is not None:
             try:
                 print(json.dumps(evaluate_saved(args), indent=2))

@@ -37,8 +37,10 @@ import pickle
 import random
 import signal
 import sys
+import tempfile
 import time
 import warnings
+import xml.etree.ElementTree as ET
 import zipfile
 from dataclasses import asdict, dataclass
 
@@ -83,6 +85,9 @@ class Args:
     """whether to write the oracle checkpoint to `output_path`"""
     num_threads: int = 1
     """number of torch CPU threads (1 keeps a second core free)"""
+    capture_video: bool = False
+    """film the written Pusher oracle's first three held-out evaluation episodes into runs/{run}/videos/oracle.mp4
+    (headless MuJoCo: MUJOCO_GL, egl when unset and there is no display)"""
 
     # Oracle (SAC) arguments
     env_id: str = "Pusher-v5"
@@ -621,6 +626,8 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
                 indent=1,
             )
         print(f"oracle written to {args.output_path}", flush=True)
+    if args.capture_video:
+        record_teacher(args, actor, run_dir, device)
     writer.close()
 
 
@@ -770,6 +777,126 @@ def train_maze(args: Args) -> None:
         print(f"oracle written to {args.output_path}", flush=True)
 
 
+# --capture-video: as inform_sac_pusher.py films its policies (video_camera and write_video are copied verbatim; a test
+# keeps them identical): headless MuJoCo (MUJOCO_GL), a fixed camera added to the model, mp4 by imageio-ffmpeg.
+VIDEO_CAMERA = {"lookat": (0.42, -0.2, -0.3), "distance": 1.0, "elevation": -75.0}  # metres, degrees
+VIDEO_SIZE = 480  # pixels, square; a multiple of 16, as H.264 wants
+VIDEO_EPISODES = 3
+
+
+def video_camera() -> dict:
+    """The camera's MJCF attributes: VIDEO_CAMERA's distance from its lookat, seen from +x (image up is -x)."""
+    (x, y, z), d, el = VIDEO_CAMERA["lookat"], VIDEO_CAMERA["distance"], math.radians(VIDEO_CAMERA["elevation"])
+    pos = f"{x + d * math.cos(el):.4f} {y} {z - d * math.sin(el):.4f}"
+    xyaxes = f"0 1 0 {math.sin(el):.4f} 0 {math.cos(el):.4f}"
+    return {"name": "inform_video", "mode": "fixed", "pos": pos, "xyaxes": xyaxes}
+
+
+def video_env(env_id: str, size: int = VIDEO_SIZE) -> gym.Env:
+    """Pusher from its own model plus the videos' camera (and no shadows: they triple the time of a frame in software
+    OpenGL), rendering every reset and step into a list (Gymnasium's RenderCollection)."""
+    import gymnasium.envs.mujoco as gym_mujoco
+
+    name = "pusher_v5.xml" if env_id == "Pusher-v5" else "pusher.xml"
+    tree = ET.parse(os.path.join(os.path.dirname(gym_mujoco.__file__), "assets", name))
+    ET.SubElement(tree.getroot().find("worldbody"), "camera", video_camera())
+    ET.SubElement(ET.SubElement(tree.getroot(), "visual"), "quality", {"shadowsize": "0"})
+    render = {"render_mode": "rgb_array", "width": size, "height": size, "camera_name": "inform_video"}
+    with tempfile.TemporaryDirectory(prefix="oracle_video_") as tmp:  # MuJoCo reads the model once, at construction
+        xml = os.path.join(tmp, name)
+        tree.write(xml)
+        if env_id == "Pusher-v5":
+            env = gym.make(env_id, xml_file=xml, **render)
+        else:  # Pusher-v4 has no xml_file argument: same class, model file swapped at construction
+            from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
+            from gymnasium.envs.mujoco.pusher_v4 import PusherEnv
+
+            class PusherVideoV4(PusherEnv):
+                def __init__(self, **kwargs):
+                    space = gym.spaces.Box(-np.inf, np.inf, (23,), np.float64)
+                    MujocoEnv.__init__(self, xml, 5, observation_space=space, **kwargs)
+
+            env = gym.wrappers.TimeLimit(PusherVideoV4(**render), max_episode_steps=100)
+    return gym.wrappers.RenderCollection(env)
+
+
+def check_video(env_id: str) -> None:
+    """Before anything is written: pick the headless GL backend (egl when MUJOCO_GL is unset and there is no display),
+    render one frame, and find ffmpeg. InputError, one line, if either is missing."""
+    if env_id not in PUSHER_IDS:
+        raise InputError(f"--capture-video films a Pusher teacher; the maze's are drawn by inform_dqn_gridworld.py "
+                         f"--capture-video, not for {env_id}")  # fmt: skip
+    if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+        os.environ["MUJOCO_GL"] = "egl"
+    try:
+        import imageio_ffmpeg
+
+        imageio_ffmpeg.get_ffmpeg_exe()
+    except Exception as e:
+        raise InputError(f"--capture-video writes mp4 with imageio-ffmpeg, which is missing ({type(e).__name__}): "
+                         "pip install imageio-ffmpeg==0.8.1") from None  # fmt: skip
+    try:
+        with warnings.catch_warnings():  # a failing backend warns before it raises: one line is enough
+            warnings.simplefilter("ignore")
+            env = video_env(env_id, size=16)
+            env.reset(seed=0)
+            frame = env.render()[-1]
+            env.close()
+    except Exception as e:
+        raise InputError(f"--capture-video: MuJoCo cannot render with MUJOCO_GL={os.environ.get('MUJOCO_GL')} "
+                         f"({type(e).__name__}); install EGL (Debian: apt-get install libegl1 libegl-mesa0) or "
+                         "OSMesa (apt-get install libosmesa6, then MUJOCO_GL=osmesa)") from None  # fmt: skip
+    if not isinstance(frame, np.ndarray) or frame.shape != (16, 16, 3):
+        raise InputError(f"--capture-video: MuJoCo rendered no image with MUJOCO_GL={os.environ.get('MUJOCO_GL')}")
+
+
+def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
+    """H.264 mp4, written to a temporary name and renamed: an interrupted write leaves no half-written video."""
+    import imageio_ffmpeg
+
+    tmp = path[: -len(".mp4")] + ".tmp.mp4"  # ffmpeg reads the container from the extension
+    try:
+        writer = imageio_ffmpeg.write_frames(tmp, frames[0].shape[1::-1], fps=fps, codec="libx264", quality=6,
+                                             macro_block_size=16, ffmpeg_log_level="error")  # fmt: skip
+        writer.send(None)
+        for frame in frames:
+            writer.send(np.ascontiguousarray(frame))
+        writer.close()
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+@torch.inference_mode()
+def record_teacher(args: Args, actor: Actor, run_dir: str, device: torch.device) -> dict:
+    """--capture-video: the written oracle's first VIDEO_EPISODES held-out evaluation episodes, deterministic and from
+    the reset seeds `evaluate` gives them, back to back in videos/oracle.mp4; videos/videos.json has each episode's
+    reset seed, frames and final distance."""
+    os.makedirs(os.path.join(run_dir, "videos"), exist_ok=True)
+    env, generator = video_env(args.env_id), torch.Generator(device=device).manual_seed(FINAL_EVAL_SEED)
+    frames, record, t0 = [], {}, time.time()
+    for ep in range(VIDEO_EPISODES):
+        obs, _ = env.reset(seed=FINAL_EVAL_SEED + ep)
+        done, info = False, {}
+        while not done:
+            _, _, action = actor.get_action(torch.as_tensor(obs, dtype=torch.float32, device=device).unsqueeze(0),
+                                            generator)  # fmt: skip
+            obs, _, terminated, truncated, info = env.step(action[0].cpu().numpy())
+            done = terminated or truncated
+        episode = env.render()
+        frames += episode
+        record[f"episode_{ep}"] = {"reset_seed": FINAL_EVAL_SEED + ep, "frames": len(episode),
+                                   "final_distance": abs(float(info["reward_dist"]))}  # fmt: skip
+    write_video(os.path.join(run_dir, "videos", "oracle.mp4"), frames, env.metadata["render_fps"])
+    env.close()
+    with open(os.path.join(run_dir, "videos", "videos.json"), "w") as f:
+        json.dump({"file": "oracle.mp4", "size": list(frames[0].shape), "episodes": record}, f, indent=1)
+    print(f"[video] {VIDEO_EPISODES} episodes of the oracle filmed in {time.time() - t0:.1f}s: "
+          f"{os.path.join(run_dir, 'videos', 'oracle.mp4')}", flush=True)  # fmt: skip
+    return record
+
+
 def main() -> None:
     received = []  # SIGTERM (Slurm's cancel and time limit, kill) stops training as Ctrl-C does
 
@@ -782,6 +909,8 @@ def main() -> None:
     try:
         check_args(args)
         is_pusher = args.env_id in PUSHER_IDS
+        if args.capture_video:
+            check_video(args.env_id)
         args.method = args.method or ("sac" if is_pusher else "value-iteration")
         args.output_path = args.output_path or os.path.join("oracles", f"{args.env_id}__{args.method}_oracle.pt")
         if is_pusher:
