@@ -6,19 +6,19 @@ from gymnasium.utils.env_checker import check_env
 import gridworld_env as g
 
 MAZE = """\
-+--+--+--+--+--+--+
-|             A| G|
-+  +--+--+--+--+  +
-|  |##|           |
-+  +--+  +--+--+  +
-|  |##|  |##|##|  |
-+  +--+  +--+--+  +
-|  |##|           |
-+  +--+  +  +  +  +
-|  |##|           |
-+  +--+--+--+--+  +
-|                 |
-+--+--+--+--+--+--+
++---+---+---+---+---+---+
+|                SA | G |
++   +---+---+---+---+   +
+|   |###|               |
++   +---+   +---+---+   +
+|   |###|   |###|###|   |
++   +---+   +---+---+   +
+|   |###|               |
++   +---+   +   +   +   +
+|   |###|               |
++   +---+---+---+---+   +
+|                       |
++---+---+---+---+---+---+
 """
 
 
@@ -34,7 +34,7 @@ def test_layout_matches_the_drawing():
     env = gym.make("KnoxStoneMaze-v0", render_mode="ansi")
     env.reset(seed=0)
     assert env.render() == MAZE
-    assert env.render().count("##") == 6
+    assert env.render().count("###") == 6 and env.render().count("S") == 1  # S stays marked under the agent
 
 
 def test_wall_variant_adds_two_walls_in_column_5():
