@@ -516,6 +516,7 @@ class Progress:
         elapsed = time.time() - self.start
         sps = step / max(elapsed, 1e-9)
         eta = (self.total - step) / max(sps, 1e-9)
+        info = {k: v for k, v in info.items() if v is not None}  # a value not measured yet is not shown
         extra = "".join(f" | {k} {v:.4g}" if isinstance(v, float) else f" | {k} {v}" for k, v in info.items())
         print(
             f"[{self.phase}] {step}/{self.total} {100 * step // self.total:3d}% | {sps:,.0f} SPS | "
@@ -768,7 +769,7 @@ def sleep_phase(args, buffer, q_net, target_net, evaluator, writer, device) -> d
             writer.add_scalar("sleep/SPS", int(sleep_step / (time.time() - start_time)), sleep_step)
         if sleep_step % args.sleep_eval_frequency == 0 or sleep_step == args.sleep_gradient_steps:
             metrics = evaluator("inform", greedy_actions(q_net, device), sleep_step)
-            progress(sleep_step, iq_loss=stats.get("losses/iq_loss", math.nan),  # synced every 100 steps
+            progress(sleep_step, iq_loss=stats.get("losses/iq_loss"),  # synced every 100 steps
                      eval_length=metrics["eval/inform_episode_length"])  # fmt: skip
             if "sleep/step_to_inform_optimum" not in stats and metrics["eval/inform_episode_length"] == OPTIMUM:
                 stats["sleep/step_to_inform_optimum"] = sleep_step

@@ -17,7 +17,6 @@ racing jobs still running. A second signal kills the local runs outright.
 
 import contextlib
 import glob
-import io
 import itertools
 import json
 import math
@@ -544,26 +543,6 @@ def main(args: Args) -> dict[str, dict]:
     return tables
 
 
-def parse_args() -> Args:
-    """tyro's command line, with tyro's multi-line error box shortened to one line."""
-    captured = io.StringIO()
-    try:
-        with contextlib.redirect_stderr(captured):
-            return tyro.cli(Args)
-    except SystemExit as e:
-        if e.code == 0:  # --help
-            raise
-        message = []
-        for line in captured.getvalue().splitlines()[1:]:  # the first line is the box's title bar
-            text = line.strip().strip("│╰╯").strip()
-            if not text or set(text) <= set("─"):
-                if message:
-                    break
-                continue
-            message.append(text)
-        raise ValueError(" ".join(message) + " (see --help)") from None
-
-
 def validate(args: Args) -> None:
     if args.workers < 1 or args.threads < 0 or not args.seeds:
         raise ValueError("--workers must be >= 1, --threads >= 0, and --seeds non-empty")
@@ -580,7 +559,7 @@ def validate(args: Args) -> None:
 
 if __name__ == "__main__":
     try:
-        args = parse_args()
+        args = tyro.cli(Args)  # a malformed flag: tyro's own message, exit 2
         validate(args)
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)

@@ -10,9 +10,7 @@ Runs are grouped by their exp_name (see docs/teacher_notes.md for the commands t
 Prints markdown tables and writes teacher_robustness.png, teacher_knowledge.png and teacher_efficiency.png.
 """
 
-import contextlib
 import glob
-import io
 import json
 import os
 import re
@@ -256,15 +254,7 @@ def main(args: Args) -> None:
 
 
 if __name__ == "__main__":
-    captured = io.StringIO()
-    try:
-        with contextlib.redirect_stderr(captured):
-            parsed = tyro.cli(Args)
-    except SystemExit as e:
-        if e.code == 0:
-            raise
-        print("error: bad command line (see --help): " + " ".join(captured.getvalue().split())[:300], file=sys.stderr)
-        sys.exit(2)
+    parsed = tyro.cli(Args)  # a malformed flag: tyro's own message, exit 2
     try:
         main(parsed)
     except ValueError as e:

@@ -318,8 +318,6 @@ def test_bad_oracle_checkpoint(run_script, kind, message):
 @pytest.mark.parametrize(
     "flags, message",
     [
-        (["--seed", "abc"], "--seed"),  # a wrong type: tyro's box, shortened to one line
-        (["--sed", "1"], "Unrecognized options"),
         (["--oracle-path", "missing.pt"], "no such file"),
         (["--evaluate", "missing.pt"], "no such file"),
     ],
