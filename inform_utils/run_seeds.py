@@ -51,8 +51,9 @@ class Args:
     """local: worker processes on this machine; slurm: one Slurm job per run, submitted as a job array"""
     workers: int = 2
     """runs side by side (local launcher)"""
-    threads: int = 0
-    """torch threads per run (0: local, the machine's cores divided among the workers; slurm, --slurm-cpus-per-task)"""
+    threads: int = 1
+    """torch threads per run (1: these small networks are fastest on one thread, above all on a busy machine;
+    0: local, the machine's cores divided among the workers; slurm, --slurm-cpus-per-task)"""
     slurm_partition: str | None = None
     """Slurm partition (None: the cluster's default partition)"""
     slurm_time: int = 120

@@ -322,3 +322,32 @@ def test_teacher_study_tables(tmp_path):
     assert "| 2 | None | 500 | - | - |" in ratios
     assert "| perfect teacher | 2 | 100 |" in teacher_study.robustness_table(runs)
     assert "| 1/2 |" in teacher_study.robustness_table(runs)  # INFORM >= TAMER on seed 1 only
+
+
+def test_a_person_who_stops_too_early_gets_an_honest_skip(tmp_path):
+    """Five answers on the plain maze, then q: no walk reached G in time, so no sleep, no INFORM policy, no INFORM
+    files, and advice a person can follow (not a flag to raise)."""
+    result = run_with_input(tmp_path, ["--teacher", "human", "--seed", "1"], "y\n" * 5 + "q\n")
+    assert result.returncode == 0, result.stderr[-3000:]
+    summary, run_dir = summary_of(tmp_path)
+    assert summary["status"] == "completed" and summary["sleep_skipped"] is True
+    assert summary["sleep/expert_transitions"] == 0 and not any(k.startswith("eval/inform") for k in summary)
+    assert not os.path.exists(os.path.join(run_dir, "inform_q.pt"))
+    assert not os.path.exists(os.path.join(run_dir, "recovered_reward.pt"))
+    assert os.path.exists(os.path.join(run_dir, "tamer_h.pt"))
+    assert "INFORM (after the sleep)" not in result.stdout and "TAMER (what you taught)" in result.stdout
+    assert "keep teaching until the agent has walked from S to G" in result.stderr
+    assert "--tamer-total-timesteps" not in result.stderr
+
+
+def test_a_scripted_person_teaches_the_maze_in_few_answers():
+    """The human mode's promise, measured as in the README: a person answering as Q* would (y for the best move,
+    Enter otherwise), through a pseudo-terminal, until TAMER's greedy path from S reaches G (seed 1)."""
+    from inform_utils import scripted_person
+
+    args = scripted_person.Args(seeds=[1], max_answers=300)
+    (result,) = scripted_person.main(args)
+    assert result["exit"] == 0 and result["status"] == "completed"
+    assert result["feedback/answers_to_tamer_goal"] is not None and result["feedback/answers_to_tamer_goal"] <= 150
+    assert result["eval/tamer_episode_length"] < 200  # TAMER's greedy policy reaches G from S
+    assert result["sleep_skipped"] is False  # the person went on until one walk reached G in time: the agent slept
