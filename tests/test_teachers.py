@@ -351,3 +351,34 @@ def test_a_scripted_person_teaches_the_maze_in_few_answers():
     assert result["feedback/answers_to_tamer_goal"] is not None and result["feedback/answers_to_tamer_goal"] <= 150
     assert result["eval/tamer_episode_length"] < 200  # TAMER's greedy policy reaches G from S
     assert result["sleep_skipped"] is False  # the person went on until one walk reached G in time: the agent slept
+
+
+# the maze's delay table, explained (inform_utils/delay_trace.py traces a real run) --------------------------------
+@pytest.mark.parametrize(
+    "delay, window, landed_on",
+    [(0, 1, {"left"}), (1, 1, {"right"}), (2, 1, {"left"}), (3, 1, {"right"}), (2, 3, {"left", "right"})],
+)
+def test_a_late_signal_in_a_two_cycle_lands_on_the_reverse_move_when_the_delay_is_odd(delay, window, landed_on):
+    """The agent goes S -> 3 -> S -> 3 ...: left from S is the best move (+1), right from 3 back to S is not. A +1
+    arriving d steps late lands on the same move of the cycle when d is even and on the reverse move when d is odd,
+    and a window reaching back over the step after the judged one (d = 2, k = 3) labels the reverse move too. This is
+    what the traced runs show: odd delays teach H to turn back, and its greedy path loops."""
+    q_star = inform.gridworld_env.optimal_q("plain")
+    moves = [(4, 2), (3, 3)] * 8  # (cell, action): S left, then 3 right, again and again
+    teacher, landed = inform.Teacher(delay=delay, credit_window=window), set()
+    for step, (cell, action) in enumerate(moves):
+        h = float(inform.oracle_feedback(q_star[cell, action], q_star[cell].max(), 0.999))
+        assert h == (action == 2)  # Eq. 4: only "left" from S is good
+        landed |= {"left" if moves[i][1] == 2 else "right" for i in teacher(step, h)}
+    assert landed == landed_on
+
+
+def test_the_traced_delayed_run_turns_back():
+    """On a real run (seed 1, the maze's defaults) with --teacher-delay 1 most +1 signals label the reverse of the
+    move they were about, and TAMER's greedy path never reaches G; with a delay of 2 few do."""
+    from inform_utils import delay_trace
+
+    odd = delay_trace.label_stats(*delay_trace.traced_run(1, 1, seed=1, total=10000)[:5])
+    even = delay_trace.label_stats(*delay_trace.traced_run(2, 1, seed=1, total=10000)[:5])
+    assert odd["on_reverse"] > 0.5 and odd["on_good"] < 0.5, odd
+    assert even["on_reverse"] < 0.2 and even["on_good"] > 0.5, even
