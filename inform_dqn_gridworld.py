@@ -886,8 +886,8 @@ def main(args: Args, stop: "StopSignals", oracle_q: np.ndarray | None = None) ->
                 print(
                     f"\n{name}, greedy from S:\n" + draw_greedy_path(greedy_actions(net, device), env.unwrapped.variant)
                 )
-    except (KeyboardInterrupt, BrokenPipeError):  # a signal, or the reader of our output died
-        status = "interrupted"
+    except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
+        status, stop.broken_pipe = "interrupted", isinstance(e, BrokenPipeError)
     except Diverged as e:
         status = "diverged"
         summary["error"] = str(e)
@@ -932,7 +932,7 @@ class StopSignals:
     then waits for the thread's next flush, up to 120 s. Later signals, and any after the summary, are only noted."""
 
     def __init__(self):
-        self.received, self.holding, self.pending, self.finished = [], 0, False, False
+        self.received, self.holding, self.pending, self.finished, self.broken_pipe = [], 0, False, False, False
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
             if signal.getsignal(sig) is not signal.SIG_IGN:
                 signal.signal(sig, self.handler)
@@ -959,8 +959,8 @@ class StopSignals:
                 raise KeyboardInterrupt
 
     def reason(self) -> str:
-        """What stopped the run: the first signal, or SIGPIPE when the reader of our output died first."""
-        return self.received[0] if self.received else "SIGPIPE"
+        """What stopped the run: the first signal; else SIGPIPE if the reader of our output died, else Ctrl-C."""
+        return self.received[0] if self.received else "SIGPIPE" if self.broken_pipe else "SIGINT"
 
     def exit_code(self, status: str) -> int:
         """128 + the signal (130 SIGINT, 143 SIGTERM, 129 SIGHUP, 141 a dead reader), as a shell reports a kill;

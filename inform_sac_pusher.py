@@ -931,8 +931,8 @@ def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals") -> dict:
             if tag.startswith(("eval/obstacle/", "eval/authors_test/", "obstacle/min")):
                 writer.add_scalar(tag, value, end_step)
         evaluator.seconds += time.time() - t
-    except (KeyboardInterrupt, BrokenPipeError):  # a signal, or the reader of our output died
-        status = "interrupted"
+    except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
+        status, stop.broken_pipe = "interrupted", isinstance(e, BrokenPipeError)
     except Diverged as e:
         status = "diverged"
         summary["error"] = str(e)
@@ -1168,7 +1168,7 @@ class StopSignals:
     then waits for the thread's next flush, up to 120 s. Later signals, and any after the summary, are only noted."""
 
     def __init__(self):
-        self.received, self.holding, self.pending, self.finished = [], 0, False, False
+        self.received, self.holding, self.pending, self.finished, self.broken_pipe = [], 0, False, False, False
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
             if signal.getsignal(sig) is not signal.SIG_IGN:
                 signal.signal(sig, self.handler)
@@ -1195,8 +1195,8 @@ class StopSignals:
                 raise KeyboardInterrupt
 
     def reason(self) -> str:
-        """What stopped the run: the first signal, or SIGPIPE when the reader of our output died first."""
-        return self.received[0] if self.received else "SIGPIPE"
+        """What stopped the run: the first signal; else SIGPIPE if the reader of our output died, else Ctrl-C."""
+        return self.received[0] if self.received else "SIGPIPE" if self.broken_pipe else "SIGINT"
 
     def exit_code(self, status: str) -> int:
         """128 + the signal (130 SIGINT, 143 SIGTERM, 129 SIGHUP, 141 a dead reader), as a shell reports a kill;

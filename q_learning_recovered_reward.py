@@ -377,9 +377,10 @@ def main(args: Args, sources: list[dict], stop: "StopSignals | None" = None) -> 
         for arm, reward in arms.items():
             run_arm(args, arm, reward, seeds, variant, optimum, runs[arm], writer)
             times[f"time/{arm}_s"] = sum(run["seconds"] for run in runs[arm])
-    except (KeyboardInterrupt, BrokenPipeError):  # a signal, or the reader of our output died
+    except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
         # what finished is kept: the summary (first) records the agents done per arm and no figure is drawn
-        stop.finished, name = True, stop.reason()
+        stop.finished, stop.broken_pipe = True, isinstance(e, BrokenPipeError)
+        name = stop.reason()
         summary = {
             **{f"{a}/agents_done": len(runs[a]) for a in arms},
             "wall_time_s": time.time() - run_start,
@@ -734,7 +735,7 @@ class StopSignals:
     then waits for the thread's next flush, up to 120 s. Later signals, and any after the summary, are only noted."""
 
     def __init__(self):
-        self.received, self.holding, self.pending, self.finished = [], 0, False, False
+        self.received, self.holding, self.pending, self.finished, self.broken_pipe = [], 0, False, False, False
         self.previous = {}
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
             if signal.getsignal(sig) is not signal.SIG_IGN:
@@ -767,8 +768,8 @@ class StopSignals:
                 raise KeyboardInterrupt
 
     def reason(self) -> str:
-        """What stopped the run: the first signal, or SIGPIPE when the reader of our output died first."""
-        return self.received[0] if self.received else "SIGPIPE"
+        """What stopped the run: the first signal; else SIGPIPE if the reader of our output died, else Ctrl-C."""
+        return self.received[0] if self.received else "SIGPIPE" if self.broken_pipe else "SIGINT"
 
     def exit_code(self, status: str) -> int:
         """128 + the signal (130 SIGINT, 143 SIGTERM, 129 SIGHUP, 141 a dead reader), as a shell reports a kill;
