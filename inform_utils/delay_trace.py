@@ -1,6 +1,6 @@
 """Where a late teacher's +1 lands, traced step by step on the maze (why --teacher-delay 1 fails and 2 works).
 
-Runs the maze script's own forward phase (`forward_phase` of inform_dqn_gridworld.py) with a teacher that records
+Runs the maze script itself (its `main`, in a temporary directory, the sleep cut to one step) with a teacher that records
 every signal: the step it was about, the transition it labels, and whether Eq. 4 calls that labelled move good. A
 signal about step t lands on step t + d (and, with a credit window k, on the k - 1 steps before that). The maze is a
 grid: an agent that goes x -> y and back y -> x walks a 2-cycle, and a signal d steps late lands on the same move of the
@@ -11,13 +11,15 @@ delay teaches H to turn back; a window k > 1 adds the steps after t (d = 2, k = 
     python -m inform_utils.delay_trace --table   # every (delay, window) of the table, the first seeds
 """
 
+import contextlib
+import io
 import os
+import signal
 import sys
+import tempfile
 from dataclasses import dataclass, field
 
-import gymnasium as gym
 import numpy as np
-import torch
 import tyro
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -47,16 +49,13 @@ class Args:
     """seeds of --table"""
 
 
-class NoWriter:
-    def add_scalar(self, *args, **kwargs):
-        pass
-
-
 def traced_run(delay: int, window: int, seed: int, total: int):
-    """The script's forward phase, with a teacher that records (step about, step labelled) for each +1."""
-    args = inform.fill_teacher_defaults(inform.Args(seed=seed, teacher_delay=delay, credit_window=window,
-                                                    tamer_total_timesteps=total))  # fmt: skip
-    signals = []
+    """A real run of the maze script (its `main`, in a temporary directory, no sleep), with a teacher that records
+    (step about, steps labelled) for each +1 and the replay buffer kept for the trace."""
+    args = inform.Args(seed=seed, teacher_delay=delay, credit_window=window, tamer_total_timesteps=total,
+                       sleep_gradient_steps=1, sleep_eval_frequency=1, save_model=False)  # fmt: skip
+    inform.check_args(args)
+    signals, buffers = [], []
 
     class TracingTeacher(inform.Teacher):
         def __call__(self, step, h_star):
@@ -65,29 +64,40 @@ def traced_run(delay: int, window: int, seed: int, total: int):
                 signals.append((step - self.delay, labelled))
             return labelled
 
-    inform.random.seed(seed)
-    np.random.seed(seed)
-    torch.manual_seed(seed)
-    env = gym.make(args.env_id)
-    env.action_space.seed(seed)
-    q_star = gridworld_env.optimal_q(env.unwrapped.variant, args.oracle_gamma)
-    h_net = inform.QNetwork(gridworld_env.N_CELLS, gridworld_env.N_ACTIONS)
-    buffer = inform.ReplayBuffer(total, gridworld_env.N_CELLS, torch.device("cpu"))
-    evaluator = inform.Evaluator(None, args.success_max_steps)
-    original, inform.Teacher = inform.Teacher, TracingTeacher
-    try:
-        inform.forward_phase(args, env, q_star, h_net, buffer, evaluator, NoWriter(), torch.device("cpu"))
-    finally:
-        inform.Teacher = original
+    class KeptBuffer(inform.ReplayBuffer):
+        def __init__(self, *a, **kw):
+            super().__init__(*a, **kw)
+            buffers.append(self)
+
+    patched = {"Teacher": TracingTeacher, "ReplayBuffer": KeptBuffer}
+    originals = {name: getattr(inform, name) for name in patched}
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+    cwd = os.getcwd()
+    with (
+        tempfile.TemporaryDirectory() as tmp,
+        contextlib.redirect_stdout(io.StringIO()),
+        contextlib.redirect_stderr(io.StringIO()),
+    ):
+        os.chdir(tmp)
+        try:
+            for name, cls in patched.items():
+                setattr(inform, name, cls)
+            summary = inform.main(args, inform.StopSignals())
+        finally:
+            os.chdir(cwd)
+            for name, cls in originals.items():
+                setattr(inform, name, cls)
+            for sig, handler in handlers.items():
+                signal.signal(sig, handler)
+    (buffer,) = buffers
+    q_star = gridworld_env.optimal_q("plain", args.oracle_gamma)
     cells = buffer.obs[: buffer.size].argmax(1).numpy()
     next_cells = buffer.next_obs[: buffer.size].argmax(1).numpy()
     actions = buffer.actions[: buffer.size].numpy()
-    good = q_star[cells, actions] >= q_star[cells].max(1) - (1 - args.feedback_alpha_start) * np.abs(
-        q_star[cells].max(1)
-    )
-    length = gridworld_env.greedy_episode_length(inform.greedy_actions(h_net, torch.device("cpu")))
-    evaluator.close()
-    return cells, next_cells, actions, good, signals, length
+    best = q_star[cells].max(1)
+    good = q_star[cells, actions] >= best - (1 - args.feedback_alpha_start) * np.abs(best)  # Eq. 4
+    assert summary["feedback/positive"] == len(signals)  # the trace is the run
+    return cells, next_cells, actions, good, signals, int(summary["eval/tamer_episode_length"])
 
 
 def label_stats(cells, next_cells, actions, good, signals) -> dict:
