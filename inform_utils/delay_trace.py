@@ -1,10 +1,10 @@
-"""Where a late teacher's +1 lands, traced step by step on the maze (why --teacher-delay 1 fails and 2 works).
+"""Where a late teacher's +1 lands, traced step by step on the maze (why --teacher-delay 1 fails and 2 can work).
 
-Runs the maze script itself (its `main`, in a temporary directory, the sleep cut to one step) with a teacher that records
-every signal: the step it was about, the transition it labels, and whether Eq. 4 calls that labelled move good. A
-signal about step t lands on step t + d (and, with a credit window k, on the k - 1 steps before that). The maze is a
-grid: an agent that goes x -> y and back y -> x walks a 2-cycle, and a signal d steps late lands on the same move of the
-cycle when d is even and on the *reverse* move when d is odd. Reverse moves of good moves are bad ones, so an odd
+Runs the maze script itself (its `main`, in a temporary directory, the sleep cut to one step) with a teacher that
+records every signal: the step it was about, the transitions it labels, and whether Eq. 4 calls a labelled move good.
+A signal about step t lands on step t + d (and, with a credit window k, on the k - 1 steps before that). The maze is a
+grid: an agent that goes x -> y and back y -> x walks a 2-cycle, and a signal d steps late lands on the same move of
+the cycle when d is even and on the *reverse* move when d is odd. The reverse of a good move is a bad one, so an odd
 delay teaches H to turn back; a window k > 1 adds the steps after t (d = 2, k = 3 labels t + 1 too: the reverse).
 
     python -m inform_utils.delay_trace --delay 1 --credit-window 1 --seed 1

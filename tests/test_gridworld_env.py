@@ -41,7 +41,7 @@ def test_wall_variant_adds_two_walls_in_column_5():
     env = gym.make("KnoxStoneMazeWall-v0", render_mode="ansi")
     env.reset(seed=0)
     lines = env.render().splitlines()
-    assert lines[4] == "+  +--+  +--+--+--+" and lines[6] == "+  +--+  +--+--+--+"
+    assert lines[4] == "+   +---+   +---+---+---+" and lines[6] == "+   +---+   +---+---+---+"
     plain, wall = g.transition_table("plain"), g.transition_table("wall")
     assert plain[10, 1] == 13 and wall[10, 1] == 10  # 10 down: into 13 on the plain maze, a wall on the variant
     assert plain[18, 0] == 13 and wall[18, 0] == 18
