@@ -225,3 +225,75 @@ def test_ctrl_c_while_a_person_is_asked(tmp_path):
     assert proc.returncode == 130, (proc.returncode, "".join(err))
     assert_clean("".join(err))
     assert_stopped(tmp_path, "SIGINT", {"tamer"})
+
+
+@pytest.mark.parametrize("module", ["inform_dqn_gridworld", "inform_sac_pusher"])
+def test_a_stop_never_lands_inside_a_tensorboard_call(module, tmp_path):
+    """The ~120 s hang after a stop: a KeyboardInterrupt raised inside the writer's queue put, between the put and its
+    notify, leaves the writer's flush thread asleep, and close() then waits for its next flush (flush_secs, 120 by
+    default). So a stop signal that arrives during a writer call takes effect when the call returns."""
+    import importlib
+
+    script = importlib.import_module(module)
+    handlers = {sig: signal.getsignal(sig) for sig in SIGNALS}
+    try:
+        stop = script.StopSignals()
+        writer = script.HeldWriter(str(tmp_path), stop)
+        calls = []
+        real = writer.writer.add_scalar
+
+        def add_scalar_hit_by_a_signal(*args, **kwargs):
+            os.kill(os.getpid(), signal.SIGHUP)  # delivered here, inside the call
+            time.sleep(0.05)  # Python runs the handler at the next bytecode: still inside
+            calls.append("returned")
+            return real(*args, **kwargs)
+
+        writer.writer.add_scalar = add_scalar_hit_by_a_signal
+        with pytest.raises(KeyboardInterrupt):
+            writer.add_scalar("x", 1.0, 1)
+        assert calls == ["returned"] and stop.received == ["SIGHUP"]  # the call finished, then the stop
+        stop.finished = True
+        started = time.monotonic()
+        writer.close()
+        assert time.monotonic() - started < 5.0
+    finally:
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
+
+
+def test_the_hang_is_an_interrupt_between_the_queue_put_and_its_notify(tmp_path):
+    """Why a stop could hang ~90-120 s (issue 20), made to happen on purpose: a KeyboardInterrupt inside
+    queue.Queue.put after the item is queued and before `not_empty.notify()` (where the old handler's raise could land
+    during add_scalar) leaves the writer's thread asleep until its next flush; close() waits for it."""
+    import inspect
+    import queue
+
+    from torch.utils.tensorboard import SummaryWriter
+
+    lines, first = inspect.getsourcelines(queue.Queue.put)
+    notify_line = first + next(i for i, line in enumerate(lines) if "self.not_empty.notify()" in line)
+
+    def tracer(frame, event, arg):
+        if frame.f_code is not queue.Queue.put.__code__:
+            return None
+
+        def in_put(frame, event, arg):
+            if event == "line" and frame.f_lineno == notify_line:
+                raise KeyboardInterrupt  # what a signal handler's raise does at that bytecode
+            return in_put
+
+        return in_put
+
+    flush_secs = 3.0
+    writer = SummaryWriter(str(tmp_path), flush_secs=flush_secs)
+    writer.add_scalar("x", 0.0, 0)
+    writer.flush()  # the thread now sleeps until its next flush, flush_secs from now
+    sys.settrace(tracer)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            writer.add_scalar("x", 1.0, 1)
+    finally:
+        sys.settrace(None)
+    started = time.monotonic()
+    writer.close()
+    assert time.monotonic() - started > flush_secs - 1.0  # it waited for the thread's own flush time
