@@ -340,6 +340,7 @@ def test_a_person_who_stops_too_early_gets_an_honest_skip(tmp_path):
     assert "--tamer-total-timesteps" not in result.stderr
 
 
+@pytest.mark.slow
 def test_a_scripted_person_teaches_the_maze_in_few_answers():
     """The human mode's promise, measured as in the README: a person answering as Q* would (y for the best move,
     Enter otherwise), through a pseudo-terminal, until TAMER's greedy path from S reaches G (seed 1)."""
@@ -373,6 +374,7 @@ def test_a_late_signal_in_a_two_cycle_lands_on_the_reverse_move_when_the_delay_i
     assert landed == landed_on
 
 
+@pytest.mark.slow
 def test_the_traced_delayed_run_turns_back():
     """On a real run (seed 1, the maze's defaults) with --teacher-delay 1 most +1 signals label the reverse of the
     move they were about, and TAMER's greedy path never reaches G; with a delay of 2 few do."""
