@@ -518,6 +518,7 @@ def test_bad_input_exits_before_creating_anything(tmp_path):
         ("inform_dqn_gridworld.py", ["--teacher", "robot"], "invalid choice 'robot'"),
         ("q_learning_recovered_reward.py", ["--num-seeds", "x"], "Error parsing --num-seeds"),
         ("inform_utils/run_seeds.py", ["--seeds", "x"], "Error parsing --seeds"),
+        ("inform_utils/run_seeds.py", ["--launcher", "cloud"], "invalid choice 'cloud'"),
         ("inform_utils/plot_results.py", ["--nope", "1"], "Unrecognized options"),
         ("inform_utils/pusher_obstacle_stats.py", ["--nope", "1"], "Unrecognized options"),
         ("inform_utils/teacher_study.py", ["--nope", "1"], "Unrecognized options"),

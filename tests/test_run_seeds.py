@@ -101,7 +101,6 @@ def test_a_failed_run_is_reported_with_the_tail_of_its_log_and_the_table_has_the
         (["--launcher", "slurm"], "no sbatch on PATH"),
         (["--launcher", "slurm", "--slurm-mem", "4X"], "--slurm-mem '4X': expected a size like 4G or 500M"),
         (["--launcher", "slurm", "--slurm-time", "0"], "--slurm-time and --slurm-cpus-per-task must be >= 1"),
-        (["--launcher", "cloud"], "--launcher"),
     ],
 )
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path, fake_script, flags, phrase):
