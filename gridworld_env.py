@@ -87,8 +87,8 @@ ARROWS = "^v<>"  # up, down, left, right, as drawn by draw_maze
 
 
 def draw_maze(variant: str = "plain", agent: int | None = None, arrows: dict[int, int] | None = None) -> str:
-    """The maze as text (the env's ansi render): A the agent, G the goal, ## blocked cells; `arrows` maps cells to
-    actions drawn as ^ v < > (the agent's cell shows "A" and its arrow, e.g. "A<")."""
+    """The maze as text (the env's ansi render), three characters a cell: S the start (always shown), A the agent,
+    G the goal, ### blocked cells; `arrows` maps cells to actions drawn as ^ v < > (the agent on S moving left: SA<)."""
     walls = VARIANT_WALLS[variant]
     arrows = arrows or {}
 
@@ -97,19 +97,18 @@ def draw_maze(variant: str = "plain", agent: int | None = None, arrows: dict[int
 
     def content(i):
         if i is None:
-            return "##"
-        if i == agent:
-            return "A" + ARROWS[arrows[i]] if i in arrows else " A"
-        return " G" if i == GOAL else " " + ARROWS[arrows[i]] if i in arrows else "  "
+            return "###"
+        who = "A" if i == agent else "G" if i == GOAL else " "
+        return ("S" if i == START else " ") + who + (ARROWS[arrows[i]] if i in arrows else " ")
 
-    lines = ["+--" * COLS + "+"]
+    lines = ["+---" * COLS + "+"]
     for r in range(ROWS):
         row = "|"
         for c in range(COLS):
             row += content(CELL_INDEX.get((r, c)))
             row += " " if c + 1 < COLS and open_between((r, c), (r, c + 1)) else "|"
         lines.append(row)
-        lines.append("+" + "+".join("  " if open_between((r, c), (r + 1, c)) else "--" for c in range(COLS)) + "+")
+        lines.append("+" + "+".join("   " if open_between((r, c), (r + 1, c)) else "---" for c in range(COLS)) + "+")
     return "\n".join(lines) + "\n"
 
 

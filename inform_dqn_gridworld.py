@@ -11,7 +11,7 @@ Fig. 3 (episode length of TAMER, INFORM and the expert). What the paper leaves o
 
 import collections
 import contextlib
-import io
+import gc
 import json
 import math
 import os
@@ -24,28 +24,42 @@ import zipfile
 from dataclasses import asdict, dataclass
 from typing import Literal
 
-import gymnasium as gym
-import matplotlib
-import numpy as np
-import torch
-import torch.nn as nn
-import torch.nn.functional as F
-import tyro
-from matplotlib.figure import Figure
-from matplotlib.patches import Polygon, Rectangle
-from torch.utils.tensorboard import SummaryWriter
+
+def stopped_while_starting(signum, frame):
+    """A stop before the run directory exists (torch & co. take seconds to load): one line, nothing to save."""
+    with contextlib.suppress(OSError):
+        os.write(2, f"interrupted ({signal.Signals(signum).name}) while starting; no run was made\n".encode())
+    os._exit(128 + signum)
+
+
+if __name__ == "__main__":  # before the slow imports, so that no stop ever ends in a traceback
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        if signal.getsignal(sig) is not signal.SIG_IGN:  # an ignored SIGINT (nohup, `&`) stays ignored
+            signal.signal(sig, stopped_while_starting)
+
+import gymnasium as gym  # noqa: E402
+import matplotlib  # noqa: E402
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+import torch.nn as nn  # noqa: E402
+import torch.nn.functional as F  # noqa: E402
+import tyro  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.patches import Polygon, Rectangle  # noqa: E402
+from torch.utils.tensorboard import SummaryWriter  # noqa: E402
 
 try:
     import gridworld_env
-except ModuleNotFoundError as e:  # a copy of this script without the maze beside it
+except ModuleNotFoundError as e:  # a copy of this script without the maze beside it: said after parsing, see below
     if e.name != "gridworld_env":
         raise
-    sys.exit("error: gridworld_env.py (the maze) is not importable: copy it next to this script, or run from the repo")
+    gridworld_env = None
 
-MAZE_IDS = tuple(gridworld_env.ENV_IDS)
+MAZE_IDS = tuple(gridworld_env.ENV_IDS) if gridworld_env else ("KnoxStoneMaze-v0",)
 POLICIES = ("oracle", "tamer", "inform")
-ALL_STARTS = tuple(cell for cell in range(gridworld_env.N_CELLS) if cell != gridworld_env.GOAL)  # the 29 others
-OPTIMUM = gridworld_env.greedy_episode_length(gridworld_env.optimal_q("plain").argmax(1))  # 19 steps from S
+if gridworld_env:
+    ALL_STARTS = tuple(cell for cell in range(gridworld_env.N_CELLS) if cell != gridworld_env.GOAL)  # the 29 others
+    OPTIMUM = gridworld_env.greedy_episode_length(gridworld_env.optimal_q("plain").argmax(1))  # 19 steps from S
 
 
 @dataclass
@@ -81,14 +95,14 @@ class Args:
     """Adam learning rate of the feedback model H"""
     tamer_batch_size: int = 32
     """batch size of the H regression"""
-    tamer_learning_starts: int = 1000
-    """environment steps before H is trained"""
+    tamer_learning_starts: int | None = None
+    """environment steps before H is trained (None: 1000; with --teacher human 1, H learns from your first answer)"""
     tamer_train_frequency: int = 1
     """environment steps between H updates"""
-    start_e: float = 1.0
-    """starting epsilon of the epsilon-greedy exploration"""
-    end_e: float = 0.05
-    """final epsilon"""
+    start_e: float | None = None
+    """starting epsilon of the epsilon-greedy exploration (None: 1; with --teacher human 0, no random moves)"""
+    end_e: float | None = None
+    """final epsilon (None: 0.05; with --teacher human 0)"""
     exploration_fraction: float = 0.2
     """fraction of the forward phase over which epsilon decays from start_e to end_e"""
     feedback_alpha_start: float = 0.999
@@ -113,6 +127,9 @@ class Args:
     """the teacher leaves after this many +1 signals (None: never); then H and the TAMER policy are frozen"""
     budget_ends_forward_phase: bool = False
     """when the budget is spent, end the forward phase and sleep (otherwise keep acting, without feedback)"""
+    human_updates_per_answer: int = 20
+    """--teacher human: H's gradient steps after each answer, each on the newest answer plus a replay of earlier ones
+    (Deep TAMER's remedies), so that an answer takes effect before the next move"""
 
     # Sleep phase: offline IQ-Learn (Eq. 2), no environment steps
     sleep_gradient_steps: int = 3000
@@ -139,6 +156,21 @@ class Args:
     """re-evaluate a saved tamer_h.pt or inform_q.pt, print its episode lengths as JSON, train nothing"""
 
 
+# The defaults that depend on who teaches: the paper's simulated teacher, or a person who answers every move
+TEACHER_DEFAULTS = {
+    "oracle": {"tamer_learning_starts": 1000, "start_e": 1.0, "end_e": 0.05},
+    "human": {"tamer_learning_starts": 1, "start_e": 0.0, "end_e": 0.0},
+}
+
+
+def fill_teacher_defaults(args: Args) -> Args:
+    """The flags left at None take the default of --teacher (the simulated teacher's are the paper's)."""
+    for name, value in TEACHER_DEFAULTS[args.teacher].items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
+    return args
+
+
 class InputError(Exception):
     """Bad input from the user: a flag value, a file. Reported as one line, before anything is written."""
 
@@ -149,6 +181,7 @@ class Diverged(Exception):
 
 def check_args(args: Args) -> None:
     """Reject bad flag values before anything is written; each message says what is wrong and how to fix it."""
+    fill_teacher_defaults(args)
     if args.seed < 0:
         raise InputError(f"--seed must be >= 0 (numpy refuses negative seeds), got {args.seed}")
     positive_ints = [
@@ -161,6 +194,7 @@ def check_args(args: Args) -> None:
         "sleep_batch_size",
         "eval_frequency",
         "sleep_eval_frequency",
+        "human_updates_per_answer",
     ]
     for name in positive_ints:
         if getattr(args, name) < 1:
@@ -179,7 +213,9 @@ def check_args(args: Args) -> None:
         raise InputError(f"--sleep-chi2-coef must be a finite number >= 0 (0 turns it off), got {args.sleep_chi2_coef}")
     if args.oracle_gamma >= 1.0:
         raise InputError("--oracle-gamma must be below 1 for value iteration to converge")
-    if args.tamer_learning_starts < args.tamer_batch_size:
+    if args.tamer_learning_starts < 1:
+        raise InputError(f"--tamer-learning-starts must be a positive integer, got {args.tamer_learning_starts}")
+    if args.teacher == "oracle" and args.tamer_learning_starts < args.tamer_batch_size:
         raise InputError(
             f"--tamer-learning-starts ({args.tamer_learning_starts}) must be at least "
             f"--tamer-batch-size ({args.tamer_batch_size})"
@@ -199,8 +235,8 @@ def check_args(args: Args) -> None:
     if args.credit_window < 1:
         raise InputError(f"--credit-window must be >= 1 (1 labels only the transition a signal arrives on), "
                          f"got {args.credit_window}")  # fmt: skip
-    if args.feedback_budget is not None and args.feedback_budget < 0:
-        raise InputError(f"--feedback-budget must be >= 0 positive signals (or None: unlimited), "
+    if args.feedback_budget is not None and args.feedback_budget < 1:
+        raise InputError(f"--feedback-budget must be >= 1 positive signal (or None: unlimited), "
                          f"got {args.feedback_budget}")  # fmt: skip
     distortions = {"teacher_noise": 0.0, "teacher_sparsity": 1.0, "teacher_delay": 0, "credit_window": 1}
     changed = [f"--{k.replace('_', '-')}" for k, v in distortions.items() if getattr(args, k) != v]
@@ -410,19 +446,30 @@ class HumanTeacher:
     input: y (+1), Enter (no feedback) or q (stop teaching: the sleep starts). The end of the input counts as q, so
     a pipe or a file of answers works as well as a keyboard."""
 
-    def __init__(self, variant: str):
+    def __init__(self, variant: str, success_max_steps: int):
         self.variant, self.next_cell = variant, gridworld_env.transition_table(variant)
         self.answers = self.agreement = 0  # answers given, and how many Eq. 4 (the oracle) would have given too
+        self.refused = np.zeros((gridworld_env.N_CELLS, gridworld_env.N_ACTIONS))  # Enter answers per (cell, move)
+        self.answers_to_goal = None  # answers given when the agent's own (greedy) way from S first reached G
         self.echo = not sys.stdin.isatty()  # piped answers are not echoed by a terminal: print them
-        print("You are the teacher. The agent A must reach G by the shortest path (19 steps from its start).\n"
-              "For each move answer: y = good (+1), Enter = no feedback, q = stop teaching (the sleep starts).",
-              flush=True)  # fmt: skip
+        print("You are the teacher. The agent A must reach G by the shortest path (19 steps from S).\n"
+              "For each move answer: y = good (+1), Enter = no feedback, q = stop teaching (the sleep starts).\n"
+              "A move you answer with Enter is not proposed again in that cell while it has moves you have not "
+              f"judged.\nThe sleep learns from the walks from S to G in fewer than {success_max_steps} steps: "
+              "teach until there is at least one.", flush=True)  # fmt: skip
 
-    def __call__(self, cell: int, action: int, explore: bool, step: int, positives: int, h_oracle: float):
+    def propose(self, h_values: torch.Tensor, cell: int) -> int:
+        """The agent's move: greedy on H, but never a move you refused in this cell before the ones you have not."""
+        return int(np.argmax(h_values.cpu().numpy() - 2.0 * self.refused[cell]))  # H is in about [0, 1]
+
+    def __call__(self, cell: int, action: int, explore: bool, step: int, positives: int, h_oracle: float,
+                 own_way: int, successes: int):  # fmt: skip
         """Your answer about the move `action` from `cell`: 1.0, 0.0, or None to stop teaching."""
         how = " (exploring: a random move)" if explore else ""
         how += " into a wall: it stays where it is" if self.next_cell[cell, action] == cell else ""
-        print(f"\nstep {step} | steps taught {step - 1} | positives given {positives}\n"
+        way = f"reaches G in {own_way} steps" if own_way < 200 else "does not reach G yet"
+        print(f"\nstep {step} | answers {self.answers} | positives given {positives} | its own way from S: {way} | "
+              f"walks to G in time: {successes}\n"
               + gridworld_env.draw_maze(self.variant, agent=cell, arrows={cell: action})
               + f"the agent moves {gridworld_env.ACTION_NAMES[action]}{how}", flush=True)  # fmt: skip
         while True:
@@ -437,12 +484,14 @@ class HumanTeacher:
                 h = float(answer == "y")
                 self.answers += 1
                 self.agreement += int(h == h_oracle)
+                self.refused[cell, action] += 1.0 - h
                 return h
             print(f"{answer!r}? type y for +1, press Enter for no feedback, or type q to stop teaching", flush=True)
 
-    def finish(self, steps: int, positives: int):
+    def finish(self, steps: int, positives: int, successes: int):
+        then = "now the agent sleeps" if successes else "the agent did not walk from S to G in time, so it cannot sleep"
         print(f"\nthank you: {steps} steps taught, {positives} positives given ({self.agreement} of "
-              f"{self.answers} answers as the oracle's, Eq. 4); now the agent sleeps", flush=True)  # fmt: skip
+              f"{self.answers} answers as the oracle's, Eq. 4); {then}", flush=True)  # fmt: skip
 
 
 def draw_greedy_path(policy: np.ndarray, variant: str) -> str:
@@ -470,6 +519,7 @@ class Progress:
         elapsed = time.time() - self.start
         sps = step / max(elapsed, 1e-9)
         eta = (self.total - step) / max(sps, 1e-9)
+        info = {k: v for k, v in info.items() if v is not None}  # a value not measured yet is not shown
         extra = "".join(f" | {k} {v:.4g}" if isinstance(v, float) else f" | {k} {v}" for k, v in info.items())
         print(
             f"[{self.phase}] {step}/{self.total} {100 * step // self.total:3d}% | {sps:,.0f} SPS | "
@@ -569,8 +619,10 @@ def forward_phase(args, env, q_star, h_net, buffer, evaluator, writer, device) -
     progress = Progress("tamer", args.tamer_total_timesteps)
     teacher = Teacher(args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window,
                       args.feedback_budget, seed=args.seed + 7919)  # fmt: skip
-    human = HumanTeacher(env.unwrapped.variant) if args.teacher == "human" else None
-    episode_positives = episode_length = episode_start = steps_run = 0
+    variant = env.unwrapped.variant
+    human = HumanTeacher(variant, args.success_max_steps) if args.teacher == "human" else None
+    episode_positives = episode_length = episode_start = steps_run = successes = 0
+    own_way = gridworld_env.greedy_episode_length(greedy_actions(h_net, device), variant) if human else None
     optimum_at = None  # (step, +1 signals) at the first evaluation where TAMER's greedy path is the shortest
     evaluated_at = -1
     start_time = time.time()
@@ -583,7 +635,8 @@ def forward_phase(args, env, q_star, h_net, buffer, evaluator, writer, device) -
             action = env.action_space.sample()
         else:
             with torch.no_grad():
-                action = int(h_net(torch.as_tensor(obs, device=device)).argmax())
+                h_values = h_net(torch.as_tensor(obs, device=device))
+            action = int(h_values.argmax()) if human is None else human.propose(h_values, int(obs.argmax()))
 
         # the teacher watches (s, a): the perfect answer (Eq. 4) or a person's; once it has left, H stays frozen
         taught = not teacher.gone
@@ -592,7 +645,8 @@ def forward_phase(args, env, q_star, h_net, buffer, evaluator, writer, device) -
         q_star_s = q_star[int(obs.argmax())]
         h_star = oracle_feedback(q_star_s[action], q_star_s.max(), alpha)
         if human is not None and taught:
-            h_star = human(int(obs.argmax()), action, explore, global_step, teacher.positives, h_star)
+            h_star = human(int(obs.argmax()), action, explore, global_step, teacher.positives, h_star, own_way,
+                           successes)  # fmt: skip
             if h_star is None:  # q or the end of the input: stop teaching, the sleep starts
                 break
         next_obs, _, terminated, truncated, _ = env.step(action)
@@ -606,14 +660,30 @@ def forward_phase(args, env, q_star, h_net, buffer, evaluator, writer, device) -
 
         obs = next_obs
         if terminated or truncated:
-            buffer.tag_episode(episode_start, is_success(terminated, episode_length, args.success_max_steps))
+            success = is_success(terminated, episode_length, args.success_max_steps)
+            buffer.tag_episode(episode_start, success)
+            successes += success
             writer.add_scalar("charts/episodic_return", float(terminated), global_step)
             writer.add_scalar("charts/episodic_length", episode_length, global_step)
             writer.add_scalar("feedback/positive_rate", episode_positives / episode_length, global_step)
             episode_start, episode_positives, episode_length = buffer.size, 0, 0
             obs, _ = env.reset()
 
-        if taught and global_step > args.tamer_learning_starts and global_step % args.tamer_train_frequency == 0:
+        if human is not None and taught and global_step >= args.tamer_learning_starts:
+            # a person: several updates per answer, on the newest answer and a replay of the earlier ones (Deep TAMER)
+            for _ in range(args.human_updates_per_answer):
+                replay = torch.randint(buffer.size, (args.tamer_batch_size - 1,), device=device)
+                idx = torch.cat([torch.tensor([buffer.size - 1], device=device), replay])
+                b_obs, b_actions, _, b_feedback, _ = buffer.batch(idx)
+                loss = tamer_loss(h_net, b_obs, b_actions, b_feedback)
+                h_optimizer.zero_grad()
+                loss.backward()
+                h_optimizer.step()
+            writer.add_scalar("losses/tamer_loss", loss.item(), global_step)
+            own_way = gridworld_env.greedy_episode_length(greedy_actions(h_net, device), variant)
+            if own_way < 200 and human.answers_to_goal is None:
+                human.answers_to_goal = human.answers
+        elif taught and global_step > args.tamer_learning_starts and global_step % args.tamer_train_frequency == 0:
             idx = torch.randint(buffer.size, (args.tamer_batch_size,), device=device)
             b_obs, b_actions, _, b_feedback, _ = buffer.batch(idx)
             loss = tamer_loss(h_net, b_obs, b_actions, b_feedback)
@@ -641,7 +711,7 @@ def forward_phase(args, env, q_star, h_net, buffer, evaluator, writer, device) -
     if evaluated_at != steps_run:  # the person stopped between two evaluations
         evaluator("tamer", greedy_actions(h_net, device), steps_run)
     if human is not None:
-        human.finish(steps_run, teacher.positives)
+        human.finish(steps_run, teacher.positives, successes)
     stats = {
         "feedback/positive": teacher.positives,
         "feedback/perfect_positive": teacher.perfect_positives,
@@ -652,16 +722,25 @@ def forward_phase(args, env, q_star, h_net, buffer, evaluator, writer, device) -
     }
     if human is not None:
         stats["feedback/oracle_agreement"] = human.agreement / max(human.answers, 1)
+        stats["feedback/answers"] = human.answers
+        stats["feedback/answers_to_tamer_goal"] = human.answers_to_goal  # until H's greedy path from S reached G
     return stats
 
 
 def sleep_phase(args, buffer, q_net, target_net, evaluator, writer, device) -> dict:
     """Offline IQ-Learn ("sleep", Eq. 2) on the buffer, successful trajectories as the expert set."""
     success_idx = buffer.success[: buffer.size].nonzero().squeeze(1)
-    stats = {"sleep/expert_transitions": int(success_idx.numel()), "sleep/replay_transitions": buffer.size}
-    if success_idx.numel() == 0:
-        print("warning: no successful episode in the buffer, so the sleep phase has no expert data and is skipped; "
-              "raise --tamer-total-timesteps", file=sys.stderr)  # fmt: skip
+    stats = {"sleep/expert_transitions": int(success_idx.numel()), "sleep/replay_transitions": buffer.size,
+             "sleep_skipped": success_idx.numel() == 0}  # fmt: skip
+    if stats["sleep_skipped"]:
+        how = ("next time keep teaching until the agent has walked from S to G in fewer than "
+               f"{args.success_max_steps} steps at least once" if args.teacher == "human"
+               else "raise --tamer-total-timesteps")  # fmt: skip
+        print(
+            f"warning: the sleep is skipped and no INFORM policy is made: no episode reached G in fewer than "
+            f"{args.success_max_steps} steps, so there is nothing to consolidate; {how}",
+            file=sys.stderr,
+        )
         return stats
     q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_learning_rate, fused=True)
     is_expert = torch.arange(2 * args.sleep_batch_size, device=device) < args.sleep_batch_size
@@ -693,7 +772,7 @@ def sleep_phase(args, buffer, q_net, target_net, evaluator, writer, device) -> d
             writer.add_scalar("sleep/SPS", int(sleep_step / (time.time() - start_time)), sleep_step)
         if sleep_step % args.sleep_eval_frequency == 0 or sleep_step == args.sleep_gradient_steps:
             metrics = evaluator("inform", greedy_actions(q_net, device), sleep_step)
-            progress(sleep_step, iq_loss=stats.get("losses/iq_loss", math.nan),  # synced every 100 steps
+            progress(sleep_step, iq_loss=stats.get("losses/iq_loss"),  # synced every 100 steps
                      eval_length=metrics["eval/inform_episode_length"])  # fmt: skip
             if "sleep/step_to_inform_optimum" not in stats and metrics["eval/inform_episode_length"] == OPTIMUM:
                 stats["sleep/step_to_inform_optimum"] = sleep_step
@@ -728,60 +807,49 @@ def save_network(path: str, net: nn.Module, **extra) -> None:
     torch.save({"state_dict": net.state_dict(), "kwargs": kwargs, **extra}, path)
 
 
-def main(args: Args) -> dict:
+def main(args: Args, stop: "StopSignals", oracle_q: np.ndarray | None = None) -> dict:
     run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
     run_start = time.time()
-
-    random.seed(args.seed)
-    np.random.seed(args.seed)
-    torch.manual_seed(args.seed)
-    torch.backends.cudnn.deterministic = args.torch_deterministic
-    if args.torch_deterministic:
-        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # CUDA matmuls refuse determinism without it
-    torch.use_deterministic_algorithms(args.torch_deterministic)
-    torch.set_num_threads(args.num_threads)
-    device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
-
-    env = gym.make(args.env_id)
-    env.action_space.seed(args.seed)
-    obs_dim, n_actions = env.observation_space.shape[0], int(env.action_space.n)
-
-    # Oracle: exact Q* by value iteration (the "fully trained model"), or a teacher saved by oracle_train.py
-    t0 = time.time()
-    if args.oracle_path:
-        q_star = load_oracle(args.oracle_path, args.env_id)
-    else:
-        q_star = gridworld_env.optimal_q(env.unwrapped.variant, args.oracle_gamma)
-    summary = {"time/oracle_s": time.time() - t0}
-
-    received = []  # SIGTERM (kill, Slurm's cancel and time limit) stops the run as Ctrl-C does
-
-    def stop(signum, frame):
-        received.append(signal.Signals(signum).name)
-        raise KeyboardInterrupt
-
-    previous_handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
-    signal.signal(signal.SIGTERM, stop)
-    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # an ignored SIGINT (nohup, &) stays ignored
-        signal.signal(signal.SIGINT, stop)
-
-    run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
-    writer = SummaryWriter(run_dir)
-    writer.add_text(
-        "hyperparameters",
-        "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
-    )
-    evaluator = Evaluator(writer, args.success_max_steps)
-    print(f"run directory: {run_dir}", flush=True)
-
-    h_net = QNetwork(obs_dim, n_actions).to(device)
-    buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, device)
-    q_net = QNetwork(obs_dim, n_actions).to(device)
-    target_net = QNetwork(obs_dim, n_actions).to(device)
-    target_net.load_state_dict(q_net.state_dict())
-
-    status, phase = "completed", "oracle"
+    run_dir = writer = evaluator = env = None
+    summary, status, phase = {}, "completed", "startup"
     try:
+        with stop.held():  # a stop waits until the directory exists and is known, so the summary can go there
+            run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
+        print(f"run directory: {run_dir}", flush=True)
+        random.seed(args.seed)
+        np.random.seed(args.seed)
+        torch.manual_seed(args.seed)
+        torch.backends.cudnn.deterministic = args.torch_deterministic
+        if args.torch_deterministic:
+            os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # CUDA matmuls refuse determinism without it
+        torch.use_deterministic_algorithms(args.torch_deterministic)
+        torch.set_num_threads(args.num_threads)
+        device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
+
+        env = gym.make(args.env_id)
+        env.action_space.seed(args.seed)
+        obs_dim, n_actions = env.observation_space.shape[0], int(env.action_space.n)
+
+        # Oracle: exact Q* by value iteration (the "fully trained model"), or a teacher saved by oracle_train.py
+        phase, t0 = "oracle", time.time()
+        if oracle_q is not None:
+            q_star = oracle_q  # read and checked before the run directory was made
+        else:
+            q_star = gridworld_env.optimal_q(env.unwrapped.variant, args.oracle_gamma)
+        summary["time/oracle_s"] = time.time() - t0
+
+        writer = HeldWriter(run_dir, stop)
+        writer.add_text(
+            "hyperparameters",
+            "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
+        )
+        evaluator = Evaluator(writer, args.success_max_steps)
+
+        h_net = QNetwork(obs_dim, n_actions).to(device)
+        buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, device)
+        q_net = QNetwork(obs_dim, n_actions).to(device)
+        target_net = QNetwork(obs_dim, n_actions).to(device)
+        target_net.load_state_dict(q_net.state_dict())
         evaluator("oracle", q_star.argmax(1), 0)
 
         # Forward phase ("day"): TAMER with a myopic H(s, a), simulated feedback, every transition remembered
@@ -795,56 +863,147 @@ def main(args: Args) -> dict:
         phase, t0, eval_s0 = "sleep", time.time(), evaluator.seconds
         summary.update(sleep_phase(args, buffer, q_net, target_net, evaluator, writer, device))
         summary["time/sleep_s"] = time.time() - t0 - (evaluator.seconds - eval_s0)
+        slept = not summary["sleep_skipped"]
 
         # Recovered reward (Eq. 3) on the maze the agent learned in
         phase = "reward"
-        reward = reward_table(q_net, env.unwrapped.next_cell, args.sleep_gamma, args.sleep_temperature, device)
-        writer.add_figure(
-            "sleep/recovered_reward", reward_figure(reward.numpy(), f"recovered reward, seed {args.seed}")
-        )
-        if args.save_model:
+        if slept:
+            reward = reward_table(q_net, env.unwrapped.next_cell, args.sleep_gamma, args.sleep_temperature, device)
+            writer.add_figure(
+                "sleep/recovered_reward", reward_figure(reward.numpy(), f"recovered reward, seed {args.seed}")
+            )
+        if args.save_model and slept:
             save_network(f"{run_dir}/inform_q.pt", q_net, env_id=args.env_id, gamma=args.sleep_gamma,
                          temperature=args.sleep_temperature)  # fmt: skip
             torch.save({"reward": reward, "env_id": args.env_id, "gamma": args.sleep_gamma,
                         "temperature": args.sleep_temperature}, f"{run_dir}/recovered_reward.pt")  # fmt: skip
 
-        # Final evaluation of the three policies
+        # Final evaluation of the three policies (INFORM's only if the sleep made one)
         phase = "eval"
         evaluator("oracle", q_star.argmax(1), summary["feedback/steps"])
         evaluator("tamer", greedy_actions(h_net, device), summary["feedback/steps"])
-        evaluator("inform", greedy_actions(q_net, device), args.sleep_gradient_steps)
+        if slept:
+            evaluator("inform", greedy_actions(q_net, device), args.sleep_gradient_steps)
         if args.capture_video:  # after the evaluation: drawing changes no number
-            record_videos(run_dir, {"tamer": greedy_actions(h_net, device), "inform": greedy_actions(q_net, device)})
+            policies = {"tamer": greedy_actions(h_net, device)}
+            if slept:
+                policies["inform"] = greedy_actions(q_net, device)
+            record_videos(run_dir, policies)
         if args.teacher == "human":
-            for name, net in (("TAMER (what you taught)", h_net), ("INFORM (after the sleep)", q_net)):
+            for name, net in (("TAMER (what you taught)", h_net), ("INFORM (after the sleep)", q_net))[: 1 + slept]:
                 print(
                     f"\n{name}, greedy from S:\n" + draw_greedy_path(greedy_actions(net, device), env.unwrapped.variant)
                 )
-    except KeyboardInterrupt:
-        status = "interrupted"
-        print(f"interrupted ({(received or ['SIGINT'])[0]}) during the {phase} phase; what finished is saved in "
-              f"{run_dir}", file=sys.stderr)  # fmt: skip
+    except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
+        status, stop.broken_pipe = "interrupted", isinstance(e, BrokenPipeError)
     except Diverged as e:
         status = "diverged"
-        print(f"error: {e}", file=sys.stderr)
+        summary["error"] = str(e)
 
-    summary.update(evaluator.final)
-    summary.update({"time/eval_s": evaluator.seconds, "wall_time_s": time.time() - run_start, "seed": args.seed,
-                    "script": os.path.basename(__file__), "status": status, "args": asdict(args)})  # fmt: skip
-    if status != "completed":
-        summary["phase"] = phase
+    # the summary first, then the messages: no signal cuts this short (StopSignals only notes the later ones)
+    stop.finished = True
+    reason = stop.reason()
+    if run_dir is not None:
+        if evaluator is not None:
+            summary.update(evaluator.final)
+            summary["time/eval_s"] = evaluator.seconds
+        summary.update({"wall_time_s": time.time() - run_start, "seed": args.seed, "script": os.path.basename(__file__),
+                        "status": status, "args": asdict(args)})  # fmt: skip
+        if status != "completed":
+            summary["phase"] = phase
+        if status == "interrupted":
+            summary["signal"] = reason
+        write_json_atomic(f"{run_dir}/summary.json", summary)
+    for closing in (evaluator, env, writer):
+        if closing is not None:
+            closing.close()
     if status == "interrupted":
-        summary["signal"] = (received or ["SIGINT"])[0]
-    write_json_atomic(f"{run_dir}/summary.json", summary)
-    for sig, handler in previous_handlers.items():
-        signal.signal(sig, handler)
-    evaluator.close()
-    env.close()
-    writer.close()
-    if status == "completed":
-        print(" | ".join(f"{p}: {summary[f'eval/{p}_episode_length']:.0f} steps" for p in POLICIES), flush=True)
-    print(f"{status} in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json", flush=True)
+        saved = f"what finished is saved in {run_dir}" if run_dir else "no run was made"
+        say(f"interrupted ({reason}) during the {phase} phase; {saved}", sys.stderr)
+    elif status == "diverged":
+        say(f"error: {summary['error']}", sys.stderr)
+    elif "eval/inform_episode_length" in summary:
+        say(" | ".join(f"{p}: {summary[f'eval/{p}_episode_length']:.0f} steps" for p in POLICIES))
+    if run_dir is not None:
+        say(f"{status} in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json")
     return summary
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# TRY NOT TO MODIFY: how a run ends. Signals, a dead reader of our output, messages that cannot crash the exit
+
+
+class StopSignals:
+    """SIGINT (Ctrl-C; unless ignored: nohup, `&`), SIGTERM (kill, Slurm) and SIGHUP (a closed terminal) stop the
+    run: the first one raises KeyboardInterrupt, which main catches to save what finished. Never inside a TensorBoard
+    call (see `held`): an interrupt in its queue put can swallow the wake-up of the writer's flush thread, and close()
+    then waits for the thread's next flush, up to 120 s. Later signals, and any after the summary, are only noted."""
+
+    def __init__(self):
+        self.received, self.holding, self.pending, self.finished, self.broken_pipe = [], 0, False, False, False
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+            if signal.getsignal(sig) is not signal.SIG_IGN:
+                signal.signal(sig, self.handler)
+
+    def handler(self, signum, frame):
+        self.received.append(signal.Signals(signum).name)
+        if len(self.received) > 1 or self.finished:
+            return
+        if self.holding:
+            self.pending = True
+            return
+        raise KeyboardInterrupt
+
+    @contextlib.contextmanager
+    def held(self):
+        """A stop signal that arrives in here takes effect as soon as the block ends."""
+        self.holding += 1
+        try:
+            yield
+        finally:
+            self.holding -= 1
+            if self.pending and not self.holding:
+                self.pending = False
+                raise KeyboardInterrupt
+
+    def reason(self) -> str:
+        """What stopped the run: the first signal; else SIGPIPE if the reader of our output died, else Ctrl-C."""
+        return self.received[0] if self.received else "SIGPIPE" if self.broken_pipe else "SIGINT"
+
+    def exit_code(self, status: str) -> int:
+        """128 + the signal (130 SIGINT, 143 SIGTERM, 129 SIGHUP, 141 a dead reader), as a shell reports a kill;
+        a signal after the summary still says the person wanted the run to stop (a shell loop then stops too)."""
+        if status == "interrupted" or self.received:
+            return 128 + signal.Signals[self.reason()].value
+        return {"completed": 0, "diverged": 1}[status]
+
+
+class HeldWriter:
+    """TensorBoard's SummaryWriter, each call inside StopSignals.held()."""
+
+    def __init__(self, log_dir: str, stop: StopSignals):
+        self.stop = stop
+        with stop.held():
+            self.writer = SummaryWriter(log_dir)
+
+    def __getattr__(self, name):
+        method = getattr(self.writer, name)
+
+        def held_call(*args, **kwargs):
+            with self.stop.held():
+                return method(*args, **kwargs)
+
+        return held_call
+
+
+def say(text: str, file=None) -> None:
+    """print, except that a dead reader (a broken pipe) is not an error: what follows goes to /dev/null."""
+    file = file or sys.stdout
+    try:
+        print(text, file=file, flush=True)
+    except OSError:  # BrokenPipeError, or a closed terminal
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), file.fileno())  # the exit's final flush then succeeds too
 
 
 def evaluate_saved(path: str, success_max_steps: int) -> dict:
@@ -948,39 +1107,21 @@ def record_videos(run_dir: str, policies: dict[str, np.ndarray]) -> dict:
     return record
 
 
-def parse_args() -> Args:
-    """tyro's command line, with tyro's multi-line error box shortened to one line."""
-    captured = io.StringIO()
-    try:
-        with contextlib.redirect_stderr(captured):
-            return tyro.cli(Args)
-    except SystemExit as e:
-        if e.code == 0:  # --help
-            raise
-        message = []
-        for line in captured.getvalue().splitlines()[1:]:  # the first line is the box's title bar
-            text = line.strip().strip("│╰╯").strip()
-            if not text or set(text) <= set("─"):
-                if message:
-                    break
-                continue
-            message.append(text)
-        raise InputError(" ".join(message) + " (see --help)") from None
-
-
 if __name__ == "__main__":
     try:
-        args = parse_args()
+        args = tyro.cli(Args)  # a malformed flag: tyro's own message, exit 2
+        if gridworld_env is None:
+            raise InputError("gridworld_env.py (the maze) is not importable: copy it next to this script, or run "
+                             "from the repo")  # fmt: skip
         check_args(args)
         if args.evaluate:
             print(json.dumps(evaluate_saved(args.evaluate, args.success_max_steps), indent=2))
             sys.exit(0)
-        summary = main(args)
+        oracle_q = load_oracle(args.oracle_path, args.env_id) if args.oracle_path else None
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
-    sys.exit(
-        {"completed": 0, "interrupted": 143 if summary.get("signal") == "SIGTERM" else 130, "diverged": 1}[
-            summary["status"]
-        ]
-    )
+    stop = StopSignals()
+    summary = main(args, stop, oracle_q)
+    gc.freeze()  # the interpreter's last collections over torch's objects take seconds on a busy machine; skip them
+    sys.exit(stop.exit_code(summary.get("status", "interrupted")))

@@ -12,6 +12,8 @@ a SAC agent trained here (--train-oracle). The algorithm reads top to bottom dow
 
 import atexit
 import collections
+import contextlib
+import gc
 import json
 import math
 import os
@@ -25,13 +27,26 @@ import xml.etree.ElementTree as ET
 from dataclasses import asdict, dataclass, fields
 from typing import Literal
 
-import gymnasium as gym
-import numpy as np
-import torch
-import torch.nn as nn
-import torch.nn.functional as F
-import tyro
-from torch.utils.tensorboard import SummaryWriter
+
+def stopped_while_starting(signum, frame):
+    """A stop before the run directory exists (torch & co. take seconds to load): one line, nothing to save."""
+    with contextlib.suppress(OSError):
+        os.write(2, f"interrupted ({signal.Signals(signum).name}) while starting; no run was made\n".encode())
+    os._exit(128 + signum)
+
+
+if __name__ == "__main__":  # before the slow imports, so that no stop ever ends in a traceback
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        if signal.getsignal(sig) is not signal.SIG_IGN:  # an ignored SIGINT (nohup, `&`) stays ignored
+            signal.signal(sig, stopped_while_starting)
+
+import gymnasium as gym  # noqa: E402
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+import torch.nn as nn  # noqa: E402
+import torch.nn.functional as F  # noqa: E402
+import tyro  # noqa: E402
+from torch.utils.tensorboard import SummaryWriter  # noqa: E402
 
 ENV_IDS = ("Pusher-v5", "Pusher-v4")
 POLICIES = ("oracle", "tamer", "inform")
@@ -580,6 +595,7 @@ class Progress:
             if self.warm_clock is not None and step > self.warmup:
                 rate = (step - self.warmup) / max(time.time() - self.excluded - self.warm_clock, 1e-9)
             eta = (self.total - step) / max(rate, 1e-9)
+            info = {k: v for k, v in info.items() if v is not None and v == v}  # not measured yet: not shown (nan)
             extra = "".join(f" | {k} {v:.4g}" if isinstance(v, float) else f" | {k} {v}" for k, v in info.items())
             print(f"[{self.phase}] {step}/{self.total} {100 * step // self.total}% | {sps:,.0f} SPS | "
                   f"ETA {int(eta // 60)}m{int(eta % 60):02d}s{extra}", flush=True)  # fmt: skip
@@ -799,7 +815,7 @@ def sleep_phase(args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator,
             progress.excluded += time.time() - t_eval
             progress(step + 1, **{"iq_loss": losses.get("losses/iq_loss"), "eval return": res["eval/inform_return"]})
         else:
-            progress(step + 1, iq_loss=losses.get("losses/iq_loss", float("nan")))
+            progress(step + 1, iq_loss=losses.get("losses/iq_loss"))
     return q_net, inform_actor, {**stats, **losses}
 
 
@@ -853,34 +869,36 @@ def authors_test(args: Args, policies: dict, generator: torch.Generator) -> dict
     return results
 
 
-def main(args: Args, oracle_ckpt: dict | None) -> dict:
+def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals") -> dict:
     run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
     run_start = time.time()
-    random.seed(args.seed)
-    np.random.seed(args.seed)
-    torch.manual_seed(args.seed)
-    torch.backends.cudnn.deterministic = args.torch_deterministic
-    if args.torch_deterministic:
-        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # CUDA matmuls refuse determinism without it
-    torch.use_deterministic_algorithms(args.torch_deterministic)
-    torch.set_num_threads(args.num_threads)
-    device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
-
-    run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
-    writer = SummaryWriter(run_dir)
-    writer.add_text(
-        "hyperparameters",
-        "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
-    )
-    print(f"run dir: {run_dir}", flush=True)
-    env, evaluator = make_env(args.env_id, args.seed), Evaluator(args, writer)
-    obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
+    run_dir = writer = env = evaluator = None
     summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
-    status, phase, end_step = "completed", "oracle", args.tamer_total_timesteps + args.sleep_gradient_steps
-    received = stop_on_signals()  # SIGTERM (Slurm's cancel and time limit, kill) stops the run as Ctrl-C does;
-    try:  # installed only here, so a signal always finds the except below that saves what finished
+    status, phase, end_step = "completed", "startup", args.tamer_total_timesteps + args.sleep_gradient_steps
+    try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
+        with stop.held():  # a stop waits until the directory exists and is known, so the summary can go there
+            run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
+        print(f"run dir: {run_dir}", flush=True)
+        random.seed(args.seed)
+        np.random.seed(args.seed)
+        torch.manual_seed(args.seed)
+        torch.backends.cudnn.deterministic = args.torch_deterministic
+        if args.torch_deterministic:
+            os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # CUDA matmuls refuse determinism without it
+        torch.use_deterministic_algorithms(args.torch_deterministic)
+        torch.set_num_threads(args.num_threads)
+        device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
+
+        writer = HeldWriter(run_dir, stop)
+        writer.add_text(
+            "hyperparameters",
+            "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
+        )
+        env, evaluator = make_env(args.env_id, args.seed), Evaluator(args, writer)
+        obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
+
         # ---- oracle: the simulated teacher (docs/protocol.md, "Oracles and the expert bar")
-        t0 = time.time()
+        phase, t0 = "oracle", time.time()
         if oracle_ckpt is not None:
             oracle_actor, oracle_qf = oracle_from_checkpoint(oracle_ckpt, device)
             steps = oracle_ckpt.get("training_steps", "?")
@@ -937,28 +955,36 @@ def main(args: Args, oracle_ckpt: dict | None) -> dict:
         if args.capture_video:  # after every number is in: filming changes none of them
             phase = "video"
             record_videos(args, policies, paths["boxes"], evaluator.reset_seed(0), run_dir)
-    except KeyboardInterrupt:
-        status = "interrupted"
-        received.append("SIGINT")  # KeyboardInterrupt without our handler is Ctrl-C
-        print(f"interrupted ({received[0]}) during the {phase} phase; what finished is saved in {run_dir}",
-              file=sys.stderr)  # fmt: skip
+    except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
+        status, stop.broken_pipe = "interrupted", isinstance(e, BrokenPipeError)
     except Diverged as e:
         status = "diverged"
-        print(f"error: {e}", file=sys.stderr)
+        summary["error"] = str(e)
 
-    summary = {**evaluator.final, **summary, "time/eval_s": evaluator.seconds,
-               "oracle_path": oracle_ckpt["path"] if oracle_ckpt is not None else None,
-               "wall_time_s": time.time() - run_start, "seed": args.seed, "script": os.path.basename(__file__),
-               "status": status, "args": asdict(args)}  # fmt: skip
-    if status != "completed":
-        summary["phase"] = phase
+    # the summary first, then the messages: no signal cuts this short (StopSignals only notes the later ones)
+    stop.finished = True
+    if run_dir is not None:
+        summary = {**(evaluator.final if evaluator else {}), **summary,
+                   "time/eval_s": evaluator.seconds if evaluator else 0.0,
+                   "oracle_path": oracle_ckpt["path"] if oracle_ckpt is not None else None,
+                   "wall_time_s": time.time() - run_start, "seed": args.seed, "script": os.path.basename(__file__),
+                   "status": status, "args": asdict(args)}  # fmt: skip
+        if status != "completed":
+            summary["phase"] = phase
+        if status == "interrupted":
+            summary["signal"] = stop.reason()
+        write_json_atomic(f"{run_dir}/summary.json", summary)
+    for closing in (env, evaluator.env if evaluator else None, writer):
+        if closing is not None:
+            closing.close()
     if status == "interrupted":
-        summary["signal"] = received[0]
-    write_json_atomic(f"{run_dir}/summary.json", summary)
-    env.close()
-    evaluator.env.close()
-    writer.close()
-    print_results(summary, run_dir)
+        saved = f"what finished is saved in {run_dir}" if run_dir else "no run was made"
+        say(f"interrupted ({stop.reason()}) during the {phase} phase; {saved}", sys.stderr)
+    elif status == "diverged":
+        say(f"error: {summary['error']}", sys.stderr)
+    if run_dir is not None:
+        print_results(summary, run_dir)
+    summary.setdefault("status", status)
     return summary
 
 
@@ -970,7 +996,7 @@ class InputError(Exception):
     """Bad input from the user: a flag value, a file. Reported as one line, before anything is written."""
 
 
-NON_NEGATIVE_INTS = ("seed", "teacher_delay", "feedback_budget")  # every other integer flag must be >= 1
+NON_NEGATIVE_INTS = ("seed", "teacher_delay")  # every other integer flag (--feedback-budget too) must be >= 1
 FLOAT_RANGES = {
     "tau": "(0, 1]",
     "sleep_chi2_coef": "[0, inf)",
@@ -1159,30 +1185,88 @@ def save_oracle(path: str, args: Args, actor: Actor, qf: QEnsemble, action_space
                  "random_starts": args.oracle_random_starts}, path)  # fmt: skip
 
 
-def stop_on_signals() -> list[str]:
-    """SIGTERM, and SIGINT unless it is ignored (nohup, `&`), raise KeyboardInterrupt; the list gets the name."""
-    received = []
+class StopSignals:
+    """SIGINT (Ctrl-C; unless ignored: nohup, `&`), SIGTERM (kill, Slurm) and SIGHUP (a closed terminal) stop the
+    run: the first one raises KeyboardInterrupt, which main catches to save what finished. Never inside a TensorBoard
+    call (see `held`): an interrupt in its queue put can swallow the wake-up of the writer's flush thread, and close()
+    then waits for the thread's next flush, up to 120 s. Later signals, and any after the summary, are only noted."""
 
-    def stop(signum, frame):
-        received.append(signal.Signals(signum).name)
+    def __init__(self):
+        self.received, self.holding, self.pending, self.finished, self.broken_pipe = [], 0, False, False, False
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+            if signal.getsignal(sig) is not signal.SIG_IGN:
+                signal.signal(sig, self.handler)
+
+    def handler(self, signum, frame):
+        self.received.append(signal.Signals(signum).name)
+        if len(self.received) > 1 or self.finished:
+            return
+        if self.holding:
+            self.pending = True
+            return
         raise KeyboardInterrupt
 
-    signal.signal(signal.SIGTERM, stop)
-    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
-        signal.signal(signal.SIGINT, stop)
-    return received
+    @contextlib.contextmanager
+    def held(self):
+        """A stop signal that arrives in here takes effect as soon as the block ends."""
+        self.holding += 1
+        try:
+            yield
+        finally:
+            self.holding -= 1
+            if self.pending and not self.holding:
+                self.pending = False
+                raise KeyboardInterrupt
+
+    def reason(self) -> str:
+        """What stopped the run: the first signal; else SIGPIPE if the reader of our output died, else Ctrl-C."""
+        return self.received[0] if self.received else "SIGPIPE" if self.broken_pipe else "SIGINT"
+
+    def exit_code(self, status: str) -> int:
+        """128 + the signal (130 SIGINT, 143 SIGTERM, 129 SIGHUP, 141 a dead reader), as a shell reports a kill;
+        a signal after the summary still says the person wanted the run to stop (a shell loop then stops too)."""
+        if status == "interrupted" or self.received:
+            return 128 + signal.Signals[self.reason()].value
+        return {"completed": 0, "diverged": 1}[status]
+
+
+class HeldWriter:
+    """TensorBoard's SummaryWriter, each call inside StopSignals.held()."""
+
+    def __init__(self, log_dir: str, stop: StopSignals):
+        self.stop = stop
+        with stop.held():
+            self.writer = SummaryWriter(log_dir)
+
+    def __getattr__(self, name):
+        method = getattr(self.writer, name)
+
+        def held_call(*args, **kwargs):
+            with self.stop.held():
+                return method(*args, **kwargs)
+
+        return held_call
+
+
+def say(text: str, file=None) -> None:
+    """print, except that a dead reader (a broken pipe) is not an error: what follows goes to /dev/null."""
+    file = file or sys.stdout
+    try:
+        print(text, file=file, flush=True)
+    except OSError:  # BrokenPipeError, or a closed terminal
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), file.fileno())  # the exit's final flush then succeeds too
 
 
 def print_results(summary: dict, run_dir: str) -> None:
     if summary["status"] == "completed":
         for p in POLICIES:
             e = {k[len("eval/") :].replace(p, "@"): v for k, v in summary.items() if k.startswith("eval/")}
-            print(f"{p:>6}: return {e['@_return']:.2f} (sampled {e['@_return_sampled']:.2f}) | final distance "
-                  f"{e['@_final_distance']:.3f} | success {e['@_success_rate']:.2f} | obstacle distance "
-                  f"{e['obstacle/@_final_distance']:.3f} +- {e['obstacle/@_final_distance_std']:.3f}",
-                  flush=True)  # fmt: skip
-        print(" | ".join(f"{k} {v:.0f}" for k, v in summary.items() if k.startswith(("time/", "sps/"))), flush=True)
-    print(f"{summary['status']} in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json", flush=True)
+            say(f"{p:>6}: return {e['@_return']:.2f} (sampled {e['@_return_sampled']:.2f}) | final distance "
+                f"{e['@_final_distance']:.3f} | success {e['@_success_rate']:.2f} | obstacle distance "
+                f"{e['obstacle/@_final_distance']:.3f} +- {e['obstacle/@_final_distance_std']:.3f}")  # fmt: skip
+        say(" | ".join(f"{k} {v:.0f}" for k, v in summary.items() if k.startswith(("time/", "sps/"))))
+    say(f"{summary['status']} in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json")
 
 
 def evaluate_saved(args: Args) -> dict:
@@ -1289,21 +1373,19 @@ def record_videos(args: Args, policies: dict, boxes: np.ndarray, reset_seed: int
 
 
 if __name__ == "__main__":
-    args = tyro.cli(Args)
+    args = tyro.cli(Args)  # a malformed flag: tyro's own message, exit 2
     try:
         check_args(args)
         if args.capture_video:
             check_video(args.env_id)
-        if args.evaluate is not None:
-            try:
-                print(json.dumps(evaluate_saved(args), indent=2))
-            except KeyboardInterrupt:
-                sys.exit(130)  # evaluating writes nothing, so there is nothing to keep
+        if args.evaluate is not None:  # writes nothing: a stop meanwhile ends it with one line (see the top)
+            print(json.dumps(evaluate_saved(args), indent=2))
             sys.exit(0)
         oracle_ckpt = load_oracle(args)
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
-    summary = main(args, oracle_ckpt)
-    sys.exit({"completed": 0, "interrupted": 143 if summary.get("signal") == "SIGTERM" else 130, "diverged": 1}[
-        summary["status"]])  # fmt: skip
+    stop = StopSignals()
+    summary = main(args, oracle_ckpt, stop)
+    gc.freeze()  # the interpreter's last collections over torch's objects take seconds on a busy machine; skip them
+    sys.exit(stop.exit_code(summary["status"]))

@@ -905,6 +905,8 @@ def main() -> None:
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, stop)
+    if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:  # a closed terminal; nohup keeps ignoring it
+        signal.signal(signal.SIGHUP, stop)
     args = tyro.cli(Args)
     try:
         check_args(args)
@@ -927,7 +929,7 @@ def main() -> None:
             "from its last saved state with --resume <run dir>/training_state.pt",
             file=sys.stderr,
         )
-        sys.exit(143 if received else 130)
+        sys.exit(128 + signal.Signals[received[0]].value if received else 130)  # 143 SIGTERM, 129 SIGHUP
 
 
 if __name__ == "__main__":

@@ -27,7 +27,7 @@ env-reward arm trains the same number of agents on the same seeds, so both arms 
 """
 
 import contextlib
-import io
+import gc
 import json
 import os
 import signal
@@ -38,15 +38,33 @@ import zipfile
 from dataclasses import asdict, dataclass
 from typing import Literal
 
-import gymnasium as gym
-import numpy as np
-import torch
-import torch.nn as nn
-import tyro
-from matplotlib.figure import Figure
-from torch.utils.tensorboard import SummaryWriter
 
-import gridworld_env
+def stopped_while_starting(signum, frame):
+    """A stop before the run directory exists (torch & co. take seconds to load): one line, nothing to save."""
+    with contextlib.suppress(OSError):
+        os.write(2, f"interrupted ({signal.Signals(signum).name}) while starting; no run was made\n".encode())
+    os._exit(128 + signum)
+
+
+if __name__ == "__main__":  # before the slow imports, so that no stop ever ends in a traceback
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        if signal.getsignal(sig) is not signal.SIG_IGN:  # an ignored SIGINT (nohup, `&`) stays ignored
+            signal.signal(sig, stopped_while_starting)
+
+import gymnasium as gym  # noqa: E402
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+import torch.nn as nn  # noqa: E402
+import tyro  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+from torch.utils.tensorboard import SummaryWriter  # noqa: E402
+
+try:
+    import gridworld_env
+except ModuleNotFoundError as e:  # a copy of this script without the maze beside it: said after parsing, see below
+    if e.name != "gridworld_env":
+        raise
+    gridworld_env = None
 
 BOOTSTRAP_RULES = {
     "sampled": "sampled bootstrap (SARSA-like): target r + gamma Q(s', a'), a' epsilon-greedy from Q(s', .)",
@@ -321,7 +339,7 @@ def run_arm(args, arm: str, reward_by_run: list, seeds: list, variant: str, opti
         )
 
 
-def main(args: Args, sources: list[dict]) -> dict:
+def main(args: Args, sources: list[dict], stop: "StopSignals | None" = None) -> dict:
     run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
     run_start = time.time()
     torch.set_num_threads(args.num_threads)
@@ -339,25 +357,18 @@ def main(args: Args, sources: list[dict]) -> dict:
     arms = {f"{args.bootstrap}_bootstrap/recovered_{args.reward_source}": reward_by_agent,
             f"{args.bootstrap}_bootstrap/env": [None] * len(seeds)}  # fmt: skip
 
-    run_dir = make_run_dir(run_name)  # only now: every input has been read and checked
-    writer = SummaryWriter(run_dir)
-    writer.add_text(
-        "hyperparameters",
-        "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
-    )
-    received = []  # SIGTERM (Slurm's cancel and time limit, kill) stops the run as Ctrl-C does
-
-    def stop(signum, frame):
-        received.append(signal.Signals(signum).name)
-        raise KeyboardInterrupt
-
-    previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
-    signal.signal(signal.SIGTERM, stop)
-    if previous[signal.SIGINT] is signal.default_int_handler:  # an ignored SIGINT (nohup, &) stays ignored
-        signal.signal(signal.SIGINT, stop)
+    stop = stop or StopSignals()  # SIGINT, SIGTERM (Slurm, kill), SIGHUP stop the run as Ctrl-C does
+    run_dir = writer = None
     runs = {arm: [] for arm in arms}
     times, arm = {}, next(iter(arms))
     try:
+        with stop.held():  # a stop waits until the directory exists and is known, so the summary can go there
+            run_dir = make_run_dir(run_name)  # only now: every input has been read and checked
+        writer = HeldWriter(run_dir, stop)
+        writer.add_text(
+            "hyperparameters",
+            "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
+        )
         print(f"run directory: {run_dir}", flush=True)
         print(f"optimum on {args.env_id}: {optimum} steps; update: {BOOTSTRAP_RULES[args.bootstrap]}", flush=True)
         for source, tamer, diag in zip(sources, tamer_lengths, diagnoses, strict=True):
@@ -366,10 +377,10 @@ def main(args: Args, sources: list[dict]) -> dict:
         for arm, reward in arms.items():
             run_arm(args, arm, reward, seeds, variant, optimum, runs[arm], writer)
             times[f"time/{arm}_s"] = sum(run["seconds"] for run in runs[arm])
-    except KeyboardInterrupt:
-        # what finished is kept: the summary records the agents done per arm and no figure is drawn
-        name = received[0] if received else "SIGINT"
-        print(f"interrupted ({name}) during {arm}; the summary in {run_dir} says what finished", file=sys.stderr)
+    except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
+        # what finished is kept: the summary (first) records the agents done per arm and no figure is drawn
+        stop.finished, stop.broken_pipe = True, isinstance(e, BrokenPipeError)
+        name = stop.reason()
         summary = {
             **{f"{a}/agents_done": len(runs[a]) for a in arms},
             "wall_time_s": time.time() - run_start,
@@ -380,12 +391,15 @@ def main(args: Args, sources: list[dict]) -> dict:
             "signal": name,
             "args": asdict(args),
         }
-        write_json_atomic(f"{run_dir}/summary.json", summary)
-        writer.close()
+        if run_dir is not None:
+            write_json_atomic(f"{run_dir}/summary.json", summary)
+        if writer is not None:
+            writer.close()
+        say(f"interrupted ({name}) during {arm}; " + (f"the summary in {run_dir} says what finished" if run_dir
+            else "no run was made"), sys.stderr)  # fmt: skip
+        stop.restore()
         return summary
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+    stop.finished = True  # from here on a signal is only noted: the results below take seconds, then the exit says it
 
     summary = {
         "optimum_episode_length": optimum,
@@ -459,8 +473,9 @@ def main(args: Args, sources: list[dict]) -> dict:
     write_json_atomic(f"{run_dir}/summary.json", summary)
     writer.close()
     for arm in arms:
-        print(f"{arm} ({len(seeds)} agents): " + arm_report(summary, arm, optimum), flush=True)
-    print(f"done in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json, figure: {run_dir}/fig6.png")
+        say(f"{arm} ({len(seeds)} agents): " + arm_report(summary, arm, optimum))
+    say(f"done in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json, figure: {run_dir}/fig6.png")
+    stop.restore()
     return summary
 
 
@@ -712,34 +727,98 @@ def reward_for(source: dict, reward_source: str, next_cell: np.ndarray) -> dict:
     return {"table": table, "next_cell": next_cell}
 
 
-def parse_args() -> Args:
-    """tyro's command line, with tyro's multi-line error box shortened to one line."""
-    captured = io.StringIO()
+# How a run ends: signals, a dead reader of our output, messages that cannot crash the exit ---------------------------
+class StopSignals:
+    """SIGINT (Ctrl-C; unless ignored: nohup, `&`), SIGTERM (kill, Slurm) and SIGHUP (a closed terminal) stop the
+    run: the first one raises KeyboardInterrupt, which main catches to save what finished. Never inside a TensorBoard
+    call (see `held`): an interrupt in its queue put can swallow the wake-up of the writer's flush thread, and close()
+    then waits for the thread's next flush, up to 120 s. Later signals, and any after the summary, are only noted."""
+
+    def __init__(self):
+        self.received, self.holding, self.pending, self.finished, self.broken_pipe = [], 0, False, False, False
+        self.previous = {}
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+            if signal.getsignal(sig) is not signal.SIG_IGN:
+                self.previous[sig] = signal.signal(sig, self.handler)
+
+    def restore(self):
+        """The handlers from before (main also runs inside other programs, e.g. the tests)."""
+        for sig, handler in self.previous.items():
+            signal.signal(sig, handler)
+
+    def handler(self, signum, frame):
+        self.received.append(signal.Signals(signum).name)
+        if len(self.received) > 1 or self.finished:
+            return
+        if self.holding:
+            self.pending = True
+            return
+        raise KeyboardInterrupt
+
+    @contextlib.contextmanager
+    def held(self):
+        """A stop signal that arrives in here takes effect as soon as the block ends."""
+        self.holding += 1
+        try:
+            yield
+        finally:
+            self.holding -= 1
+            if self.pending and not self.holding:
+                self.pending = False
+                raise KeyboardInterrupt
+
+    def reason(self) -> str:
+        """What stopped the run: the first signal; else SIGPIPE if the reader of our output died, else Ctrl-C."""
+        return self.received[0] if self.received else "SIGPIPE" if self.broken_pipe else "SIGINT"
+
+    def exit_code(self, status: str) -> int:
+        """128 + the signal (130 SIGINT, 143 SIGTERM, 129 SIGHUP, 141 a dead reader), as a shell reports a kill;
+        a signal after the summary still says the person wanted the run to stop (a shell loop then stops too)."""
+        if status == "interrupted" or self.received:
+            return 128 + signal.Signals[self.reason()].value
+        return 0
+
+
+class HeldWriter:
+    """TensorBoard's SummaryWriter, each call inside StopSignals.held()."""
+
+    def __init__(self, log_dir: str, stop: StopSignals):
+        self.stop = stop
+        with stop.held():
+            self.writer = SummaryWriter(log_dir)
+
+    def __getattr__(self, name):
+        method = getattr(self.writer, name)
+
+        def held_call(*args, **kwargs):
+            with self.stop.held():
+                return method(*args, **kwargs)
+
+        return held_call
+
+
+def say(text: str, file=None) -> None:
+    """print, except that a dead reader (a broken pipe) is not an error: what follows goes to /dev/null."""
+    file = file or sys.stdout
     try:
-        with contextlib.redirect_stderr(captured):
-            return tyro.cli(Args)
-    except SystemExit as e:
-        if e.code == 0:  # --help
-            raise
-        message = []
-        for line in captured.getvalue().splitlines()[1:]:  # the first line is the box's title bar
-            text = line.strip().strip("│╰╯").strip()
-            if not text or set(text) <= set("─"):
-                if message:
-                    break
-                continue
-            message.append(text)
-        raise ValueError(" ".join(message) + " (see --help)") from None
+        print(text, file=file, flush=True)
+    except OSError:  # BrokenPipeError, or a closed terminal
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), file.fileno())  # the exit's final flush then succeeds too
 
 
 if __name__ == "__main__":
     try:
-        args = parse_args()
+        args = tyro.cli(Args)  # a malformed flag: tyro's own message, exit 2
+        if gridworld_env is None:
+            raise ValueError("gridworld_env.py (the maze) is not importable: copy it next to this script, or run "
+                             "from the repo")  # fmt: skip
         check_args(args)
         sources = resolve_sources(args)
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
-    summary = main(args, sources)
-    if summary["status"] == "interrupted":
-        sys.exit(143 if summary.get("signal") == "SIGTERM" else 130)
+    stop = StopSignals()
+    summary = main(args, sources, stop)
+    gc.freeze()  # the interpreter's last collections over torch's objects take seconds on a busy machine; skip them
+    sys.exit(stop.exit_code(summary["status"]))

@@ -10,9 +10,7 @@ Writes, each only when its runs exist:
 - recovered_reward.png: the recovered reward of one maze run, drawn over the maze.
 """
 
-import contextlib
 import glob
-import io
 import json
 import os
 import sys
@@ -237,29 +235,9 @@ def main(args: Args) -> None:
     print(f"wrote {', '.join(written) or 'nothing (no finished runs found)'} to {args.out}")
 
 
-def parse_args() -> Args:
-    """tyro's command line, with tyro's multi-line error box shortened to one line."""
-    captured = io.StringIO()
-    try:
-        with contextlib.redirect_stderr(captured):
-            return tyro.cli(Args)
-    except SystemExit as e:
-        if e.code == 0:  # --help
-            raise
-        message = []
-        for line in captured.getvalue().splitlines()[1:]:  # the first line is the box's title bar
-            text = line.strip().strip("│╰╯").strip()
-            if not text or set(text) <= set("─"):
-                if message:
-                    break
-                continue
-            message.append(text)
-        raise ValueError(" ".join(message) + " (see --help)") from None
-
-
 if __name__ == "__main__":
     try:
-        main(parse_args())
+        main(tyro.cli(Args))  # a malformed flag: tyro's own message, exit 2
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)

@@ -9,8 +9,6 @@ episodes and on the per-seed means.
         runs/Pusher-v5__inform_sac_pusher__2__* runs/Pusher-v5__inform_sac_pusher__3__*
 """
 
-import contextlib
-import io
 import json
 import os
 import sys
@@ -144,29 +142,9 @@ def main(args: Args) -> dict:
     return out
 
 
-def parse_args() -> Args:
-    """tyro's command line, with tyro's multi-line error box shortened to one line."""
-    captured = io.StringIO()
-    try:
-        with contextlib.redirect_stderr(captured):
-            return tyro.cli(Args)
-    except SystemExit as e:
-        if e.code == 0:  # --help
-            raise
-        message = []
-        for line in captured.getvalue().splitlines()[1:]:  # the first line is the box's title bar
-            text = line.strip().strip("│╰╯").strip()
-            if not text or set(text) <= set("─"):
-                if message:
-                    break
-                continue
-            message.append(text)
-        raise ValueError(" ".join(message) + " (see --help)") from None
-
-
 if __name__ == "__main__":
     try:
-        args = parse_args()
+        args = tyro.cli(Args)  # a malformed flag: tyro's own message, exit 2
         if not args.run_dirs:
             raise ValueError("pass at least one run directory")
         main(args)

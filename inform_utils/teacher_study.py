@@ -10,10 +10,9 @@ Runs are grouped by their exp_name (see docs/teacher_notes.md for the commands t
 Prints markdown tables and writes teacher_robustness.png, teacher_knowledge.png and teacher_efficiency.png.
 """
 
-import contextlib
 import glob
-import io
 import json
+import math
 import os
 import re
 import sys
@@ -66,7 +65,8 @@ def load_runs(runs_dir: str, env_id: str) -> dict[str, dict[int, dict]]:
 
 
 def column(runs: dict[int, dict], key: str) -> np.ndarray:
-    return np.array([runs[seed][key] for seed in sorted(runs)], dtype=float)
+    """One metric per seed; NaN where a run has none (a skipped sleep makes no INFORM policy to evaluate)."""
+    return np.array([runs[seed].get(key) for seed in sorted(runs)], dtype=float)
 
 
 def mean_sd(values: np.ndarray, digits: int = 2) -> str:
@@ -74,7 +74,7 @@ def mean_sd(values: np.ndarray, digits: int = 2) -> str:
 
 
 def no_sleep(runs: dict[int, dict]) -> int:
-    """Runs whose buffer held no successful episode: the sleep was skipped and INFORM's Q is its initialisation."""
+    """Runs whose buffer held no successful episode: the sleep was skipped and there is no INFORM policy."""
     return int((column(runs, "sleep/expert_transitions") == 0).sum())
 
 
@@ -134,14 +134,14 @@ def efficiency_table(runs) -> tuple[str, str]:
             if s not in r:
                 cells.append("-")
                 continue
-            pos, length = r[s]["feedback/positive"], r[s]["eval/inform_episode_length"]
+            pos, length = r[s]["feedback/positive"], r[s].get("eval/inform_episode_length", math.nan)
             slept = r[s]["sleep/expert_transitions"] > 0
             cells.append(
                 f"{pos}: {length:.0f}" + (" *" if length == OPTIMUM else "") + ("" if slept else " (no sleep)")
             )
             if length == OPTIMUM and slept and s not in first:
                 first[s] = (pos, k)
-        reached = sum(r[s]["eval/inform_episode_length"] == OPTIMUM for s in seeds if s in r)
+        reached = sum(r[s].get("eval/inform_episode_length") == OPTIMUM for s in seeds if s in r)
         t_reached = sum(r[s]["eval/tamer_episode_length"] == OPTIMUM for s in seeds if s in r)
         rows.append(f"| INFORM, sleep after k = {k}: +1 signals: INFORM length | " + " | ".join(cells)
                     + f" | {reached}/{len(r)} (TAMER {t_reached}/{len(r)}) |")  # fmt: skip
@@ -256,15 +256,7 @@ def main(args: Args) -> None:
 
 
 if __name__ == "__main__":
-    captured = io.StringIO()
-    try:
-        with contextlib.redirect_stderr(captured):
-            parsed = tyro.cli(Args)
-    except SystemExit as e:
-        if e.code == 0:
-            raise
-        print("error: bad command line (see --help): " + " ".join(captured.getvalue().split())[:300], file=sys.stderr)
-        sys.exit(2)
+    parsed = tyro.cli(Args)  # a malformed flag: tyro's own message, exit 2
     try:
         main(parsed)
     except ValueError as e:

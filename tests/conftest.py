@@ -28,9 +28,10 @@ def run_script(tmp_path):
 
 
 def default_signals():
-    """In the child: SIGINT and SIGTERM at their defaults, whatever the test runner inherited (e.g. trap '' INT)."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    """In the child: SIGINT, SIGTERM and SIGHUP at their defaults, whatever the test runner inherited (e.g. trap ''
+    INT, or nohup)."""
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, signal.SIG_DFL)
 
 
 class Child:

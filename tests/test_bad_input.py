@@ -75,6 +75,8 @@ CASES = [
     case("gridworld-pusher-oracle", "inform_dqn_gridworld.py", f"--oracle-path {shlex.quote(PUSHER_ORACLE)}",
          "not a maze oracle checkpoint"),
     case("gridworld-negative-seed", "inform_dqn_gridworld.py", "--seed -1", "--seed must be >= 0"),
+    case("gridworld-zero-budget", "inform_dqn_gridworld.py", "--feedback-budget 0", "--feedback-budget must be >= 1"),
+    case("pusher-zero-budget", "inform_sac_pusher.py", "--feedback-budget 0", "--feedback-budget must be >= 1"),
     case("pusher-negative-seed", "inform_sac_pusher.py", "--seed -2", "--seed must be >= 0"),
     case("pusher-evaluate-missing-file", "inform_sac_pusher.py", "--evaluate nope.pt",
          "--evaluate nope.pt: no such file"),

@@ -6,19 +6,19 @@ from gymnasium.utils.env_checker import check_env
 import gridworld_env as g
 
 MAZE = """\
-+--+--+--+--+--+--+
-|             A| G|
-+  +--+--+--+--+  +
-|  |##|           |
-+  +--+  +--+--+  +
-|  |##|  |##|##|  |
-+  +--+  +--+--+  +
-|  |##|           |
-+  +--+  +  +  +  +
-|  |##|           |
-+  +--+--+--+--+  +
-|                 |
-+--+--+--+--+--+--+
++---+---+---+---+---+---+
+|                SA | G |
++   +---+---+---+---+   +
+|   |###|               |
++   +---+   +---+---+   +
+|   |###|   |###|###|   |
++   +---+   +---+---+   +
+|   |###|               |
++   +---+   +   +   +   +
+|   |###|               |
++   +---+---+---+---+   +
+|                       |
++---+---+---+---+---+---+
 """
 
 
@@ -34,14 +34,14 @@ def test_layout_matches_the_drawing():
     env = gym.make("KnoxStoneMaze-v0", render_mode="ansi")
     env.reset(seed=0)
     assert env.render() == MAZE
-    assert env.render().count("##") == 6
+    assert env.render().count("###") == 6 and env.render().count("S") == 1  # S stays marked under the agent
 
 
 def test_wall_variant_adds_two_walls_in_column_5():
     env = gym.make("KnoxStoneMazeWall-v0", render_mode="ansi")
     env.reset(seed=0)
     lines = env.render().splitlines()
-    assert lines[4] == "+  +--+  +--+--+--+" and lines[6] == "+  +--+  +--+--+--+"
+    assert lines[4] == "+   +---+   +---+---+---+" and lines[6] == "+   +---+   +---+---+---+"
     plain, wall = g.transition_table("plain"), g.transition_table("wall")
     assert plain[10, 1] == 13 and wall[10, 1] == 10  # 10 down: into 13 on the plain maze, a wall on the variant
     assert plain[18, 0] == 13 and wall[18, 0] == 18

@@ -318,8 +318,6 @@ def test_bad_oracle_checkpoint(run_script, kind, message):
 @pytest.mark.parametrize(
     "flags, message",
     [
-        (["--seed", "abc"], "--seed"),  # a wrong type: tyro's box, shortened to one line
-        (["--sed", "1"], "Unrecognized options"),
         (["--oracle-path", "missing.pt"], "no such file"),
         (["--evaluate", "missing.pt"], "no such file"),
     ],
@@ -430,16 +428,25 @@ def test_divergence_is_reported(run_script):
     assert summary["status"] == "diverged" and summary["phase"] == "sleep"
 
 
-def test_a_copied_script_asks_for_the_maze_module(tmp_path):
+@pytest.mark.parametrize("script, flag", [("inform_dqn_gridworld.py", "--teacher-noise"),
+                                          ("q_learning_recovered_reward.py", "--reward-path")])  # fmt: skip
+def test_a_copied_script_asks_for_the_maze_module(tmp_path, script, flag):
+    """Copied without gridworld_env.py: --help still works, and a run says in one line what is missing, with the exit
+    code of any other bad input (2)."""
     import shutil
 
-    shutil.copy(os.path.join(REPO, "inform_dqn_gridworld.py"), tmp_path / "my_inform.py")
-    proc = subprocess.run([sys.executable, "my_inform.py", "--seed", "1"], cwd=tmp_path, capture_output=True,
-                          text=True, timeout=120, env={**os.environ, "PYTHONPATH": ""})  # fmt: skip
-    assert proc.returncode != 0 and "Traceback" not in proc.stderr, proc.stderr
+    shutil.copy(os.path.join(REPO, script), tmp_path / "my_copy.py")
+    env = {**os.environ, "PYTHONPATH": ""}
+    proc = subprocess.run([sys.executable, "my_copy.py", "--help"], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=120, env=env)  # fmt: skip
+    assert proc.returncode == 0 and flag in proc.stdout, proc.stderr
+    proc = subprocess.run([sys.executable, "my_copy.py", "--seed", "1"], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=120, env=env)  # fmt: skip
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     (line,) = proc.stderr.strip().splitlines()
     assert line.startswith("error: ") and "gridworld_env.py" in line and "copy it next to this script" in line
+    assert not os.path.exists(tmp_path / "runs")
     shutil.copy(os.path.join(REPO, "gridworld_env.py"), tmp_path)  # with the maze beside it, the copy runs
-    proc = subprocess.run([sys.executable, "my_inform.py", "--help"], cwd=tmp_path, capture_output=True, text=True,
-                          timeout=120, env={**os.environ, "PYTHONPATH": ""})  # fmt: skip
-    assert proc.returncode == 0 and "--teacher-noise" in proc.stdout, proc.stderr
+    proc = subprocess.run([sys.executable, "my_copy.py", "--help"], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=120, env=env)  # fmt: skip
+    assert proc.returncode == 0 and flag in proc.stdout, proc.stderr

@@ -1,0 +1,299 @@
+"""Every way a run ends is clean, in both INFORM scripts: SIGINT, SIGTERM and SIGHUP while starting, in each phase and
+after the end, and a reader of stdout that dies. Real signals and real broken pipes, in children started with default
+signals, every wait bounded. Each test checks the exit code (128 + the signal) and summary.json's status and phase."""
+
+import glob
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+from conftest import REPO, Child, default_signals
+
+MAZE = os.path.join(REPO, "inform_dqn_gridworld.py")
+PUSHER = os.path.join(REPO, "inform_sac_pusher.py")
+# phases long enough that a signal sent on their first progress line lands in them (see test_inform_gridworld.py)
+MAZE_TAMER = [MAZE, "--tamer-total-timesteps", "40000", "--eval-frequency", "2000"]
+MAZE_SLEEP = [MAZE, "--tamer-total-timesteps", "2000", "--tamer-learning-starts", "500", "--sleep-gradient-steps",
+              "20000", "--sleep-eval-frequency", "1000"]  # fmt: skip
+PUSHER_TINY = ["--tamer-total-timesteps", "600", "--tamer-learning-starts", "300", "--tamer-batch-size", "64",
+               "--sleep-gradient-steps", "200", "--sleep-batch-size", "64", "--hidden-size", "64",
+               "--eval-frequency", "300", "--sleep-eval-frequency", "100", "--eval-episodes", "2",
+               "--periodic-eval-episodes", "1", "--authors-test-episodes", "3", "--log-frequency", "100"]  # fmt: skip
+SIGNALS = [signal.SIGINT, signal.SIGTERM, signal.SIGHUP]
+
+
+def summary_of(cwd) -> dict | None:
+    found = glob.glob(os.path.join(cwd, "runs", "*", "summary.json"))
+    assert len(found) <= 1, found
+    if not found:
+        return None
+    with open(found[0]) as f:
+        return json.load(f)
+
+
+def assert_clean(stderr: str) -> None:
+    assert "Traceback" not in stderr and "Exception ignored" not in stderr, stderr[-3000:]
+
+
+def assert_stopped(cwd, sig_name: str, phases) -> dict:
+    summary = summary_of(cwd)
+    assert summary is not None, "no summary.json"
+    assert summary["status"] == "interrupted" and summary["phase"] in phases and summary["signal"] == sig_name, summary
+    return summary
+
+
+def handler_installed(pid: int, sig: int) -> bool:
+    """Linux: the process catches `sig` (SigCgt in /proc/<pid>/status)."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            caught = int(next(line for line in f if line.startswith("SigCgt:")).split()[1], 16)
+    except (OSError, StopIteration):
+        return False
+    return bool(caught & (1 << (sig - 1)))
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="reads /proc/<pid>/status (Linux)")
+@pytest.mark.parametrize("script", [MAZE, PUSHER], ids=["maze", "pusher"])
+@pytest.mark.parametrize("sig", SIGNALS, ids=lambda s: s.name)
+def test_a_stop_while_the_libraries_load_is_one_line(tmp_path, script, sig):
+    """The first handler is in place before torch loads (seconds): the stop then ends the process with one line and
+    the signal's code, and nothing is written (no run exists yet) - or, on a machine so fast that the run began, a
+    summary says where it stopped."""
+    child = Child([sys.executable, script], tmp_path)
+    deadline = time.monotonic() + 60
+    while not handler_installed(child.proc.pid, signal.SIGHUP):  # Python's own handlers never catch SIGHUP
+        if time.monotonic() > deadline or child.proc.poll() is not None:
+            child.fail("the early handler was never installed")
+        time.sleep(0.005)
+    child.proc.send_signal(sig)
+    returncode, _, stderr = child.finish(timeout=60)
+    assert returncode == 128 + sig, (returncode, stderr)
+    assert_clean(stderr)
+    if summary_of(tmp_path) is None:
+        assert stderr.strip() == f"interrupted ({sig.name}) while starting; no run was made", stderr
+        assert not os.path.exists(tmp_path / "runs") or not os.listdir(tmp_path / "runs")
+    else:
+        assert_stopped(tmp_path, sig.name, {"startup", "oracle", "tamer"})
+
+
+@pytest.mark.parametrize("script", [MAZE, PUSHER], ids=["maze", "pusher"])
+@pytest.mark.parametrize("sig", SIGNALS, ids=lambda s: s.name)
+def test_a_stop_as_soon_as_the_run_directory_exists(tmp_path, script, sig):
+    """Start-up: the signal goes out on the first line (the run directory); the summary says the phase it hit."""
+    flags = PUSHER_TINY if script == PUSHER else []
+    child = Child([sys.executable, script, *flags], tmp_path)
+    child.wait_for_line("run dir")
+    child.proc.send_signal(sig)
+    returncode, _, stderr = child.finish(timeout=60)
+    assert returncode == 128 + sig, (returncode, stderr)
+    assert_clean(stderr)
+    assert_stopped(tmp_path, sig.name, {"startup", "oracle", "tamer"})
+
+
+@pytest.mark.parametrize(("cmd", "phase"), [(MAZE_TAMER, "tamer"), (MAZE_SLEEP, "sleep")], ids=["tamer", "sleep"])
+def test_sighup_in_each_maze_phase(tmp_path, cmd, phase):
+    """A closed terminal (SIGHUP) saves what finished, as Ctrl-C and SIGTERM do (test_inform_gridworld.py)."""
+    child = Child([sys.executable, *cmd], tmp_path)
+    child.wait_for_line(f"[{phase}]")
+    child.proc.send_signal(signal.SIGHUP)
+    returncode, _, stderr = child.finish(timeout=60)
+    assert returncode == 129, (returncode, stderr)
+    assert_clean(stderr)
+    assert f"interrupted (SIGHUP) during the {phase} phase" in stderr
+    assert_stopped(tmp_path, "SIGHUP", {phase})
+
+
+@pytest.mark.parametrize("sig", SIGNALS, ids=lambda s: s.name)
+def test_a_stop_in_the_pusher_final_evaluation(tmp_path, sig):
+    """The Pusher's last phase (final evaluation and the obstacle test) is long enough to be hit for sure."""
+    child = Child([sys.executable, PUSHER, *PUSHER_TINY, "--obstacle-episodes", "2000"], tmp_path)
+    child.wait_for_line("[eval] final evaluation", timeout=300)
+    child.proc.send_signal(sig)
+    returncode, _, stderr = child.finish(timeout=60)
+    assert returncode == 128 + sig, (returncode, stderr)
+    assert_clean(stderr)
+    assert_stopped(tmp_path, sig.name, {"eval"})
+
+
+@pytest.mark.parametrize("sig", SIGNALS, ids=lambda s: s.name)
+def test_a_signal_after_the_end(tmp_path, sig):
+    """After the summary is written the run is complete: a signal then only sets the exit code (if the process is
+    still there to get it) and never a traceback."""
+    child = Child([sys.executable, MAZE, "--tamer-total-timesteps", "1500", "--tamer-learning-starts", "500",
+                   "--sleep-gradient-steps", "100", "--sleep-eval-frequency", "100"], tmp_path)  # fmt: skip
+    child.wait_for_line("oracle: 19 steps")  # printed after summary.json is written
+    child.proc.send_signal(sig)
+    returncode, _, stderr = child.finish(timeout=60)
+    assert returncode in (0, 128 + sig), (returncode, stderr)
+    assert_clean(stderr)
+    assert summary_of(tmp_path)["status"] == "completed"
+
+
+def start_piped(cmd, cwd, **kwargs):
+    """The script with its stdout on a pipe we read ourselves (to close it), stderr collected by a thread."""
+    proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs)
+    err = []
+    thread = threading.Thread(target=lambda: err.extend(proc.stderr), daemon=True)
+    thread.start()
+    return proc, err, thread
+
+
+def read_until(proc, prefix: str, timeout: float = 180) -> None:
+    lines, done = [], threading.Event()
+
+    def read():
+        for line in proc.stdout:
+            lines.append(line)
+            if line.startswith(prefix):
+                break
+        done.set()
+
+    threading.Thread(target=read, daemon=True).start()
+    if not done.wait(timeout) or not lines or not lines[-1].startswith(prefix):
+        proc.kill()
+        pytest.fail(f"no line starting with {prefix!r} within {timeout}s: {''.join(lines)[-2000:]}")
+
+
+@pytest.mark.parametrize(("cmd", "phase"), [(MAZE_TAMER, "tamer"), ([PUSHER, *PUSHER_TINY], "tamer")],
+                         ids=["maze", "pusher"])  # fmt: skip
+def test_the_reader_of_stdout_dies(tmp_path, cmd, phase):
+    """`python ... | head`: the reader goes away mid-run; the run saves what finished and ends with 141 (SIGPIPE)."""
+    proc, err, thread = start_piped([sys.executable, *cmd], tmp_path, preexec_fn=default_signals)
+    read_until(proc, f"[{phase}]")
+    proc.stdout.close()  # the only reader: the script's next line hits a broken pipe
+    try:
+        proc.wait(180)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        pytest.fail("still running 180 s after its reader died")
+    thread.join(30)
+    assert proc.returncode == 141, (proc.returncode, "".join(err))
+    assert_clean("".join(err))
+    assert_stopped(tmp_path, "SIGPIPE", {phase})
+
+
+def test_ctrl_c_behind_a_pipe_to_tee(tmp_path):
+    """`python ... | tee log` and Ctrl-C: the terminal sends SIGINT to both; tee dies at once, so the script's last
+    lines meet a broken pipe. The summary is saved all the same, the exit code is 130 and nothing crashes."""
+    log = open(tmp_path / "log.txt", "w")
+    proc = subprocess.Popen([sys.executable, *MAZE_TAMER], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, process_group=0,
+                            preexec_fn=default_signals)  # fmt: skip
+    tee = subprocess.Popen(["tee"], stdin=proc.stdout, stdout=log, process_group=proc.pid,
+                           preexec_fn=default_signals)  # the pipeline's process group, as a shell makes it  # fmt: skip
+    proc.stdout.close()  # tee is the only reader
+    deadline = time.monotonic() + 180
+    while "[tamer]" not in (tmp_path / "log.txt").read_text():
+        if time.monotonic() > deadline or proc.poll() is not None:
+            proc.kill()
+            tee.kill()
+            pytest.fail(f"no [tamer] line in the log: {(tmp_path / 'log.txt').read_text()[-2000:]}")
+        time.sleep(0.1)
+    os.killpg(proc.pid, signal.SIGINT)  # what the terminal does on Ctrl-C: the whole foreground group
+    try:
+        _, stderr = proc.communicate(timeout=120)
+        tee.wait(30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        tee.kill()
+        pytest.fail("still running 120 s after Ctrl-C")
+    assert proc.returncode == 130 and tee.returncode != 0, (proc.returncode, tee.returncode, stderr)
+    assert_clean(stderr)
+    assert_stopped(tmp_path, "SIGINT", {"tamer"})
+
+
+def test_ctrl_c_while_a_person_is_asked(tmp_path):
+    """--teacher human waits for an answer: Ctrl-C there saves the run (status interrupted, phase tamer)."""
+    proc, err, thread = start_piped([sys.executable, MAZE, "--teacher", "human"], tmp_path, stdin=subprocess.PIPE,
+                                    preexec_fn=default_signals)  # fmt: skip
+    proc.stdin.write("y\n")
+    proc.stdin.flush()
+    read_until(proc, "good move?")  # the prompt ends without a newline: wait for the second one
+    read_until(proc, "the agent moves")
+    proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(120)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        pytest.fail("still waiting for an answer 120 s after Ctrl-C")
+    thread.join(30)
+    assert proc.returncode == 130, (proc.returncode, "".join(err))
+    assert_clean("".join(err))
+    assert_stopped(tmp_path, "SIGINT", {"tamer"})
+
+
+@pytest.mark.parametrize("module", ["inform_dqn_gridworld", "inform_sac_pusher"])
+def test_a_stop_never_lands_inside_a_tensorboard_call(module, tmp_path):
+    """The ~120 s hang after a stop: a KeyboardInterrupt raised inside the writer's queue put, between the put and its
+    notify, leaves the writer's flush thread asleep, and close() then waits for its next flush (flush_secs, 120 by
+    default). So a stop signal that arrives during a writer call takes effect when the call returns."""
+    import importlib
+
+    script = importlib.import_module(module)
+    handlers = {sig: signal.getsignal(sig) for sig in SIGNALS}
+    try:
+        stop = script.StopSignals()
+        writer = script.HeldWriter(str(tmp_path), stop)
+        calls = []
+        real = writer.writer.add_scalar
+
+        def add_scalar_hit_by_a_signal(*args, **kwargs):
+            os.kill(os.getpid(), signal.SIGHUP)  # delivered here, inside the call
+            time.sleep(0.05)  # Python runs the handler at the next bytecode: still inside
+            calls.append("returned")
+            return real(*args, **kwargs)
+
+        writer.writer.add_scalar = add_scalar_hit_by_a_signal
+        with pytest.raises(KeyboardInterrupt):
+            writer.add_scalar("x", 1.0, 1)
+        assert calls == ["returned"] and stop.received == ["SIGHUP"]  # the call finished, then the stop
+        stop.finished = True
+        started = time.monotonic()
+        writer.close()
+        assert time.monotonic() - started < 5.0
+    finally:
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
+
+
+def test_the_hang_is_an_interrupt_between_the_queue_put_and_its_notify(tmp_path):
+    """Why a stop could hang ~90-120 s (issue 20), made to happen on purpose: a KeyboardInterrupt inside
+    queue.Queue.put after the item is queued and before `not_empty.notify()` (where the old handler's raise could land
+    during add_scalar) leaves the writer's thread asleep until its next flush; close() waits for it."""
+    import inspect
+    import queue
+
+    from torch.utils.tensorboard import SummaryWriter
+
+    lines, first = inspect.getsourcelines(queue.Queue.put)
+    notify_line = first + next(i for i, line in enumerate(lines) if "self.not_empty.notify()" in line)
+
+    def tracer(frame, event, arg):
+        if frame.f_code is not queue.Queue.put.__code__:
+            return None
+
+        def in_put(frame, event, arg):
+            if event == "line" and frame.f_lineno == notify_line:
+                raise KeyboardInterrupt  # what a signal handler's raise does at that bytecode
+            return in_put
+
+        return in_put
+
+    flush_secs = 3.0
+    writer = SummaryWriter(str(tmp_path), flush_secs=flush_secs)
+    writer.add_scalar("x", 0.0, 0)
+    writer.flush()  # the thread now sleeps until its next flush, flush_secs from now
+    sys.settrace(tracer)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            writer.add_scalar("x", 1.0, 1)
+    finally:
+        sys.settrace(None)
+    started = time.monotonic()
+    writer.close()
+    assert time.monotonic() - started > flush_secs - 1.0  # it waited for the thread's own flush time
