@@ -18,7 +18,8 @@ script) runs in this process for two budgets past learning starts, and the diffe
   timed in a hot loop in the same run; peak = the step's matmul FLOPs over the time those calls take in the hot loop;
 - `roofline/{phase}_fraction` = achieved / peak, and the profile's top ops (self CPU time) of each phase.
 `--baseline-script` measures another copy of the script (e.g. the previous commit's) side by side, interleaved, and
-`--variants` the opt-in speed flags (`--bf16`, two threads, `--compile`) against the default, interleaved.
+`--variants bf16 compile threads` the opt-in speed (`--bf16`, `--compile`, two threads) against the default,
+interleaved.
 
     python benchmarks/benchmark.py                # about 5 minutes on 2 cores
     python benchmarks/benchmark.py --repeats 1 --oracle-steps 600 --tamer-steps 600 --sleep-steps 200   # a smoke run
@@ -91,8 +92,8 @@ class Args:
     """process: CPU seconds of this process (what it ran on a shared machine); wall: elapsed seconds"""
     baseline_script: str | None = None
     """another inform_sac_pusher.py (e.g. the previous commit's, oracles/ beside it), timed interleaved with ours"""
-    variants: bool = False
-    """also time the opt-in speed flags against the default, interleaved: --bf16, two threads, --compile"""
+    variants: tuple[str, ...] = ()
+    """opt-in speed to time against the default, interleaved: any of bf16, compile, threads (two against one)"""
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -638,11 +639,13 @@ def main_roofline(args: Args) -> dict:
         ratios = print_side_by_side(times, list(sides), f"ours against the baseline, interleaved ({args.clock} clock)")
         res.update({f"baseline/{k}": v for k, v in {**times, **ratios}.items()})
         res.update({f"baseline/{p}_speedup": ratios[f"{p}/ours"] for p in ("oracle", "tamer", "sleep")})
-    if args.variants:
-        sides = {"default": (ours, {}, 1), "bf16": (ours, {"bf16": True}, 1), "compile": (ours, {"compile": True}, 1)}
+    flags = [f for f in args.variants if f != "threads"]
+    if flags:
+        sides = {"default": (ours, {}, 1), **{f: (ours, {f: True}, 1) for f in flags}}
         times = measure_side_by_side(args, sides, args.clock)
         ratios = print_side_by_side(times, list(sides), f"opt-in flags against the default, interleaved ({args.clock})")
         res.update({f"variants/{k}": v for k, v in {**times, **ratios}.items()})
+    if "threads" in args.variants:
         sides = {"1_thread": (ours, {}, 1), "2_threads": (ours, {}, 2)}
         times = measure_side_by_side(args, sides, "wall")
         ratios = print_side_by_side(times, list(sides), "two threads against one, interleaved (wall clock)")
