@@ -16,13 +16,16 @@ script) runs in this process for two budgets past learning starts, and the diffe
   process got, which on a shared machine is what it ran, `wall` the elapsed ones);
 - the one-thread peak at the phase's own matmul shapes: the shapes recorded by `torch.profiler` (record_shapes), each
   timed in a hot loop in the same run; peak = the step's matmul FLOPs over the time those calls take in the hot loop;
-- `roofline/{phase}_fraction` = achieved / peak, and the profile's top ops (self CPU time) of each phase.
+- `roofline/{phase}_fraction` = achieved / peak, and the top ops (self time) of the longer profiled run (its setup
+  and random-action steps included).
 `--baseline-script` measures another copy of the script (e.g. the previous commit's) side by side, interleaved, and
 `--variants bf16 compile threads` the opt-in speed (`--bf16`, `--compile`, two threads) against the default,
 interleaved.
 
     python benchmarks/benchmark.py                # about 5 minutes on 2 cores
     python benchmarks/benchmark.py --repeats 1 --oracle-steps 600 --tamer-steps 600 --sleep-steps 200   # a smoke run
+    git show HEAD~1:inform_sac_pusher.py > /tmp/before/inform_sac_pusher.py && ln -s $PWD/oracles /tmp/before/
+    python benchmarks/benchmark.py --no-side-by-side --baseline-script /tmp/before/inform_sac_pusher.py --variants bf16
 
 Writes benchmarks/results.json (keys `{phase}_ratio` = ours / reference for oracle, tamer, sleep,
 `gridworld_pipeline_s`, and `roofline/...`) and prints tables.
