@@ -58,8 +58,6 @@ class Args:
     """torch CPU threads"""
     bf16: bool = False
     """opt-in speed: the training updates' forward passes in bfloat16 (CPU autocast); the numbers change"""
-    compile: bool = False
-    """opt-in speed: torch.compile the networks trained here (the first steps wait for the compiler)"""
     save_model: bool = True
     """whether to save the oracle (when trained here), TAMER and INFORM networks into the run directory"""
     env_id: str = "Pusher-v5"
@@ -594,9 +592,6 @@ def train_oracle(args: Args, writer: SummaryWriter, device: torch.device):
     qf = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
     qf_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
     qf_target.load_state_dict(qf.state_dict())
-    if args.compile:
-        for net in (actor, qf, qf_target):
-            net.compile()
     amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
     q_optimizer = torch.optim.Adam(qf.parameters(), lr=args.oracle_q_lr, foreach=True)
     actor_optimizer = torch.optim.Adam(actor.parameters(), lr=args.oracle_policy_lr, foreach=True)
@@ -665,9 +660,6 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer
     obs_dim, act_dim = buffer.obs.shape[1], buffer.actions.shape[1]
     h_net = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
     tamer_actor = Actor(obs_dim, act_dim, args.hidden_size, env.action_space.low, env.action_space.high).to(device)
-    if args.compile:
-        for net in (h_net, tamer_actor):
-            net.compile()
     amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
     h_optimizer = torch.optim.Adam(h_net.parameters(), lr=args.tamer_h_lr, foreach=True)
     actor_optimizer = torch.optim.Adam(tamer_actor.parameters(), lr=args.tamer_policy_lr, foreach=True)
@@ -769,9 +761,6 @@ def sleep_phase(args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator,
     inform_actor = Actor(obs_dim, act_dim, args.hidden_size, low, high).to(device)
     if args.sleep_init_actor_from_tamer:
         inform_actor.load_state_dict(tamer_actor.state_dict())
-    if args.compile:
-        for net in (q_net, q_target, inform_actor):
-            net.compile()
     amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
     q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_q_lr, foreach=True)
     inform_optimizer = torch.optim.Adam(inform_actor.parameters(), lr=args.sleep_policy_lr, foreach=True)

@@ -19,8 +19,8 @@ script) runs in this process for two budgets past learning starts, and the diffe
 - `roofline/{phase}_fraction` = achieved / peak, and the top ops (self time) of the longer profiled run (its setup
   and random-action steps included).
 `--baseline-script` measures another copy of the script (e.g. the previous commit's) side by side, interleaved, and
-`--variants bf16 compile threads` the opt-in speed (`--bf16`, `--compile`, two threads) against the default,
-interleaved.
+`--variants bf16 threads` the opt-in speed (`--bf16`, two threads; any boolean flag of the script) against the
+default, interleaved.
 
     python benchmarks/benchmark.py                # about 5 minutes on 2 cores
     python benchmarks/benchmark.py --repeats 1 --oracle-steps 600 --tamer-steps 600 --sleep-steps 200   # a smoke run
@@ -96,7 +96,7 @@ class Args:
     baseline_script: str | None = None
     """another inform_sac_pusher.py (e.g. the previous commit's, oracles/ beside it), timed interleaved with ours"""
     variants: tuple[str, ...] = ()
-    """opt-in speed to time against the default, interleaved: any of bf16, compile, threads (two against one)"""
+    """opt-in speed to time against the default, interleaved: bf16 (any boolean flag of the script), threads (two)"""
 
 
 # ---------------------------------------------------------------------------------------------------------------
