@@ -74,6 +74,8 @@ class Args:
     capture_video: bool = False
     """film the final deterministic episode of the oracle, TAMER and INFORM, plain and with the boxes, into
     runs/{run}/videos/ (headless MuJoCo: MUJOCO_GL, egl when unset and there is no display)"""
+    bf16: bool = False
+    """opt-in speed: the training updates' forward passes in bfloat16 (CPU autocast); the numbers change"""
     save_model: bool = True
     """whether to save the oracle (when trained here), TAMER and INFORM networks into the run directory"""
     env_id: str = "Pusher-v5"
@@ -436,14 +438,17 @@ def actor_loss(q_net: QEnsemble, actor: Actor, obs: torch.Tensor, temperature: t
     return (temperature * log_prob - q_net(obs, action).min(0).values).mean(), log_prob
 
 
-def update_actor(q_net, actor, obs, log_ent_coef, actor_optimizer, ent_coef_optimizer, target_entropy: float):
+def update_actor(q_net, actor, obs, log_ent_coef, actor_optimizer, ent_coef_optimizer, target_entropy: float,
+                 bf16: bool = False):  # fmt: skip
     """One SAC actor step on min_i Q_i (the oracle's critics, or TAMER's H), then one of the autotuned entropy
     coefficient exp(log_ent_coef) towards `target_entropy`."""
-    pi_loss, logp = actor_loss(q_net, actor, obs, log_ent_coef.detach().exp())
+    q_net.requires_grad_(False)  # the gradient flows through the critic to the action, but none is kept on it
+    with torch.autocast(obs.device.type, dtype=torch.bfloat16, enabled=bf16):
+        pi_loss, logp = actor_loss(q_net, actor, obs, log_ent_coef.detach().exp())
     actor_optimizer.zero_grad(set_to_none=True)
     pi_loss.backward()
+    q_net.requires_grad_(True)
     actor_optimizer.step()
-    q_net.zero_grad(set_to_none=True)  # the actor loss left gradients on the critic
     ent_coef_loss = (-log_ent_coef.exp() * (logp.detach() + target_entropy)).mean()
     ent_coef_optimizer.zero_grad(set_to_none=True)
     ent_coef_loss.backward()
@@ -612,10 +617,11 @@ def train_oracle(args: Args, writer: SummaryWriter, device: torch.device):
     qf = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
     qf_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
     qf_target.load_state_dict(qf.state_dict())
-    q_optimizer = torch.optim.Adam(qf.parameters(), lr=args.oracle_q_lr)
-    actor_optimizer = torch.optim.Adam(actor.parameters(), lr=args.oracle_policy_lr)
+    amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
+    q_optimizer = torch.optim.Adam(qf.parameters(), lr=args.oracle_q_lr, foreach=True)
+    actor_optimizer = torch.optim.Adam(actor.parameters(), lr=args.oracle_policy_lr, foreach=True)
     log_ent_coef = torch.zeros(1, device=device, requires_grad=True)  # SAC's entropy coefficient, autotuned
-    ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.oracle_q_lr)
+    ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.oracle_q_lr, foreach=True)
     n = args.oracle_total_timesteps
     b_obs, b_next = torch.zeros(n, obs_dim, device=device), torch.zeros(n, obs_dim, device=device)
     b_act, b_rew, b_term = torch.zeros(n, act_dim, device=device), torch.zeros(n, device=device), torch.zeros(n)
@@ -644,16 +650,19 @@ def train_oracle(args: Args, writer: SummaryWriter, device: torch.device):
         obs_t = next_t
         if step >= args.oracle_learning_starts:
             idx = torch.randint(0, step + 1, (args.oracle_batch_size,), device=device)
-            with torch.no_grad():
-                next_a, next_logp, _ = actor.get_action(b_next[idx])
-                v_next = qf_target(b_next[idx], next_a).min(0).values - log_ent_coef.detach().exp() * next_logp
+            obs_b, next_b = b_obs[idx], b_next[idx]
+            with amp, torch.no_grad():
+                next_a, next_logp, _ = actor.get_action(next_b)
+                v_next = qf_target(next_b, next_a).min(0).values - log_ent_coef.detach().exp() * next_logp
                 target = b_rew[idx] + (1.0 - b_term[idx]) * args.oracle_gamma * v_next
-            q_loss = (qf(b_obs[idx], b_act[idx]) - target.unsqueeze(0)).pow(2).mean(-1).sum()
+            with amp:
+                q_loss = (qf(obs_b, b_act[idx]) - target.unsqueeze(0)).pow(2).mean(-1).sum()
             q_optimizer.zero_grad(set_to_none=True)
             q_loss.backward()
             q_optimizer.step()
             if step % args.oracle_policy_frequency == 0:
-                update_actor(qf, actor, b_obs[idx], log_ent_coef, actor_optimizer, ent_coef_optimizer, -float(act_dim))
+                update_actor(qf, actor, obs_b, log_ent_coef, actor_optimizer, ent_coef_optimizer, -float(act_dim),
+                             args.bf16)  # fmt: skip
             soft_update(qf_target, qf, args.tau)
             if (step + 1) % args.log_frequency == 0:
                 writer.add_scalar("oracle/qf_loss", q_loss.item(), step + 1)
@@ -676,10 +685,11 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer
     obs_dim, act_dim = buffer.obs.shape[1], buffer.actions.shape[1]
     h_net = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
     tamer_actor = Actor(obs_dim, act_dim, args.hidden_size, env.action_space.low, env.action_space.high).to(device)
-    h_optimizer = torch.optim.Adam(h_net.parameters(), lr=args.tamer_h_lr)
-    actor_optimizer = torch.optim.Adam(tamer_actor.parameters(), lr=args.tamer_policy_lr)
+    amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
+    h_optimizer = torch.optim.Adam(h_net.parameters(), lr=args.tamer_h_lr, foreach=True)
+    actor_optimizer = torch.optim.Adam(tamer_actor.parameters(), lr=args.tamer_policy_lr, foreach=True)
     log_ent_coef = torch.zeros(1, device=device, requires_grad=True)  # the actor's entropy coefficient, autotuned
-    ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.tamer_h_lr)
+    ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.tamer_h_lr, foreach=True)
     h_loss, n = torch.zeros((), device=device), args.tamer_total_timesteps
     print(f"[tamer] {n} env steps, feedback alpha {args.feedback_alpha_start} -> {args.feedback_alpha_end}", flush=True)
     teacher = Teacher(args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window,
@@ -703,7 +713,9 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer
         with torch.no_grad():
             q_star_sa, q_star_best = oracle_q(oracle_actor, oracle_qf, obs_t, action_t)
         h_star = oracle_feedback(q_star_sa, q_star_best, feedback_alpha).item() if taught else 0.0
-        buffer.feedback[teacher(step, h_star)] = 1.0
+        labelled = teacher(step, h_star)
+        if labelled:
+            buffer.feedback[labelled] = 1.0
         next_obs, reward, terminated, truncated, info = env.step(action_t.cpu().numpy())
         next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
         buffer.obs[step], buffer.next_obs[step], buffer.actions[step] = obs_t, next_t, action_t
@@ -723,13 +735,15 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer
 
         if step >= args.tamer_learning_starts and taught:
             idx = torch.randint(0, step + 1, (args.tamer_batch_size,), device=device)
-            h_loss = tamer_loss(h_net, buffer.obs[idx], buffer.actions[idx], buffer.feedback[idx])
+            obs_b = buffer.obs[idx]
+            with amp:
+                h_loss = tamer_loss(h_net, obs_b, buffer.actions[idx], buffer.feedback[idx])
             h_optimizer.zero_grad(set_to_none=True)
             h_loss.backward()
             h_optimizer.step()
             if step % args.tamer_policy_frequency == 0:  # the actor maximises H, SAC-style
-                update_actor(h_net, tamer_actor, buffer.obs[idx], log_ent_coef, actor_optimizer, ent_coef_optimizer,
-                             -float(act_dim))  # fmt: skip
+                update_actor(h_net, tamer_actor, obs_b, log_ent_coef, actor_optimizer, ent_coef_optimizer,
+                             -float(act_dim), args.bf16)  # fmt: skip
         # TRY NOT TO MODIFY: logging and periodic evaluation
         if (step + 1) % args.log_frequency == 0 or last_step:
             scalars = {"losses/tamer_loss": h_loss.item(), "losses/tamer_entropy_coef": log_ent_coef.exp().item(),
@@ -772,8 +786,9 @@ def sleep_phase(args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator,
     inform_actor = Actor(obs_dim, act_dim, args.hidden_size, low, high).to(device)
     if args.sleep_init_actor_from_tamer:
         inform_actor.load_state_dict(tamer_actor.state_dict())
-    q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_q_lr)
-    inform_optimizer = torch.optim.Adam(inform_actor.parameters(), lr=args.sleep_policy_lr)
+    amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
+    q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_q_lr, foreach=True)
+    inform_optimizer = torch.optim.Adam(inform_actor.parameters(), lr=args.sleep_policy_lr, foreach=True)
 
     n, B, total = buffer.size, args.sleep_batch_size, args.sleep_gradient_steps
     is_expert = torch.cat([torch.zeros(B, dtype=torch.bool), torch.ones(B, dtype=torch.bool)]).to(device)
@@ -785,17 +800,20 @@ def sleep_phase(args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator,
         replay = torch.randint(0, n, (B,), device=device)
         expert = expert_idx[torch.randint(0, expert_idx.numel(), (B,), device=device)]
         idx = torch.cat([replay, expert])
-        loss, terms = iq_loss(q_net, q_target, buffer.obs[idx], buffer.actions[idx], buffer.next_obs[idx],
-                              buffer.terminated[idx], is_expert, args.sleep_gamma, args.sleep_temperature,
-                              args.sleep_chi2_coef, inform_actor)  # fmt: skip
+        with amp:
+            loss, terms = iq_loss(q_net, q_target, buffer.obs[idx], buffer.actions[idx], buffer.next_obs[idx],
+                                  buffer.terminated[idx], is_expert, args.sleep_gamma, args.sleep_temperature,
+                                  args.sleep_chi2_coef, inform_actor)  # fmt: skip
         q_optimizer.zero_grad(set_to_none=True)
         loss.backward()
         q_optimizer.step()
-        pi_loss, _ = actor_loss(q_net, inform_actor, buffer.obs[replay], args.sleep_temperature)
+        q_net.requires_grad_(False)  # the actor's gradient flows through Q, but none is kept on it
+        with amp:
+            pi_loss, _ = actor_loss(q_net, inform_actor, buffer.obs[replay], args.sleep_temperature)
         inform_optimizer.zero_grad(set_to_none=True)
         pi_loss.backward()
+        q_net.requires_grad_(True)
         inform_optimizer.step()
-        q_net.zero_grad(set_to_none=True)
         soft_update(q_target, q_net, args.tau)
 
         # TRY NOT TO MODIFY: logging (one host sync per 100 steps to catch divergence) and periodic evaluation

@@ -9,15 +9,35 @@ For each Pusher phase (oracle SAC training, TAMER forward phase, sleep phase) it
 - the raw env step rate, and each process's peak memory.
 It also times the full default gridworld pipeline. Only ratios taken in one run count: these machines are noisy.
 
+The roofline (`--roofline`): each phase's own code (`train_oracle`, `forward_phase`, `sleep_phase`, imported from the
+script) runs in this process for two budgets past learning starts, and the difference per step gives
+- the FLOPs of one step, counted by `torch.utils.flop_counter.FlopCounterMode`;
+- the achieved GFLOP/s (those FLOPs over the measured seconds per step; `--clock process` counts the CPU seconds this
+  process got, which on a shared machine is what it ran, `wall` the elapsed ones);
+- the one-thread peak at the phase's own matmul shapes: the shapes recorded by `torch.profiler` (record_shapes), each
+  timed in a hot loop in the same run; peak = the step's matmul FLOPs over the time those calls take in the hot loop;
+- `roofline/{phase}_fraction` = achieved / peak, and the top ops (self time) of the longer profiled run (its setup
+  and random-action steps included).
+`--baseline-script` measures another copy of the script (e.g. the previous commit's) side by side, interleaved, and
+`--variants bf16 threads` the opt-in speed (`--bf16`, two threads; any boolean flag of the script) against the
+default, interleaved.
+
     python benchmarks/benchmark.py                # about 5 minutes on 2 cores
     python benchmarks/benchmark.py --repeats 1 --oracle-steps 600 --tamer-steps 600 --sleep-steps 200   # a smoke run
+    git show HEAD~1:inform_sac_pusher.py > /tmp/before/inform_sac_pusher.py && ln -s $PWD/oracles /tmp/before/
+    python benchmarks/benchmark.py --no-side-by-side --baseline-script /tmp/before/inform_sac_pusher.py --variants bf16
 
-Writes benchmarks/results.json (keys `{phase}_ratio` = ours / reference for oracle, tamer, sleep, and
-`gridworld_pipeline_s`) and prints a table.
+Writes benchmarks/results.json (keys `{phase}_ratio` = ours / reference for oracle, tamer, sleep,
+`gridworld_pipeline_s`, and `roofline/...`) and prints tables.
 """
 
+import collections
+import contextlib
 import glob
+import importlib.util
+import io
 import json
+import math
 import os
 import platform
 import statistics
@@ -61,6 +81,22 @@ class Args:
     """where the results go"""
     reference: bool = False
     """internal: run the reference loops in this process and print their throughput as JSON"""
+    side_by_side: bool = True
+    """the subprocess comparison with the eager reference (and the gridworld pipeline)"""
+    roofline: bool = True
+    """measure each Pusher phase against the machine's own matmul peak, in this process"""
+    roofline_steps: tuple[int, int] = (40, 200)
+    """the two budgets (steps past learning starts; gradient steps for the sleep) whose difference is one step"""
+    roofline_repeats: int = 3
+    """interleaved timing rounds of the roofline (and of the baseline and variants); medians"""
+    profile_steps: tuple[int, int] = (10, 40)
+    """the two budgets profiled with record_shapes (the shapes per step, and the top-ops table)"""
+    clock: str = "process"
+    """process: CPU seconds of this process (what it ran on a shared machine); wall: elapsed seconds"""
+    baseline_script: str | None = None
+    """another inform_sac_pusher.py (e.g. the previous commit's, oracles/ beside it), timed interleaved with ours"""
+    variants: tuple[str, ...] = ()
+    """opt-in speed to time against the default, interleaved: bf16 (any boolean flag of the script), threads (two)"""
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -287,6 +323,226 @@ def reference_sleep(args: Args, env) -> float:
 
 
 # ---------------------------------------------------------------------------------------------------------------
+# the roofline: the script's own phase code, in this process, against the matmul peak at its own shapes
+
+
+MATMULS = ("aten::mm", "aten::addmm", "aten::bmm", "aten::baddbmm")
+
+
+def load_script(path: str, name: str):
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+class NullWriter:
+    def add_scalar(self, *args, **kwargs):
+        pass
+
+
+def null_evaluator(name, actor, step, episodes):  # the phases' periodic evaluation, skipped: not a training step
+    return {f"eval/{name}_return": float("nan")}
+
+
+def phase_runner(module, args: Args, phase: str, flags: dict):
+    """run(steps): the script's `phase` code for `steps` steps past learning starts, output swallowed."""
+    cpu = torch.device("cpu")
+    common = dict(env_id=args.env_id, oracle_learning_starts=args.learning_starts,
+                  tamer_learning_starts=args.learning_starts, eval_frequency=10**9, sleep_eval_frequency=10**9,
+                  log_frequency=10**9, **flags)  # fmt: skip
+    oracle_ckpt = torch.load(os.path.join(os.path.dirname(module.__file__), "oracles", f"{args.env_id}__sac_oracle.pt"),
+                             weights_only=True)  # fmt: skip
+    oracle_actor, oracle_qf = module.oracle_from_checkpoint(oracle_ckpt, cpu)
+    for p in (*oracle_actor.parameters(), *oracle_qf.parameters()):
+        p.requires_grad_(False)
+    obs_dim, act_dim = oracle_actor.fc1.in_features, oracle_actor.fc_mean.out_features
+    memory = []  # the sleep's buffer: one short forward phase of the oracle's teaching, made once
+
+    def run(steps: int):
+        torch.manual_seed(1)
+        with contextlib.redirect_stdout(io.StringIO()):
+            if phase == "oracle":
+                module.train_oracle(module.Args(**common, oracle_total_timesteps=args.learning_starts + steps),
+                                    NullWriter(), cpu)  # fmt: skip
+            elif phase == "tamer":
+                n = args.learning_starts + steps
+                buffer = module.ReplayBuffer(n, obs_dim, act_dim, cpu)
+                module.forward_phase(module.Args(**common, tamer_total_timesteps=n), module.make_env(args.env_id, 1),
+                                     oracle_actor, oracle_qf, buffer, null_evaluator, NullWriter(), cpu)  # fmt: skip
+            else:
+                if not memory:
+                    n = 2000  # random actions only (learning starts = the budget - 1): cheap to make
+                    memory.append(module.ReplayBuffer(n, obs_dim, act_dim, cpu))
+                    day = module.Args(**{**common, "tamer_learning_starts": n - 1}, tamer_total_timesteps=n)
+                    module.forward_phase(day, module.make_env(args.env_id, 1), oracle_actor, oracle_qf, memory[0],
+                                         null_evaluator, NullWriter(), cpu)  # fmt: skip
+                    memory[0].success[:200] |= not memory[0].success.any()  # an expert set, whatever the luck
+                module.sleep_phase(module.Args(**common, sleep_gradient_steps=steps), memory[0], oracle_actor,
+                                   null_evaluator, NullWriter(), cpu)  # fmt: skip
+
+    return run
+
+
+def clock(kind: str) -> float:
+    return time.process_time() if kind == "process" else time.perf_counter()
+
+
+def seconds_per_step(run, steps: tuple[int, int], kind: str) -> float:
+    """The difference of two budgets' times per step: setup, learning starts and the last evaluation cancel."""
+    times = []
+    for n in steps:
+        t = clock(kind)
+        run(n)
+        times.append(clock(kind) - t)
+    return (times[1] - times[0]) / (steps[1] - steps[0])
+
+
+def flops_per_step(run, steps: tuple[int, int]) -> float:
+    from torch.utils.flop_counter import FlopCounterMode
+
+    total = []
+    for n in steps:
+        counter = FlopCounterMode(display=False)
+        with counter:
+            run(n)
+        total.append(counter.get_total_flops())
+    return (total[1] - total[0]) / (steps[1] - steps[0])
+
+
+def matmul_flops(name: str, shapes: list) -> int:
+    a, b = (shapes[1], shapes[2]) if name in ("aten::addmm", "aten::baddbmm") else (shapes[0], shapes[1])
+    return 2 * math.prod(a) * b[-1]  # [(batch,) m, k] @ [(batch,) k, n]
+
+
+def profile_phase(run, steps: tuple[int, int]):
+    """(matmul calls per step by (op, input shapes), the top ops per step of the longer run's profile)."""
+    from torch.profiler import ProfilerActivity, profile
+
+    counts, tables = [], []
+    for n in steps:
+        with profile(activities=[ProfilerActivity.CPU], record_shapes=True) as prof:
+            run(n)
+        c = collections.Counter()
+        for e in prof.events():
+            if e.name in MATMULS:
+                c[(e.name, tuple(tuple(s) for s in e.input_shapes[:3]))] += 1
+        counts.append(c)
+        tables.append(prof.key_averages())
+    per_step = {k: (counts[1][k] - counts[0][k]) / (steps[1] - steps[0]) for k in counts[1]}
+    total = sum(e.self_cpu_time_total for e in tables[1])
+    top = sorted(tables[1], key=lambda e: -e.self_cpu_time_total)[:10]
+    top_ops = [{"op": e.key, "self_cpu_share": e.self_cpu_time_total / total, "calls": e.count} for e in top]
+    return {k: v for k, v in per_step.items() if v > 0}, top_ops
+
+
+def hot_loop_seconds(name: str, shapes: list, kind: str, budget: float = 0.05) -> float:
+    """Seconds per call of one matmul at these shapes, in a hot loop (best of 3 timed loops)."""
+    op = getattr(torch.ops.aten, name.split("::")[1])
+    tensors = [torch.randn(s) for s in shapes[: 3 if name in ("aten::addmm", "aten::baddbmm") else 2]]
+    for _ in range(3):
+        op(*tensors)
+    reps, best = 8, math.inf
+    while True:
+        t = clock(kind)
+        for _ in range(reps):
+            op(*tensors)
+        elapsed = clock(kind) - t
+        if elapsed > budget:
+            break
+        reps *= 4
+    for _ in range(3):
+        t = clock(kind)
+        for _ in range(reps):
+            op(*tensors)
+        best = min(best, (clock(kind) - t) / reps)
+    return best
+
+
+def measure_roofline(args: Args, module) -> dict:
+    """Per phase: FLOPs per step, seconds per step (median of interleaved rounds), peak at the phase's shapes."""
+    runs = {phase: phase_runner(module, args, phase, {}) for phase in ("oracle", "tamer", "sleep")}
+    out = {}
+    for phase, run in runs.items():
+        run(args.roofline_steps[0])  # warm: first-call costs, the sleep's buffer
+        print(f"roofline: {phase}: FLOPs and shapes", flush=True)
+        shapes, top_ops = profile_phase(run, args.profile_steps)
+        out[phase] = {"flops_per_step": flops_per_step(run, args.roofline_steps), "shapes": shapes,
+                      "top_ops": top_ops, "seconds_per_step": []}  # fmt: skip
+    for r in range(args.roofline_repeats):
+        for phase, run in runs.items():
+            print(f"roofline round {r + 1}/{args.roofline_repeats}: {phase}", flush=True)
+            out[phase]["seconds_per_step"].append(seconds_per_step(run, args.roofline_steps, args.clock))
+    results = {}
+    for phase, m in out.items():
+        hot = {k: hot_loop_seconds(k[0], k[1], args.clock) for k in m["shapes"]}
+        mm_flops = sum(matmul_flops(k[0], k[1]) * c for k, c in m["shapes"].items())
+        peak_seconds = sum(hot[k] * c for k, c in m["shapes"].items())
+        step_s = statistics.median(m["seconds_per_step"])
+        achieved, peak = m["flops_per_step"] / step_s / 1e9, mm_flops / peak_seconds / 1e9
+        results.update({
+            f"roofline/{phase}_flops_per_step": m["flops_per_step"],
+            f"roofline/{phase}_matmul_flops_per_step": mm_flops,
+            f"roofline/{phase}_seconds_per_step": step_s, f"roofline/{phase}_steps_per_s": 1 / step_s,
+            f"roofline/{phase}_achieved_gflops": achieved, f"roofline/{phase}_peak_gflops": peak,
+            f"roofline/{phase}_fraction": achieved / peak, f"roofline/{phase}_peak_seconds_per_step": peak_seconds,
+            f"roofline/{phase}_shapes": [{"op": k[0], "shapes": k[1], "calls_per_step": c,
+                                          "hot_loop_gflops": matmul_flops(*k) / hot[k] / 1e9}
+                                         for k, c in sorted(m["shapes"].items(), key=lambda kv: -kv[1] * hot[kv[0]])],
+            f"roofline/{phase}_top_ops": m["top_ops"], f"roofline/{phase}_rounds_s": m["seconds_per_step"],
+        })  # fmt: skip
+    return results
+
+
+def measure_side_by_side(args: Args, sides: dict, kind: str) -> dict:
+    """Seconds per step (clock `kind`) of each side (name -> (module, flags, threads)) per phase, interleaved rounds;
+    returns {phase/name: median seconds per step, phase/name_rounds: all}."""
+    times = {(name, phase): [] for name in sides for phase in ("oracle", "tamer", "sleep")}
+    runners = {}
+    for name, (module, flags, threads) in sides.items():
+        torch.set_num_threads(threads)
+        for phase in ("oracle", "tamer", "sleep"):
+            runners[(name, phase)] = phase_runner(module, args, phase, flags)
+            runners[(name, phase)](args.roofline_steps[0])  # warm (and compile, where asked)
+    for r in range(args.roofline_repeats):
+        for phase in ("oracle", "tamer", "sleep"):
+            for name, (_, _, threads) in sides.items():
+                print(f"side by side round {r + 1}/{args.roofline_repeats}: {phase} {name}", flush=True)
+                torch.set_num_threads(threads)
+                times[(name, phase)].append(seconds_per_step(runners[(name, phase)], args.roofline_steps, kind))
+    torch.set_num_threads(args.num_threads)
+    out = {}
+    for (name, phase), t in times.items():
+        out[f"{phase}/{name}"], out[f"{phase}/{name}_rounds"] = statistics.median(t), t
+    return out
+
+
+def print_side_by_side(res: dict, sides: list[str], title: str) -> dict:
+    """A table of steps per second and ratios to the first side; returns the ratios."""
+    ratios = {}
+    print(f"\n{title}\n| phase | " + " | ".join(sides) + " |\n|" + " --- |" * (len(sides) + 1))
+    for phase in ("oracle", "tamer", "sleep"):
+        cells = []
+        for name in sides:
+            ratios[f"{phase}/{name}"] = res[f"{phase}/{sides[0]}"] / res[f"{phase}/{name}"]
+            cells.append(f"{1 / res[f'{phase}/{name}']:.1f}/s ({ratios[f'{phase}/{name}']:.2f}x)")
+        print(f"| {phase} | " + " | ".join(cells) + " |")
+    return ratios
+
+
+def print_roofline(res: dict, title: str) -> None:
+    print(f"\n{title}\n| phase | FLOPs/step | achieved GFLOP/s | peak GFLOP/s at its shapes | fraction |")
+    print("| --- | --- | --- | --- | --- |")
+    for phase in ("oracle", "tamer", "sleep"):
+        keys = ("flops_per_step", "achieved_gflops", "peak_gflops", "fraction")
+        flops, achieved, peak, fraction = (res[f"roofline/{phase}_{k}"] for k in keys)
+        print(f"| {phase} | {flops / 1e6:.0f} M | {achieved:.1f} | {peak:.1f} | {fraction:.2f} |")
+    for phase in ("oracle", "tamer", "sleep"):
+        ops = ", ".join(f"{o['op']} {100 * o['self_cpu_share']:.0f}%" for o in res[f"roofline/{phase}_top_ops"][:8])
+        print(f"top ops, {phase}: {ops}")
+
+
+# ---------------------------------------------------------------------------------------------------------------
 # measuring
 
 
@@ -351,6 +607,57 @@ def measure_gridworld(workdir: str) -> float:
 
 
 def main(args: Args) -> dict:
+    results = {}
+    if os.path.isfile(args.output):  # what this run does not measure again stays as it was
+        with open(args.output) as f:
+            results = json.load(f)
+    if args.side_by_side:
+        results.update(main_side_by_side(args))
+    if args.roofline or args.baseline_script or args.variants:
+        results.update(main_roofline(args))
+    with open(args.output + ".tmp", "w") as f:
+        json.dump(results, f, indent=2)
+    os.replace(args.output + ".tmp", args.output)
+    print(f"written to {args.output}")
+    return results
+
+
+def main_roofline(args: Args) -> dict:
+    torch.set_num_threads(args.num_threads)
+    ours = load_script(os.path.join(REPO, "inform_sac_pusher.py"), "inform_sac_pusher_ours")
+    machine = f"{platform.machine()}, {os.cpu_count()} cores, torch {torch.__version__}, {args.num_threads} thread(s)"
+    res = {"roofline/args": asdict(args), "roofline/clock": args.clock, "roofline/load_average_start": os.getloadavg(),
+           "roofline/machine": machine, "roofline/date": time.strftime("%Y-%m-%d %H:%M")}  # fmt: skip
+    if args.roofline:
+        res.update(measure_roofline(args, ours))
+        print_roofline(res, f"roofline ({args.clock} clock), ours")
+    if args.baseline_script:
+        base = load_script(os.path.abspath(args.baseline_script), "inform_sac_pusher_baseline")
+        if args.roofline:
+            before = measure_roofline(args, base)
+            res.update({k.replace("roofline/", "roofline_baseline/"): v for k, v in before.items()})
+            print_roofline(before, f"roofline ({args.clock} clock), baseline {args.baseline_script}")
+        sides = {"baseline": (base, {}, args.num_threads), "ours": (ours, {}, args.num_threads)}
+        times = measure_side_by_side(args, sides, args.clock)
+        ratios = print_side_by_side(times, list(sides), f"ours against the baseline, interleaved ({args.clock} clock)")
+        res.update({f"baseline/{k}": v for k, v in {**times, **ratios}.items()})
+        res.update({f"baseline/{p}_speedup": ratios[f"{p}/ours"] for p in ("oracle", "tamer", "sleep")})
+    flags = [f for f in args.variants if f != "threads"]
+    if flags:
+        sides = {"default": (ours, {}, 1), **{f: (ours, {f: True}, 1) for f in flags}}
+        times = measure_side_by_side(args, sides, args.clock)
+        ratios = print_side_by_side(times, list(sides), f"opt-in flags against the default, interleaved ({args.clock})")
+        res.update({f"variants/{k}": v for k, v in {**times, **ratios}.items()})
+    if "threads" in args.variants:
+        sides = {"1_thread": (ours, {}, 1), "2_threads": (ours, {}, 2)}
+        times = measure_side_by_side(args, sides, "wall")
+        ratios = print_side_by_side(times, list(sides), "two threads against one, interleaved (wall clock)")
+        res.update({f"threads/{k}": v for k, v in {**times, **ratios}.items()})
+    res["roofline/load_average_end"] = os.getloadavg()
+    return res
+
+
+def main_side_by_side(args: Args) -> dict:
     rounds = {"ours": [], "reference": [], "gridworld_pipeline_s": []}
     with tempfile.TemporaryDirectory() as workdir:
         for r in range(args.repeats):
@@ -386,10 +693,6 @@ def main(args: Args) -> dict:
     print(f"| peak memory | MB | {results['peak_mb_ours']:.0f} | {results['peak_mb_reference']:.0f} | |")
     if args.gridworld:
         print(f"| gridworld default pipeline | s | {results['gridworld_pipeline_s']:.1f} | | |")
-    with open(args.output + ".tmp", "w") as f:
-        json.dump(results, f, indent=2)
-    os.replace(args.output + ".tmp", args.output)
-    print(f"written to {args.output}")
     return results
 
 
