@@ -220,3 +220,12 @@ def test_tiny_maze_run_draws_the_greedy_episodes_and_changes_no_number(tmp_path)
     assert os.path.basename(gif) == "KnoxStoneMaze-v0_tamer_vs_inform_seed1_tamer2k_sleep200.gif"
     longest = {v: max(videos[f"{p}_{v}_{g.START}"]["frames"] for p in ("tamer", "inform")) for v in ("plain", "wall")}
     assert os.path.getsize(gif) < 2_000_000 and gif_frames(gif) == longest["plain"] + longest["wall"]
+
+
+def test_the_filmed_start_cells_are_every_third_of_the_start_set():
+    """The maze script names its filmed start cells as numbers (so a copy without gridworld_env.py still starts);
+    they must stay the start set's every third cell."""
+    import gridworld_env
+    import inform_dqn_gridworld
+
+    assert inform_dqn_gridworld.VIDEO_START_CELLS == tuple(gridworld_env.START_SET[::3])

@@ -462,7 +462,7 @@ BAD_FLAGS = [
     (["--obstacle-episodes", "-1"], "obstacle-episodes"),
     (["--feedback-alpha-start", "1.5"], "feedback-alpha-start"),
     (["--env-id", "CartPole-v1"], "env-id"),
-    (["--tamer-batch-size", "100000"], "tamer-batch-size"),
+    (["--tamer-batch-size", "1000000"], "tamer-batch-size"),
     (["--oracle-path", "missing.pt"], "missing.pt"),
     (["--oracle-path", "{corrupt}"], "corrupt.pt"),
     (["--oracle-path", "{wrong_env}"], "wrong_env.pt"),
