@@ -403,11 +403,14 @@ def test_sigterm_stops_a_run_started_in_the_background(tmp_path):
     command = f"{run} > out.txt 2> err.txt & echo pid=$!; wait $!; echo rc=$?"
     child = Child(["bash", "-c", command], tmp_path)
     pid = int(child.wait_for_line("pid=").strip().split("=")[1])
+
+    def text(name: str) -> str:  # the shell may echo the pid before the background job has opened its files
+        return (tmp_path / name).read_text() if (tmp_path / name).exists() else ""
+
     deadline = time.monotonic() + 180
-    while "[tamer]" not in (tmp_path / "out.txt").read_text():
+    while "[tamer]" not in text("out.txt"):
         if time.monotonic() > deadline or child.proc.poll() is not None:
-            child.fail(f"no [tamer] line in out.txt:\n{(tmp_path / 'out.txt').read_text()[-2000:]}\n"
-                       f"err.txt:\n{(tmp_path / 'err.txt').read_text()[-2000:]}")  # fmt: skip
+            child.fail(f"no [tamer] line in out.txt:\n{text('out.txt')[-2000:]}\nerr.txt:\n{text('err.txt')[-2000:]}")
         time.sleep(0.2)
     if os.path.exists(f"/proc/{pid}/status"):  # Linux: the background run ignores SIGINT, as the shell set it up
         with open(f"/proc/{pid}/status") as f:
