@@ -159,6 +159,17 @@ def read_until(proc, prefix: str, timeout: float = 180) -> None:
         pytest.fail(f"no line starting with {prefix!r} within {timeout}s: {''.join(lines)[-2000:]}")
 
 
+def finish_piped(proc, err, thread, timeout: float, what: str) -> str:
+    """Wait for a process of start_piped, bounded; its collected stderr."""
+    try:
+        proc.wait(timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        pytest.fail(f"{what} {timeout} s after the stop")
+    thread.join(30)
+    return "".join(err)
+
+
 @pytest.mark.parametrize(("cmd", "phase"), [(MAZE_TAMER, "tamer"), ([PUSHER, *PUSHER_TINY], "tamer")],
                          ids=["maze", "pusher"])  # fmt: skip
 def test_the_reader_of_stdout_dies(tmp_path, cmd, phase):
@@ -166,14 +177,9 @@ def test_the_reader_of_stdout_dies(tmp_path, cmd, phase):
     proc, err, thread = start_piped([sys.executable, *cmd], tmp_path, preexec_fn=default_signals)
     read_until(proc, f"[{phase}]")
     proc.stdout.close()  # the only reader: the script's next line hits a broken pipe
-    try:
-        proc.wait(180)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        pytest.fail("still running 180 s after its reader died")
-    thread.join(30)
-    assert proc.returncode == 141, (proc.returncode, "".join(err))
-    assert_clean("".join(err))
+    stderr = finish_piped(proc, err, thread, 180, "still running")
+    assert proc.returncode == 141, (proc.returncode, stderr)
+    assert_clean(stderr)
     assert_stopped(tmp_path, "SIGPIPE", {phase})
 
 
@@ -216,14 +222,9 @@ def test_ctrl_c_while_a_person_is_asked(tmp_path):
     read_until(proc, "good move?")  # the prompt ends without a newline: wait for the second one
     read_until(proc, "the agent moves")
     proc.send_signal(signal.SIGINT)
-    try:
-        proc.wait(120)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        pytest.fail("still waiting for an answer 120 s after Ctrl-C")
-    thread.join(30)
-    assert proc.returncode == 130, (proc.returncode, "".join(err))
-    assert_clean("".join(err))
+    stderr = finish_piped(proc, err, thread, 120, "still waiting for an answer")
+    assert proc.returncode == 130, (proc.returncode, stderr)
+    assert_clean(stderr)
     assert_stopped(tmp_path, "SIGINT", {"tamer"})
 
 
