@@ -545,7 +545,7 @@ def test_both_scripts_carry_the_same_networks():
 
     import oracle_train
 
-    for name in ("BatchedLinear", "QEnsemble", "Actor", "soft_update"):
+    for name in ("BatchedLinear", "QEnsemble", "Actor", "soft_update", "video_camera", "write_video"):
         assert inspect.getsource(getattr(isp, name)) == inspect.getsource(getattr(oracle_train, name)), name
 
 
