@@ -1,13 +1,14 @@
 """INFORM on MuJoCo Pusher: SAC-style TAMER learns from a simulated teacher's yes/no feedback ("day"), then offline
 IQ-Learn on the remembered transitions ("sleep") gives a far-sighted policy and a recovered reward.
 
-Tarakli & Di Nuovo, "Learning while Sleeping" (ICDL 2024): Algorithm 1, Fig. 3 and the obstacle robustness test; see
-docs/protocol.md for what the paper leaves open. Every episode starts from the run's seed (the paper's protocol) unless
+Tarakli & Di Nuovo, "Learning while Sleeping" (ICDL 2024): Algorithm 1, Fig. 3 and the obstacle robustness test; what
+the paper leaves open is in docs/protocol.md. Every episode starts from the run's seed (the paper's protocol) unless
 --random-starts. The teacher is the shipped oracles/{env_id}__sac_oracle.pt (from oracle_train.py), --oracle-path, or
-a SAC agent trained here (--train-oracle). The algorithm reads top to bottom down to `main`; the checks, files and
---evaluate come after it.
+a SAC agent trained here (--train-oracle). Read top to bottom down to `main`: Args, the networks, Eq. 1-4 and the
+teacher, the buffer, the day, the night, main. Everything else comes after main.
 
-    python inform_sac_pusher.py --seed 1
+    python inform_sac_pusher.py --seed 1                            # Pusher-v5, the authors' budget
+    python inform_sac_pusher.py --env-id Pusher-v4 --seed 1         # the paper's Pusher (needs mujoco==2.3.7)
 """
 
 import atexit
@@ -50,13 +51,9 @@ from torch.utils.tensorboard import SummaryWriter  # noqa: E402
 
 ENV_IDS = ("Pusher-v5", "Pusher-v4")
 POLICIES = ("oracle", "tamer", "inform")
-LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
+LOG_STD_MIN = -5.0
+LOG_STD_MAX = 2.0
 REPO_DIR = os.path.dirname(os.path.abspath(__file__))
-# the robustness test's three 3 cm cubes on the table (docs/protocol.md): the paper's positions (layout "paper"), the
-# paper's distance between neighbouring boxes (kept by layout "bisector"), their half-size and height
-OBSTACLE_POSITIONS = ((0.32, -0.20), (0.35, -0.23), (0.38, -0.26))
-OBSTACLE_SPACING, OBSTACLE_HALF_SIZE, OBSTACLE_Z = 0.0424, 0.015, -0.325
-OBSTACLE_LAYOUTS = ("bisector", "paper")
 
 
 @dataclass
@@ -184,91 +181,23 @@ class Args:
     """re-evaluate a saved tamer_actor.pt, inform_actor.pt or oracle (and the obstacle test); print JSON, no run"""
 
 
-# ---------------------------------------------------------------------------------------------------------------
-# environments: Pusher, and Pusher with the robustness test's boxes
-
-
 def make_env(env_id: str, seed: int, obstacles=None, **render) -> gym.Env:
-    """Plain Pusher, or with boxes at the xy `obstacles` (built at run time from the installed model). With `render`
-    (--capture-video: render_mode, width, height) the model also gets the camera of the videos."""
+    """Plain Pusher, or with the robustness test's boxes at the xy `obstacles`; `render` (--capture-video:
+    render_mode, width, height) adds the videos' camera. The boxes and the camera are built below main."""
     if obstacles is None and not render:
         env = gym.make(env_id)
-    elif env_id == "Pusher-v5":
-        render = {**render, "camera_name": "inform_video"} if render else render
-        env = gym.make(env_id, xml_file=obstacle_xml(env_id, obstacles, camera=bool(render)), **render)
-    else:  # Pusher-v4 has no xml_file argument: same class, model file swapped at construction
-        from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
-        from gymnasium.envs.mujoco.pusher_v4 import PusherEnv
-
-        xml, space = obstacle_xml(env_id, obstacles, bool(render)), gym.spaces.Box(-np.inf, np.inf, (23,), np.float64)
-        render = {**render, "camera_name": "inform_video"} if render else render
-
-        class PusherObstacleV4(PusherEnv):
-            def __init__(self, **kwargs):
-                gym.utils.EzPickle.__init__(self, **kwargs)
-                MujocoEnv.__init__(self, xml, 5, observation_space=space, **kwargs)
-
-        env = gym.wrappers.TimeLimit(PusherObstacleV4(**render), max_episode_steps=100)
+    else:
+        env = pusher_with_boxes(env_id, obstacles, **render)
     env.action_space.seed(seed)
     env.observation_space.seed(seed)
     return env
-
-
-_OBSTACLE_DIR: list[str] = []  # one temporary directory per process, removed at exit
-
-
-def obstacle_xml(env_id: str, positions, camera: bool = False) -> str:
-    """Pusher's own model (never modified) plus the boxes (and the videos' camera), written to a file that outlives
-    the env's construction (EzPickle re-creates the env from it); returns its path."""
-    import gymnasium.envs.mujoco as gym_mujoco
-
-    name = "pusher_v5.xml" if env_id == "Pusher-v5" else "pusher.xml"
-    tree, h = ET.parse(os.path.join(os.path.dirname(gym_mujoco.__file__), "assets", name)), OBSTACLE_HALF_SIZE
-    for i, (x, y) in enumerate(() if positions is None else positions):
-        ET.SubElement(tree.getroot().find("worldbody"), "geom", {
-            "name": f"obstacle_{i}", "type": "box", "size": f"{h} {h} {h}", "pos": f"{x:.6f} {y:.6f} {OBSTACLE_Z}",
-            "contype": "1", "conaffinity": "1", "rgba": "0.2 0.2 0.8 1"})  # fmt: skip
-    if camera:  # the videos' camera, and no shadows: they triple the time of a frame in software OpenGL
-        ET.SubElement(tree.getroot().find("worldbody"), "camera", video_camera())
-        ET.SubElement(ET.SubElement(tree.getroot(), "visual"), "quality", {"shadowsize": "0"})
-    if not _OBSTACLE_DIR:
-        _OBSTACLE_DIR.append(tempfile.mkdtemp(prefix="inform_pusher_obstacle_"))
-        atexit.register(shutil.rmtree, _OBSTACLE_DIR[0], True)
-    fd, path = tempfile.mkstemp(prefix=f"{env_id.lower().replace('-', '_')}_obstacle_", suffix=".xml",
-                                dir=_OBSTACLE_DIR[0])  # fmt: skip
-    os.close(fd)
-    tree.write(path)
-    return path
-
-
-def start_and_goal(env_id: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """The object's and the goal's xy after a reset with `seed` (obs[17:19] and obs[20:22])."""
-    env = gym.make(env_id)
-    obs, _ = env.reset(seed=seed)
-    env.close()
-    return obs[17:19].copy(), obs[20:22].copy()
-
-
-def obstacle_positions(layout: str, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
-    """The three box centres (3 x 2): the paper's coordinates, or the middle box at the midpoint of the object's start
-    and the goal and the other two OBSTACLE_SPACING either side of it along the perpendicular bisector."""
-    if layout == "paper":
-        return np.array(OBSTACLE_POSITIONS)
-    middle, along = (start + goal) / 2, (goal - start) / np.linalg.norm(goal - start)
-    across = np.array([-along[1], along[0]])
-    return np.stack([middle - OBSTACLE_SPACING * across, middle, middle + OBSTACLE_SPACING * across])
-
-
-def distance_to_segment(point: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
-    t = np.clip(np.dot(point - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
-    return float(np.linalg.norm(point - (a + t * (b - a))))
 
 
 def final_distance(info: dict) -> float:  # the object-goal distance at the end of an episode
     return abs(float(info["reward_dist"]))
 
 
-# ---------------------------------------------------------------------------------------------------------------
+# ---------------------------------------------------------------------------------------------------------------------
 # networks: each is rebuilt from the `kwargs` saved beside its state_dict
 
 
@@ -342,8 +271,13 @@ def soft_update(target: nn.Module, source: nn.Module, tau: float) -> None:
             target_param.lerp_(param, tau)
 
 
-# ---------------------------------------------------------------------------------------------------------------
-# the pieces of the algorithm, named after the paper
+# ---------------------------------------------------------------------------------------------------------------------
+# the pieces of Algorithm 1, named after the paper: Eq. 1-4 and the teacher
+
+
+def linear_schedule(start: float, end: float, duration: int, t: int) -> float:
+    """From `start` at t = 0 to `end` at t = duration, then constant."""
+    return start + (end - start) * min(t, duration) / max(duration, 1)
 
 
 def oracle_feedback(q_star_sa: torch.Tensor, q_star_best: torch.Tensor, alpha: float) -> torch.Tensor:
@@ -373,13 +307,21 @@ class Teacher:
     """
 
     def __init__(self, noise=0.0, sparsity=1.0, delay=0, credit_window=1, budget=None, seed=0):
-        self.noise, self.sparsity, self.delay, self.credit_window, self.budget = (
-            noise, sparsity, delay, credit_window, budget,
-        )  # fmt: skip
+        self.noise = noise
+        self.sparsity = sparsity
+        self.delay = delay
+        self.credit_window = credit_window
+        self.budget = budget
         self.rng = np.random.default_rng(seed)
         self.in_flight = collections.deque()  # clicks on their way, oldest first
         self.positives = 0  # +1 signals delivered
         self.perfect_positives = 0  # +1 answers of the perfect teacher (Eq. 4), for the record
+
+    @classmethod
+    def from_args(cls, args) -> "Teacher":
+        """The person that the --teacher-* flags describe, with a generator of its own."""
+        flags = ("teacher_noise", "teacher_sparsity", "teacher_delay", "credit_window", "feedback_budget")
+        return cls(*(getattr(args, flag) for flag in flags), seed=args.seed + 7919)
 
     @property
     def gone(self) -> bool:
@@ -438,10 +380,9 @@ def actor_loss(q_net: QEnsemble, actor: Actor, obs: torch.Tensor, temperature: t
     return (temperature * log_prob - q_net(obs, action).min(0).values).mean(), log_prob
 
 
-def update_actor(q_net, actor, obs, log_ent_coef, actor_optimizer, ent_coef_optimizer, target_entropy: float,
-                 bf16: bool = False):  # fmt: skip
+def update_actor(q_net, actor, obs, log_ent_coef, actor_optimizer, ent_coef_optimizer, bf16: bool = False) -> None:
     """One SAC actor step on min_i Q_i (the oracle's critics, or TAMER's H), then one of the autotuned entropy
-    coefficient exp(log_ent_coef) towards `target_entropy`."""
+    coefficient exp(log_ent_coef) towards SAC's target entropy, -dim(A)."""
     q_net.requires_grad_(False)  # the gradient flows through the critic to the action, but none is kept on it
     with torch.autocast(obs.device.type, dtype=torch.bfloat16, enabled=bf16):
         pi_loss, logp = actor_loss(q_net, actor, obs, log_ent_coef.detach().exp())
@@ -449,10 +390,681 @@ def update_actor(q_net, actor, obs, log_ent_coef, actor_optimizer, ent_coef_opti
     pi_loss.backward()
     q_net.requires_grad_(True)
     actor_optimizer.step()
+    target_entropy = -float(actor.fc_mean.out_features)
     ent_coef_loss = (-log_ent_coef.exp() * (logp.detach() + target_entropy)).mean()
     ent_coef_optimizer.zero_grad(set_to_none=True)
     ent_coef_loss.backward()
     ent_coef_optimizer.step()
+
+
+class ReplayBuffer:
+    """Every forward-phase transition (s, a, s', h, terminated), preallocated, and the success tag of its episode."""
+
+    def __init__(self, capacity: int, obs_dim: int, act_dim: int, device: torch.device):
+        self.obs = torch.zeros(capacity, obs_dim, device=device)
+        self.next_obs = torch.zeros(capacity, obs_dim, device=device)
+        self.actions = torch.zeros(capacity, act_dim, device=device)
+        self.feedback = torch.zeros(capacity, device=device)  # h, written by the teacher when a signal arrives
+        self.terminated = torch.zeros(capacity, device=device)
+        self.success = torch.zeros(capacity, dtype=torch.bool, device=device)
+        self.episodes: list[tuple[int, int, float]] = []  # (first step, end step, final object-goal distance)
+        self.size = 0  # transitions stored (fewer than the capacity when the teacher's budget ends the day early)
+
+    def add(self, obs, action, next_obs, terminated) -> None:
+        self.obs[self.size] = obs
+        self.actions[self.size] = action
+        self.next_obs[self.size] = next_obs
+        self.terminated[self.size] = float(terminated)
+        self.size += 1
+
+    def tag_episode(self, start: int, distance: float, success_distance: float) -> bool:
+        """Tag the trajectory buffer[start:size], which just ended: a success if the object ended within
+        `success_distance` of the goal."""
+        success = distance < success_distance
+        self.success[start : self.size] = success
+        self.episodes.append((start, self.size, distance))
+        return success
+
+    def batch(self, idx: torch.Tensor):
+        return self.obs[idx], self.actions[idx], self.next_obs[idx], self.feedback[idx], self.terminated[idx]
+
+    def expert_indices(self, fallback_fraction: float = 0.1) -> tuple[torch.Tensor, int]:
+        """The success set's transitions and 0; with no success, the transitions of the episodes that ended closest
+        to the goal and how many episodes those are."""
+        idx = self.success.nonzero().squeeze(-1)
+        if idx.numel() > 0:
+            return idx, 0
+        k = max(1, int(len(self.episodes) * fallback_fraction))
+        closest = sorted(self.episodes, key=lambda e: e[2])[:k]
+        return torch.cat([torch.arange(s, e, device=self.success.device) for s, e, _ in closest]), k
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# the phases of Algorithm 1, then main
+
+
+def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer, evaluator, writer, device):
+    """The day: SAC-style TAMER (Eq. 1, gamma = 0) on the teacher's yes/no feedback (Eq. 4), all remembered."""
+    obs_dim = buffer.obs.shape[1]
+    act_dim = buffer.actions.shape[1]
+    h_net = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
+    tamer_actor = Actor(obs_dim, act_dim, args.hidden_size, env.action_space.low, env.action_space.high).to(device)
+    amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
+    h_optimizer = torch.optim.Adam(h_net.parameters(), lr=args.tamer_h_lr, foreach=True)
+    actor_optimizer = torch.optim.Adam(tamer_actor.parameters(), lr=args.tamer_policy_lr, foreach=True)
+    log_ent_coef = torch.zeros(1, device=device, requires_grad=True)  # the actor's entropy coefficient, autotuned
+    ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.tamer_h_lr, foreach=True)
+    teacher = Teacher.from_args(args)
+    n = args.tamer_total_timesteps
+    print(f"[tamer] {n} env steps, feedback alpha {args.feedback_alpha_start} -> {args.feedback_alpha_end}", flush=True)
+    progress = Progress("tamer", n, warmup=args.tamer_learning_starts, evaluator=evaluator)
+    reset_seed = None if args.random_starts else args.seed
+    obs, _ = env.reset(seed=args.seed)
+    obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
+    h_loss = torch.zeros((), device=device)
+    ep_start = ep_length = 0
+    ep_return = 0.0
+    last_return = float("nan")
+    for step in range(n):
+        # the teacher gets stricter: alpha rises linearly over the phase
+        feedback_alpha = linear_schedule(args.feedback_alpha_start, args.feedback_alpha_end, n - 1, step)
+        if step < args.tamer_learning_starts:
+            action_t = torch.as_tensor(env.action_space.sample(), device=device)
+        else:
+            with torch.no_grad():
+                action_t = tamer_actor.get_action(obs_t.unsqueeze(0))[0][0]
+
+        # ALGO LOGIC: the teacher watches (s, a): the perfect answer (Eq. 4), then the person's (Teacher)
+        taught = not teacher.gone  # after the budget is spent, TAMER has nothing to learn from
+        with torch.no_grad():
+            q_star_sa, q_star_best = oracle_q(oracle_actor, oracle_qf, obs_t, action_t)
+        h_star = oracle_feedback(q_star_sa, q_star_best, feedback_alpha).item() if taught else 0.0
+        labelled = teacher(step, h_star)  # the transitions that this step's arriving signal labels
+        buffer.feedback[labelled] = 1.0
+
+        next_obs, reward, terminated, truncated, info = env.step(action_t.cpu().numpy())
+        next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
+        buffer.add(obs_t, action_t, next_t, terminated)
+        ep_return += float(reward)
+        ep_length += 1
+        last_step = step == n - 1 or (teacher.gone and args.budget_ends_forward_phase)
+        if terminated or truncated or last_step:  # tag the trajectory; a cut-off last one by where it stands
+            success = buffer.tag_episode(ep_start, final_distance(info), args.success_distance)
+            writer.add_scalar("charts/episodic_return", ep_return, step + 1)
+            writer.add_scalar("charts/episodic_length", ep_length, step + 1)
+            writer.add_scalar("charts/final_distance", final_distance(info), step + 1)
+            writer.add_scalar("charts/episode_success", float(success), step + 1)
+            last_return = ep_return
+            ep_start = step + 1
+            ep_return = 0.0
+            ep_length = 0
+            next_obs, _ = env.reset(seed=reset_seed)
+            next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
+        obs_t = next_t
+
+        # ALGO LOGIC: TAMER's update: H regresses on the feedback (Eq. 1), the actor maximises H, SAC-style
+        if step >= args.tamer_learning_starts and taught:
+            idx = torch.randint(0, step + 1, (args.tamer_batch_size,), device=device)
+            obs_b = buffer.obs[idx]
+            with amp:
+                h_loss = tamer_loss(h_net, obs_b, buffer.actions[idx], buffer.feedback[idx])
+            h_optimizer.zero_grad(set_to_none=True)
+            h_loss.backward()
+            h_optimizer.step()
+            if step % args.tamer_policy_frequency == 0:
+                update_actor(h_net, tamer_actor, obs_b, log_ent_coef, actor_optimizer, ent_coef_optimizer, args.bf16)
+
+        # TRY NOT TO MODIFY: logging and periodic evaluation
+        if (step + 1) % args.log_frequency == 0 or last_step:
+            writer.add_scalar("losses/tamer_loss", h_loss.item(), step + 1)
+            writer.add_scalar("losses/tamer_entropy_coef", log_ent_coef.exp().item(), step + 1)
+            writer.add_scalar("feedback/positive", teacher.positives, step + 1)
+            writer.add_scalar("feedback/positive_rate", teacher.positives / (step + 1), step + 1)
+            writer.add_scalar("feedback/alpha", feedback_alpha, step + 1)
+            writer.add_scalar("charts/SPS", progress.sps(step + 1), step + 1)
+        report = {"return": last_return}
+        if (step + 1) % args.eval_frequency == 0 or last_step:
+            metrics = evaluator("tamer", tamer_actor, step + 1, args.periodic_eval_episodes)
+            report["eval return"] = metrics["eval/tamer_return"]
+        progress(step + 1, **report)
+        if last_step:
+            break
+
+    successes = sum(distance < args.success_distance for *_, distance in buffer.episodes)
+    print(
+        f"[tamer] feedback +1 on {teacher.positives}/{buffer.size} steps ({teacher.positives / buffer.size:.1%}); "
+        f"{successes}/{len(buffer.episodes)} episodes tagged success",
+        flush=True,
+    )
+    stats = {
+        "feedback/positive": teacher.positives,
+        "feedback/perfect_positive": teacher.perfect_positives,
+        "feedback/steps": buffer.size,
+        "feedback/positive_rate": teacher.positives / buffer.size,
+        "sleep/success_episodes": int(successes),
+        "sleep/episodes": len(buffer.episodes),
+    }
+    return h_net, tamer_actor, stats
+
+
+def sleep_phase(args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator, writer, device):
+    """The night: offline IQ-Learn (Eq. 2) on the buffer, the successful trajectories as the expert set."""
+    expert_idx, fallback_episodes = buffer.expert_indices()
+    if fallback_episodes:
+        print(
+            f"[sleep] warning: no successful episode; using the {fallback_episodes} episodes that ended closest to "
+            "the goal as the expert set",
+            flush=True,
+        )
+    print(f"[sleep] {expert_idx.numel()} expert transitions, {buffer.size} in the buffer", flush=True)
+    obs_dim = buffer.obs.shape[1]
+    act_dim = buffer.actions.shape[1]
+    q_net = QEnsemble(obs_dim, act_dim, args.hidden_size, n=1).to(device)
+    q_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=1).to(device)
+    q_target.load_state_dict(q_net.state_dict())
+    low = tamer_actor.action_bias - tamer_actor.action_scale
+    high = tamer_actor.action_bias + tamer_actor.action_scale
+    inform_actor = Actor(obs_dim, act_dim, args.hidden_size, low, high).to(device)
+    if args.sleep_init_actor_from_tamer:
+        inform_actor.load_state_dict(tamer_actor.state_dict())
+    amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
+    q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_q_lr, foreach=True)
+    inform_optimizer = torch.optim.Adam(inform_actor.parameters(), lr=args.sleep_policy_lr, foreach=True)
+    batch_size = args.sleep_batch_size
+    gamma = args.sleep_gamma
+    temperature = args.sleep_temperature
+    chi2 = args.sleep_chi2_coef
+    is_expert = torch.arange(2 * batch_size, device=device) >= batch_size  # the batch: replay rows, then expert rows
+    names = ("losses/iq_loss", "losses/iq_expert_term", "losses/iq_value_term", "losses/iq_chi2_term")
+    names += ("losses/inform_actor_loss",)
+    stats = {"sleep/expert_transitions": int(expert_idx.numel()), "sleep/expert_fallback": int(fallback_episodes > 0)}
+    losses = {}
+    progress = Progress("sleep", args.sleep_gradient_steps, evaluator=evaluator)
+    for step in range(1, args.sleep_gradient_steps + 1):
+        # ALGO LOGIC: the sleep update: Q by IQ-Learn (Eq. 2), the INFORM actor on Q, the target Q follows softly
+        replay = torch.randint(0, buffer.size, (batch_size,), device=device)
+        expert = expert_idx[torch.randint(0, expert_idx.numel(), (batch_size,), device=device)]
+        obs, actions, next_obs, _, terminated = buffer.batch(torch.cat([replay, expert]))
+        with amp:
+            loss, terms = iq_loss(
+                q_net, q_target, obs, actions, next_obs, terminated, is_expert, gamma, temperature, chi2, inform_actor
+            )
+        q_optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        q_optimizer.step()
+        q_net.requires_grad_(False)  # the actor's gradient flows through Q, but none is kept on it
+        with amp:
+            pi_loss, _ = actor_loss(q_net, inform_actor, obs[:batch_size], temperature)
+        inform_optimizer.zero_grad(set_to_none=True)
+        pi_loss.backward()
+        q_net.requires_grad_(True)
+        inform_optimizer.step()
+        soft_update(q_target, q_net, args.tau)
+
+        # TRY NOT TO MODIFY: logging (one host sync per 100 steps to catch divergence) and periodic evaluation
+        last_step = step == args.sleep_gradient_steps
+        log_now = step % args.log_frequency == 0 or last_step
+        if log_now or step % 100 == 0:
+            values = torch.stack([loss, *terms, pi_loss]).tolist()
+            if not all(map(math.isfinite, values)):
+                last = ", ".join(f"{k.split('/')[1]} {v:.4g}" for k, v in losses.items())
+                raise Diverged(
+                    f"the sleep loss diverged (NaN or inf) by gradient step {step}; last finite losses: "
+                    f"{last or 'none yet'}; try a lower --sleep-q-lr or --sleep-policy-lr"
+                )
+            losses = dict(zip(names, values, strict=True))
+        if log_now:
+            for tag, value in losses.items():
+                writer.add_scalar(tag, value, step)
+            writer.add_scalar("sleep/SPS", progress.sps(step), step)
+        report = {"iq_loss": losses.get("losses/iq_loss")}
+        if step % args.sleep_eval_frequency == 0 or last_step:
+            metrics = evaluator("inform", inform_actor, step, args.periodic_eval_episodes)
+            report["eval return"] = metrics["eval/inform_return"]
+        progress(step, **report)
+    return q_net, inform_actor, {**stats, **losses}
+
+
+def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals") -> dict:
+    run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
+    run_start = time.time()
+    run_dir = writer = env = evaluator = None
+    summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
+    status = "completed"
+    phase = "startup"
+    try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
+        with stop.held():  # a stop waits until the directory exists and is known, so the summary can go there
+            run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
+        print(f"run directory: {run_dir}", flush=True)
+        random.seed(args.seed)
+        np.random.seed(args.seed)
+        torch.manual_seed(args.seed)
+        torch.backends.cudnn.deterministic = args.torch_deterministic
+        if args.torch_deterministic:
+            os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # CUDA matmuls refuse determinism without it
+        torch.use_deterministic_algorithms(args.torch_deterministic)
+        torch.set_num_threads(args.num_threads)
+        device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
+
+        writer = HeldWriter(run_dir, stop)
+        writer.add_text(
+            "hyperparameters",
+            "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
+        )
+        env = make_env(args.env_id, args.seed)
+        evaluator = Evaluator(args, writer)
+        obs_dim = int(np.prod(env.observation_space.shape))
+        act_dim = int(np.prod(env.action_space.shape))
+
+        # ---- oracle: the simulated teacher (docs/protocol.md, "Oracles and the expert bar")
+        phase = "oracle"
+        t0 = time.time()
+        if oracle_ckpt is not None:
+            oracle_actor, oracle_qf = oracle_from_checkpoint(oracle_ckpt, device)
+            steps = oracle_ckpt.get("training_steps", "?")
+            print(f"[oracle] loaded {oracle_ckpt['path']} ({steps} SAC steps)", flush=True)
+        else:
+            print(f"[oracle] training SAC on the env reward for {args.oracle_total_timesteps} steps", flush=True)
+            oracle_actor, oracle_qf, summary["sps/oracle"] = train_oracle(args, writer, device)
+            if args.save_model:
+                save_oracle(f"{run_dir}/oracle.pt", args, oracle_actor, oracle_qf, env.action_space)
+        oracle_actor.requires_grad_(False)
+        oracle_qf.requires_grad_(False)
+        summary["time/oracle_s"] = time.time() - t0
+        evaluator("oracle", oracle_actor, 0, args.periodic_eval_episodes)
+
+        # ---- forward phase ("day"): TAMER with simulated feedback, every transition remembered
+        phase = "tamer"
+        t0 = time.time() - evaluator.seconds  # the phase's clock stops during its evaluations
+        buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, act_dim, device)
+        h_net, tamer_actor, stats = forward_phase(args, env, oracle_actor, oracle_qf, buffer, evaluator, writer, device)
+        summary.update(stats)
+        summary["time/tamer_s"] = time.time() - evaluator.seconds - t0
+        summary["sps/tamer"] = summary["feedback/steps"] / max(summary["time/tamer_s"], 1e-9)
+        if args.save_model:
+            save_actor(f"{run_dir}/tamer_actor.pt", tamer_actor, env_id=args.env_id)
+            save_critic(f"{run_dir}/tamer_h.pt", h_net, obs_dim, act_dim, env_id=args.env_id)
+
+        # ---- sleep phase ("night"): offline IQ-Learn on the buffer, no environment steps
+        phase = "sleep"
+        t0 = time.time() - evaluator.seconds
+        q_net, inform_actor, stats = sleep_phase(args, buffer, tamer_actor, evaluator, writer, device)
+        summary.update(stats)
+        summary["time/sleep_s"] = time.time() - evaluator.seconds - t0
+        summary["sps/sleep"] = args.sleep_gradient_steps / max(summary["time/sleep_s"], 1e-9)
+        if args.save_model:
+            save_actor(f"{run_dir}/inform_actor.pt", inform_actor, env_id=args.env_id)
+            extra = {"gamma": args.sleep_gamma, "temperature": args.sleep_temperature}
+            save_critic(f"{run_dir}/inform_critic.pt", q_net, obs_dim, act_dim, env_id=args.env_id, **extra)
+
+        # ---- the recovered reward (Eq. 3), then the final evaluation and the obstacle robustness test
+        phase = "eval"
+        policies = {"oracle": oracle_actor, "tamer": tamer_actor, "inform": inform_actor}
+        summary.update(final_evaluation(args, buffer, q_net, policies, evaluator, writer, run_dir))
+    except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
+        status = "interrupted"
+        stop.broken_pipe = isinstance(e, BrokenPipeError)
+    except Diverged as e:
+        status = "diverged"
+        summary["error"] = str(e)
+    return end_run(args, summary, status, phase, run_dir, run_start, oracle_ckpt, evaluator, (env, writer), stop)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# TRY NOT TO MODIFY: everything else, below main. Evaluation and the tests (obstacle, authors'), progress lines, the
+# oracle's own training, the obstacle model, the reward wrapper, checkpoints, input checks, signals and the run's end,
+# --evaluate, videos
+
+
+@torch.no_grad()
+def evaluate(actor: Actor, env: gym.Env, episodes: int, reset_seed, deterministic: bool, generator, success_dist):
+    """Run `episodes` episodes; reset_seed(ep) gives each episode's reset seed. Returns means and per-episode data."""
+    returns = []
+    distances = []
+    paths = []
+    for ep in range(episodes):
+        obs, _ = env.reset(seed=reset_seed(ep))
+        done = False
+        ep_return = 0.0
+        info = {}
+        path = [obs[17:19]]
+        while not done:
+            sampled, _, mean = actor.get_action(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0), generator)
+            obs, reward, terminated, truncated, info = env.step((mean if deterministic else sampled)[0].numpy())
+            ep_return = ep_return + float(reward)
+            done = terminated or truncated
+            path.append(obs[17:19])
+        returns.append(ep_return)
+        distances.append(final_distance(info))
+        paths.append(np.array(path))  # the object's xy at every step
+    distances = np.asarray(distances)
+    return {
+        "return": float(np.mean(returns)),
+        "final_distance": float(distances.mean()),
+        "final_distance_std": float(distances.std()),
+        "success_rate": float((distances < success_dist).mean()),
+        "distances": distances,
+        "returns": np.asarray(returns),
+        "paths": paths,
+    }
+
+
+class Evaluator:
+    """Evaluates a policy on the plain env with deterministic and sampled actions; logs and keeps eval/{name}_*.
+    Episodes start from the run's seed (fixed start) or from fresh seeds (`--random-starts`), the same each time."""
+
+    def __init__(self, args: Args, writer: SummaryWriter | None):
+        self.env = make_env(args.env_id, args.seed)
+        self.generator = torch.Generator().manual_seed(args.seed + 12345)  # sampled actions, off the training RNG
+        self.writer = writer
+        self.seed = args.seed
+        self.random_starts = args.random_starts
+        self.success_distance = args.success_distance
+        self.seconds = 0.0  # spent evaluating
+        self.final = {}  # the latest value of each tag
+
+    def reset_seed(self, episode: int) -> int:
+        return 1_000_000 + 1000 * self.seed + episode if self.random_starts else self.seed
+
+    def __call__(self, name: str, actor: Actor, step: int, episodes: int) -> dict:
+        t = time.time()
+        results = {}
+        for deterministic, suffix in ((True, ""), (False, "_sampled")):
+            res = evaluate(
+                actor, self.env, episodes, self.reset_seed, deterministic, self.generator, self.success_distance
+            )
+            results.update({f"eval/{name}_{k}{suffix}": res[k] for k in ("return", "final_distance", "success_rate")})
+        if self.writer is not None:
+            for tag, value in results.items():
+                self.writer.add_scalar(tag, value, step)
+        self.final.update(results)
+        self.seconds += time.time() - t
+        return results
+
+
+def final_evaluation(args: Args, buffer, q_net, policies: dict, evaluator, writer, run_dir: str) -> dict:
+    """After the sleep: Eq. 3 on the buffer, each policy's final evaluation, the obstacle test and the authors' test
+    (all logged at the run's last step), the obstacle files and, with --capture-video, the videos."""
+    results = recovered_reward_stats(args, buffer, q_net, policies["inform"])
+    end_step = args.tamer_total_timesteps + args.sleep_gradient_steps
+    print("[eval] final evaluation", flush=True)
+    for name, actor in policies.items():
+        evaluator(name, actor, end_step, args.eval_episodes)
+    t = time.time()
+    obstacle, distances, paths = obstacle_test(args, policies, evaluator.generator)
+    results.update(obstacle)
+    np.savez(f"{run_dir}/obstacle_distances.npz", **distances)
+    np.savez(f"{run_dir}/obstacle_paths.npz", **paths)
+    results.update(authors_test(args, policies, evaluator.generator))
+    for tag, value in results.items():
+        if tag.startswith(("eval/obstacle/", "eval/authors_test/", "obstacle/min")):
+            writer.add_scalar(tag, value, end_step)
+    evaluator.seconds += time.time() - t
+    if args.capture_video:  # after every number is in: filming changes none of them
+        record_videos(args, policies, paths["boxes"], evaluator.reset_seed(0), run_dir)
+    return results
+
+
+def recovered_reward_stats(args: Args, buffer: ReplayBuffer, q_net: QEnsemble, inform_actor: Actor) -> dict:
+    """Eq. 3 on the buffer: the mean recovered reward of success and of failure transitions, for the record."""
+    reward_fn = RecoveredReward(q_net, inform_actor, args.sleep_gamma, args.sleep_temperature, samples=4)
+    b = [x[: buffer.size].cpu().numpy() for x in (buffer.obs, buffer.actions, buffer.next_obs, buffer.terminated)]
+    r_all = reward_fn(*b)
+    succ = buffer.success[: buffer.size].cpu().numpy()
+    return {
+        "sleep/recovered_reward_success_mean": float(r_all[succ].mean()) if succ.any() else float("nan"),
+        "sleep/recovered_reward_failure_mean": float(r_all[~succ].mean()) if (~succ).any() else float("nan"),
+    }
+
+
+def obstacle_test(args: Args, policies: dict, generator: torch.Generator) -> tuple[dict, dict, dict]:
+    """The robustness test: each policy on the obstacle variant, every episode from the run's initial state, sampled
+    actions. Returns the metrics, the final distances, and the object's xy path of one deterministic episode per
+    policy with and without the boxes (Fig. 5a)."""
+    start, goal = start_and_goal(args.env_id, args.seed)
+    boxes = obstacle_positions(args.obstacle_layout, start, goal)
+    results = {
+        "obstacle/box_positions": boxes.round(4).tolist(),
+        "obstacle/min_box_distance_to_path": min(distance_to_segment(b, start, goal) for b in boxes),
+    }
+    distances = {}
+    paths = {"boxes": boxes, "start": start, "goal": goal}
+    env = make_env(args.env_id, args.seed, obstacles=boxes)
+    plain = make_env(args.env_id, args.seed)
+    at_start = lambda episode: args.seed  # noqa: E731
+    for name, actor in policies.items():
+        res = evaluate(actor, env, args.obstacle_episodes, at_start, False, generator, args.success_distance)
+        det = evaluate(actor, env, 1, at_start, True, generator, args.success_distance)
+        det_plain = evaluate(actor, plain, 1, at_start, True, torch.Generator(), args.success_distance)
+        paths[f"{name}_obstacle"] = det["paths"][0]
+        paths[f"{name}_plain"] = det_plain["paths"][0]
+        distances[name] = res["distances"]
+        for key in ("final_distance", "final_distance_std", "success_rate", "return"):
+            results[f"eval/obstacle/{name}_{key}"] = res[key]
+        results[f"eval/obstacle/{name}_final_distance_deterministic"] = det["final_distance"]
+    env.close()
+    plain.close()
+    return results, distances, paths
+
+
+def authors_test(args: Args, policies: dict, generator: torch.Generator) -> dict:
+    """The authors' test: sampled actions, every episode from the run's initial state, on the plain env."""
+    env = make_env(args.env_id, args.seed)
+    results = {}
+    for name, actor in policies.items():
+        res = evaluate(
+            actor, env, args.authors_test_episodes, lambda ep: args.seed, False, generator, args.success_distance
+        )
+        for key in ("return", "final_distance", "success_rate"):
+            results[f"eval/authors_test/{name}_{key}"] = res[key]
+    env.close()
+    return results
+
+
+class Progress:
+    """One line per ~5% of a phase: steps, SPS and ETA, plus whatever the phase reports. The clock stops while the
+    `evaluator` runs. The first line comes early (`warmup` + 500 steps), and the ETA counts only the steps after
+    `warmup` (random-action steps before learning starts are much faster than the rest)."""
+
+    def __init__(self, phase: str, total: int, warmup: int = 0, evaluator=None):
+        self.phase = phase
+        self.total = total
+        self.every = max(total // 20, 1)
+        self.warmup = min(warmup, total)
+        self.early = min(warmup + 500, total)
+        self.evaluator = evaluator
+        self.start = self.clock()
+        self.warm_start = None
+
+    def clock(self) -> float:
+        """Seconds, without those spent in evaluations."""
+        return time.time() - (self.evaluator.seconds if self.evaluator is not None else 0.0)
+
+    def sps(self, step: int) -> float:
+        return step / max(self.clock() - self.start, 1e-9)
+
+    def __call__(self, step: int, **info):
+        if step == self.warmup:
+            self.warm_start = self.clock()
+        if step % self.every == 0 or step == self.total or step == self.early:
+            sps = self.sps(step)
+            rate = sps
+            if self.warm_start is not None and step > self.warmup:
+                rate = (step - self.warmup) / max(self.clock() - self.warm_start, 1e-9)
+            eta = (self.total - step) / max(rate, 1e-9)
+            info = {k: v for k, v in info.items() if v is not None and v == v}  # not measured yet: not shown (nan)
+            extra = "".join(f" | {k} {v:.4g}" if isinstance(v, float) else f" | {k} {v}" for k, v in info.items())
+            print(
+                f"[{self.phase}] {step}/{self.total} {100 * step // self.total}% | {sps:,.0f} SPS | "
+                f"ETA {int(eta // 60)}m{int(eta % 60):02d}s{extra}",
+                flush=True,
+            )
+
+
+# the oracle: SAC on the environment reward (oracle_train.py runs the same SAC; a test keeps the two identical)
+def train_oracle(args: Args, writer: SummaryWriter, device: torch.device):
+    """SAC on the environment reward (CleanRL's, with the twin critics as one module): the simulated teacher."""
+    env = make_env(args.env_id, args.seed)
+    obs_dim = int(np.prod(env.observation_space.shape))
+    act_dim = int(np.prod(env.action_space.shape))
+    actor = Actor(obs_dim, act_dim, args.hidden_size, env.action_space.low, env.action_space.high).to(device)
+    qf = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
+    qf_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
+    qf_target.load_state_dict(qf.state_dict())
+    amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
+    q_optimizer = torch.optim.Adam(qf.parameters(), lr=args.oracle_q_lr, foreach=True)
+    actor_optimizer = torch.optim.Adam(actor.parameters(), lr=args.oracle_policy_lr, foreach=True)
+    log_ent_coef = torch.zeros(1, device=device, requires_grad=True)  # SAC's entropy coefficient, autotuned
+    ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.oracle_q_lr, foreach=True)
+    n = args.oracle_total_timesteps
+    b_obs = torch.zeros(n, obs_dim, device=device)
+    b_next = torch.zeros(n, obs_dim, device=device)
+    b_act = torch.zeros(n, act_dim, device=device)
+    b_rew = torch.zeros(n, device=device)
+    b_term = torch.zeros(n)
+    progress = Progress("oracle", n, warmup=args.oracle_learning_starts)
+    reset_seed = None if args.oracle_random_starts else args.seed
+    obs, _ = env.reset(seed=args.seed)
+    obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
+    ep_return = 0.0
+    last_return = float("nan")
+    for step in range(n):
+        if step < args.oracle_learning_starts:
+            action = env.action_space.sample()
+        else:
+            with torch.no_grad():
+                action = actor.get_action(obs_t.unsqueeze(0))[0][0].cpu().numpy()
+        next_obs, reward, terminated, truncated, info = env.step(action)
+        next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
+        b_obs[step] = obs_t
+        b_next[step] = next_t
+        b_act[step] = torch.as_tensor(action)
+        b_rew[step] = float(reward)
+        b_term[step] = float(terminated)
+        ep_return += float(reward)
+        if terminated or truncated:
+            writer.add_scalar("oracle/episodic_return", ep_return, step)
+            writer.add_scalar("oracle/final_distance", final_distance(info), step)
+            last_return = ep_return
+            ep_return = 0.0
+            next_obs, _ = env.reset(seed=reset_seed)
+            next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
+        obs_t = next_t
+        if step >= args.oracle_learning_starts:
+            idx = torch.randint(0, step + 1, (args.oracle_batch_size,), device=device)
+            obs_b = b_obs[idx]
+            next_b = b_next[idx]
+            with amp, torch.no_grad():
+                next_a, next_logp, _ = actor.get_action(next_b)
+                v_next = qf_target(next_b, next_a).min(0).values - log_ent_coef.detach().exp() * next_logp
+                target = b_rew[idx] + (1.0 - b_term[idx]) * args.oracle_gamma * v_next
+            with amp:
+                q_loss = (qf(obs_b, b_act[idx]) - target.unsqueeze(0)).pow(2).mean(-1).sum()
+            q_optimizer.zero_grad(set_to_none=True)
+            q_loss.backward()
+            q_optimizer.step()
+            if step % args.oracle_policy_frequency == 0:
+                update_actor(qf, actor, obs_b, log_ent_coef, actor_optimizer, ent_coef_optimizer, args.bf16)
+            soft_update(qf_target, qf, args.tau)
+            if (step + 1) % args.log_frequency == 0:
+                writer.add_scalar("oracle/qf_loss", q_loss.item(), step + 1)
+                writer.add_scalar("oracle/SPS", progress.sps(step + 1), step + 1)
+        progress(step + 1, **{"return": last_return})
+    env.close()
+    return actor, qf, n / max(time.time() - progress.start, 1e-9)
+
+
+# the robustness test's three 3 cm cubes on the table (docs/protocol.md): the paper's positions (layout "paper"), the
+# paper's distance between neighbouring boxes (kept by layout "bisector"), their half-size and height
+OBSTACLE_POSITIONS = ((0.32, -0.20), (0.35, -0.23), (0.38, -0.26))
+OBSTACLE_SPACING = 0.0424
+OBSTACLE_HALF_SIZE = 0.015
+OBSTACLE_Z = -0.325
+OBSTACLE_LAYOUTS = ("bisector", "paper")
+
+
+def pusher_with_boxes(env_id: str, obstacles, **render) -> gym.Env:
+    """Pusher's own model plus the boxes at the xy `obstacles` (None: none) and, with `render`, the videos' camera."""
+    if render:
+        render = {**render, "camera_name": "inform_video"}
+    xml = obstacle_xml(env_id, obstacles, camera=bool(render))
+    if env_id == "Pusher-v5":
+        return gym.make(env_id, xml_file=xml, **render)
+    # Pusher-v4 has no xml_file argument: the same class, with the model file swapped at construction
+    from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
+    from gymnasium.envs.mujoco.pusher_v4 import PusherEnv
+
+    space = gym.spaces.Box(-np.inf, np.inf, (23,), np.float64)
+
+    class PusherObstacleV4(PusherEnv):
+        def __init__(self, **kwargs):
+            gym.utils.EzPickle.__init__(self, **kwargs)
+            MujocoEnv.__init__(self, xml, 5, observation_space=space, **kwargs)
+
+    return gym.wrappers.TimeLimit(PusherObstacleV4(**render), max_episode_steps=100)
+
+
+_OBSTACLE_DIR: list[str] = []  # one temporary directory per process, removed at exit
+
+
+def obstacle_xml(env_id: str, positions, camera: bool = False) -> str:
+    """Pusher's own model (never modified) plus the boxes (and the videos' camera), written to a file that outlives
+    the env's construction (EzPickle re-creates the env from it); returns its path."""
+    import gymnasium.envs.mujoco as gym_mujoco
+
+    name = "pusher_v5.xml" if env_id == "Pusher-v5" else "pusher.xml"
+    tree = ET.parse(os.path.join(os.path.dirname(gym_mujoco.__file__), "assets", name))
+    h = OBSTACLE_HALF_SIZE
+    for i, (x, y) in enumerate(() if positions is None else positions):
+        ET.SubElement(
+            tree.getroot().find("worldbody"),
+            "geom",
+            {
+                "name": f"obstacle_{i}",
+                "type": "box",
+                "size": f"{h} {h} {h}",
+                "pos": f"{x:.6f} {y:.6f} {OBSTACLE_Z}",
+                "contype": "1",
+                "conaffinity": "1",
+                "rgba": "0.2 0.2 0.8 1",
+            },
+        )
+    if camera:  # the videos' camera, and no shadows: they triple the time of a frame in software OpenGL
+        ET.SubElement(tree.getroot().find("worldbody"), "camera", video_camera())
+        ET.SubElement(ET.SubElement(tree.getroot(), "visual"), "quality", {"shadowsize": "0"})
+    if not _OBSTACLE_DIR:
+        _OBSTACLE_DIR.append(tempfile.mkdtemp(prefix="inform_pusher_obstacle_"))
+        atexit.register(shutil.rmtree, _OBSTACLE_DIR[0], True)
+    fd, path = tempfile.mkstemp(
+        prefix=f"{env_id.lower().replace('-', '_')}_obstacle_", suffix=".xml", dir=_OBSTACLE_DIR[0]
+    )
+    os.close(fd)
+    tree.write(path)
+    return path
+
+
+def start_and_goal(env_id: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """The object's and the goal's xy after a reset with `seed` (obs[17:19] and obs[20:22])."""
+    env = gym.make(env_id)
+    obs, _ = env.reset(seed=seed)
+    env.close()
+    return obs[17:19].copy(), obs[20:22].copy()
+
+
+def obstacle_positions(layout: str, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
+    """The three box centres (3 x 2): the paper's coordinates, or the middle box at the midpoint of the object's start
+    and the goal and the other two OBSTACLE_SPACING either side of it along the perpendicular bisector."""
+    if layout == "paper":
+        return np.array(OBSTACLE_POSITIONS)
+    middle = (start + goal) / 2
+    along = (goal - start) / np.linalg.norm(goal - start)
+    across = np.array([-along[1], along[0]])
+    return np.stack([middle - OBSTACLE_SPACING * across, middle, middle + OBSTACLE_SPACING * across])
+
+
+def distance_to_segment(point: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    t = np.clip(np.dot(point - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+    return float(np.linalg.norm(point - (a + t * (b - a))))
 
 
 class RecoveredReward:
@@ -460,7 +1072,11 @@ class RecoveredReward:
     V(s') is averaged over `samples` actions drawn with a fixed generator, so the reward is deterministic."""
 
     def __init__(self, q_net: QEnsemble, actor: Actor, gamma: float, temperature: float, samples: int = 16):
-        self.q_net, self.actor, self.gamma, self.temperature, self.samples = q_net, actor, gamma, temperature, samples
+        self.q_net = q_net
+        self.actor = actor
+        self.gamma = gamma
+        self.temperature = temperature
+        self.samples = samples
 
     @classmethod
     def load(cls, run_dir: str, samples: int = 16) -> "RecoveredReward":  # from a run's inform_critic.pt and actor
@@ -478,8 +1094,9 @@ class RecoveredReward:
         next_t = torch.as_tensor(np.asarray(next_obs), dtype=torch.float32).reshape(obs_t.shape)
         term_t = torch.as_tensor(np.asarray(terminated), dtype=torch.float32).reshape(-1)
         g = torch.Generator().manual_seed(0)
-        v_next = torch.stack([soft_value(self.q_net, self.actor, next_t, self.temperature, g)
-                              for _ in range(self.samples)]).mean(0)  # fmt: skip
+        v_next = torch.stack(
+            [soft_value(self.q_net, self.actor, next_t, self.temperature, g) for _ in range(self.samples)]
+        ).mean(0)
         return recover_reward(self.q_net(obs_t, act_t).min(0).values, v_next, term_t, self.gamma).numpy()
 
 
@@ -488,7 +1105,8 @@ class RecoveredRewardWrapper(gym.Wrapper):
 
     def __init__(self, env: gym.Env, reward_fn: RecoveredReward):
         super().__init__(env)
-        self.reward_fn, self._obs = reward_fn, None
+        self.reward_fn = reward_fn
+        self._obs = None
 
     def reset(self, **kwargs):
         self._obs, info = self.env.reset(**kwargs)
@@ -496,603 +1114,9 @@ class RecoveredRewardWrapper(gym.Wrapper):
 
     def step(self, action):
         next_obs, reward, terminated, truncated, info = self.env.step(action)
-        new_reward, self._obs = float(self.reward_fn(self._obs, action, next_obs, terminated)[0]), next_obs
+        new_reward = float(self.reward_fn(self._obs, action, next_obs, terminated)[0])
+        self._obs = next_obs
         return next_obs, new_reward, terminated, truncated, {**info, "env_reward": reward}
-
-
-class ReplayBuffer:
-    """Every forward-phase transition (s, a, s', h, terminated), preallocated, and the success tag of its episode."""
-
-    def __init__(self, capacity: int, obs_dim: int, act_dim: int, device: torch.device):
-        self.obs = torch.zeros(capacity, obs_dim, device=device)
-        self.next_obs = torch.zeros(capacity, obs_dim, device=device)
-        self.actions = torch.zeros(capacity, act_dim, device=device)
-        self.feedback = torch.zeros(capacity, device=device)
-        self.terminated = torch.zeros(capacity, device=device)
-        self.success = torch.zeros(capacity, dtype=torch.bool, device=device)
-        self.episodes: list[tuple[int, int, float]] = []  # (first step, end step, final object-goal distance)
-        self.size = 0  # transitions stored (fewer than the capacity when the teacher's budget ends the day early)
-
-    def tag_episode(self, start: int, end: int, distance: float, success_distance: float) -> bool:
-        """Tag the whole trajectory at its end: a success if the object ended within `success_distance`."""
-        self.success[start:end] = distance < success_distance
-        self.episodes.append((start, end, distance))
-        return distance < success_distance
-
-    def expert_indices(self, fallback_fraction: float = 0.1) -> tuple[torch.Tensor, int]:
-        """The success set's transitions and 0; with no success, the transitions of the episodes that ended closest
-        to the goal and how many episodes those are."""
-        idx = self.success.nonzero().squeeze(-1)
-        if idx.numel() > 0:
-            return idx, 0
-        k = max(1, int(len(self.episodes) * fallback_fraction))
-        closest = sorted(self.episodes, key=lambda e: e[2])[:k]
-        return torch.cat([torch.arange(s, e, device=self.success.device) for s, e, _ in closest]), k
-
-
-@torch.no_grad()
-def evaluate(actor: Actor, env: gym.Env, episodes: int, reset_seed, deterministic: bool, generator, success_dist):
-    """Run `episodes` episodes; reset_seed(ep) gives each episode's reset seed. Returns means and per-episode data."""
-    returns, distances, paths = [], [], []
-    for ep in range(episodes):
-        obs, _ = env.reset(seed=reset_seed(ep))
-        done, ep_return, info, path = False, 0.0, {}, [obs[17:19]]
-        while not done:
-            sampled, _, mean = actor.get_action(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0), generator)
-            obs, reward, terminated, truncated, info = env.step((mean if deterministic else sampled)[0].numpy())
-            ep_return, done = ep_return + float(reward), terminated or truncated
-            path.append(obs[17:19])
-        returns.append(ep_return)
-        distances.append(final_distance(info))
-        paths.append(np.array(path))  # the object's xy at every step
-    distances = np.asarray(distances)
-    return {"return": float(np.mean(returns)), "final_distance": float(distances.mean()),
-            "final_distance_std": float(distances.std()), "success_rate": float((distances < success_dist).mean()),
-            "distances": distances, "returns": np.asarray(returns), "paths": paths}  # fmt: skip
-
-
-class Evaluator:
-    """Evaluates a policy on the plain env with deterministic and sampled actions; logs and keeps eval/{name}_*.
-    Episodes start from the run's seed (fixed start) or from fresh seeds (`--random-starts`), the same each time."""
-
-    def __init__(self, args: Args, writer: SummaryWriter | None):
-        self.env = make_env(args.env_id, args.seed)
-        self.generator = torch.Generator().manual_seed(args.seed + 12345)  # sampled actions, off the training RNG
-        self.writer, self.seed, self.random_starts = writer, args.seed, args.random_starts
-        self.success_distance, self.seconds, self.final = args.success_distance, 0.0, {}  # final: latest of each tag
-
-    def reset_seed(self, episode: int) -> int:
-        return 1_000_000 + 1000 * self.seed + episode if self.random_starts else self.seed
-
-    def __call__(self, name: str, actor: Actor, step: int, episodes: int) -> dict:
-        t, results = time.time(), {}
-        for deterministic, suffix in ((True, ""), (False, "_sampled")):
-            res = evaluate(actor, self.env, episodes, self.reset_seed, deterministic, self.generator,
-                           self.success_distance)  # fmt: skip
-            results.update({f"eval/{name}_{k}{suffix}": res[k] for k in ("return", "final_distance", "success_rate")})
-        if self.writer is not None:
-            for tag, value in results.items():
-                self.writer.add_scalar(tag, value, step)
-        self.final.update(results)
-        self.seconds += time.time() - t
-        return results
-
-
-class Progress:
-    """One line per ~5% of a phase: steps, SPS (evaluations excluded) and ETA, plus whatever the phase reports. The
-    first line comes early (`warmup` + 500 steps), and the ETA counts only the steps after `warmup` (random-action
-    steps before learning starts are much faster than the rest)."""
-
-    def __init__(self, phase: str, total: int, warmup: int = 0):
-        self.phase, self.total, self.start, self.every = phase, total, time.time(), max(total // 20, 1)
-        self.excluded = 0.0  # seconds spent in evaluations
-        self.warmup, self.early, self.warm_clock = min(warmup, total), min(warmup + 500, total), None
-
-    def sps(self, step: int) -> float:
-        return step / max(time.time() - self.start - self.excluded, 1e-9)
-
-    def __call__(self, step: int, **info):
-        if step == self.warmup:
-            self.warm_clock = time.time() - self.excluded
-        if step % self.every == 0 or step == self.total or step == self.early:
-            sps = self.sps(step)
-            rate = sps
-            if self.warm_clock is not None and step > self.warmup:
-                rate = (step - self.warmup) / max(time.time() - self.excluded - self.warm_clock, 1e-9)
-            eta = (self.total - step) / max(rate, 1e-9)
-            info = {k: v for k, v in info.items() if v is not None and v == v}  # not measured yet: not shown (nan)
-            extra = "".join(f" | {k} {v:.4g}" if isinstance(v, float) else f" | {k} {v}" for k, v in info.items())
-            print(f"[{self.phase}] {step}/{self.total} {100 * step // self.total}% | {sps:,.0f} SPS | "
-                  f"ETA {int(eta // 60)}m{int(eta % 60):02d}s{extra}", flush=True)  # fmt: skip
-
-
-# ---------------------------------------------------------------------------------------------------------------
-# the oracle: SAC on the environment reward (oracle_train.py runs the same SAC; a test keeps the two identical)
-
-
-def train_oracle(args: Args, writer: SummaryWriter, device: torch.device):
-    env = make_env(args.env_id, args.seed)
-    obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
-    actor = Actor(obs_dim, act_dim, args.hidden_size, env.action_space.low, env.action_space.high).to(device)
-    qf = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
-    qf_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
-    qf_target.load_state_dict(qf.state_dict())
-    amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
-    q_optimizer = torch.optim.Adam(qf.parameters(), lr=args.oracle_q_lr, foreach=True)
-    actor_optimizer = torch.optim.Adam(actor.parameters(), lr=args.oracle_policy_lr, foreach=True)
-    log_ent_coef = torch.zeros(1, device=device, requires_grad=True)  # SAC's entropy coefficient, autotuned
-    ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.oracle_q_lr, foreach=True)
-    n = args.oracle_total_timesteps
-    b_obs, b_next = torch.zeros(n, obs_dim, device=device), torch.zeros(n, obs_dim, device=device)
-    b_act, b_rew, b_term = torch.zeros(n, act_dim, device=device), torch.zeros(n, device=device), torch.zeros(n)
-    progress = Progress("oracle", n, warmup=args.oracle_learning_starts)
-    reset_seed = None if args.oracle_random_starts else args.seed
-    obs, _ = env.reset(seed=args.seed)
-    obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
-    ep_return, last_return = 0.0, float("nan")
-    for step in range(n):
-        if step < args.oracle_learning_starts:
-            action = env.action_space.sample()
-        else:
-            with torch.no_grad():
-                action = actor.get_action(obs_t.unsqueeze(0))[0][0].cpu().numpy()
-        next_obs, reward, terminated, truncated, info = env.step(action)
-        next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
-        b_obs[step], b_next[step], b_act[step] = obs_t, next_t, torch.as_tensor(action)
-        b_rew[step], b_term[step] = float(reward), float(terminated)
-        ep_return += float(reward)
-        if terminated or truncated:
-            writer.add_scalar("oracle/episodic_return", ep_return, step)
-            writer.add_scalar("oracle/final_distance", final_distance(info), step)
-            last_return, ep_return = ep_return, 0.0
-            next_obs, _ = env.reset(seed=reset_seed)
-            next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
-        obs_t = next_t
-        if step >= args.oracle_learning_starts:
-            idx = torch.randint(0, step + 1, (args.oracle_batch_size,), device=device)
-            obs_b, next_b = b_obs[idx], b_next[idx]
-            with amp, torch.no_grad():
-                next_a, next_logp, _ = actor.get_action(next_b)
-                v_next = qf_target(next_b, next_a).min(0).values - log_ent_coef.detach().exp() * next_logp
-                target = b_rew[idx] + (1.0 - b_term[idx]) * args.oracle_gamma * v_next
-            with amp:
-                q_loss = (qf(obs_b, b_act[idx]) - target.unsqueeze(0)).pow(2).mean(-1).sum()
-            q_optimizer.zero_grad(set_to_none=True)
-            q_loss.backward()
-            q_optimizer.step()
-            if step % args.oracle_policy_frequency == 0:
-                update_actor(qf, actor, obs_b, log_ent_coef, actor_optimizer, ent_coef_optimizer, -float(act_dim),
-                             args.bf16)  # fmt: skip
-            soft_update(qf_target, qf, args.tau)
-            if (step + 1) % args.log_frequency == 0:
-                writer.add_scalar("oracle/qf_loss", q_loss.item(), step + 1)
-                writer.add_scalar("oracle/SPS", progress.sps(step + 1), step + 1)
-        progress(step + 1, **{"return": last_return})
-    env.close()
-    return actor, qf, n / max(time.time() - progress.start, 1e-9)
-
-
-# ---------------------------------------------------------------------------------------------------------------
-# the phases of Algorithm 1
-
-
-class Diverged(Exception):
-    """The sleep loss became NaN or inf."""
-
-
-def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer, evaluator, writer, device):
-    """The day: SAC-style TAMER (Eq. 1, gamma = 0) on the teacher's yes/no feedback (Eq. 4), all remembered."""
-    obs_dim, act_dim = buffer.obs.shape[1], buffer.actions.shape[1]
-    h_net = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
-    tamer_actor = Actor(obs_dim, act_dim, args.hidden_size, env.action_space.low, env.action_space.high).to(device)
-    amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
-    h_optimizer = torch.optim.Adam(h_net.parameters(), lr=args.tamer_h_lr, foreach=True)
-    actor_optimizer = torch.optim.Adam(tamer_actor.parameters(), lr=args.tamer_policy_lr, foreach=True)
-    log_ent_coef = torch.zeros(1, device=device, requires_grad=True)  # the actor's entropy coefficient, autotuned
-    ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.tamer_h_lr, foreach=True)
-    h_loss, n = torch.zeros((), device=device), args.tamer_total_timesteps
-    print(f"[tamer] {n} env steps, feedback alpha {args.feedback_alpha_start} -> {args.feedback_alpha_end}", flush=True)
-    teacher = Teacher(args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window,
-                      args.feedback_budget, seed=args.seed + 7919)  # fmt: skip
-    progress = Progress("tamer", n, warmup=args.tamer_learning_starts)
-    reset_seed = None if args.random_starts else args.seed
-    obs, _ = env.reset(seed=args.seed)
-    obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
-    ep_start, ep_return, ep_length, last_return = 0, 0.0, 0, float("nan")
-    for step in range(n):
-        feedback_alpha = args.feedback_alpha_start + (args.feedback_alpha_end - args.feedback_alpha_start) * step / max(
-            n - 1, 1
-        )  # the teacher gets stricter
-        if step < args.tamer_learning_starts:
-            action_t = torch.as_tensor(env.action_space.sample(), device=device)
-        else:
-            with torch.no_grad():
-                action_t = tamer_actor.get_action(obs_t.unsqueeze(0))[0][0]
-        # ALGO LOGIC: the teacher watches (s, a): the perfect answer (Eq. 4), then the person's (Teacher)
-        taught = not teacher.gone  # after the budget is spent, TAMER has nothing to learn from
-        with torch.no_grad():
-            q_star_sa, q_star_best = oracle_q(oracle_actor, oracle_qf, obs_t, action_t)
-        h_star = oracle_feedback(q_star_sa, q_star_best, feedback_alpha).item() if taught else 0.0
-        labelled = teacher(step, h_star)
-        if labelled:
-            buffer.feedback[labelled] = 1.0
-        next_obs, reward, terminated, truncated, info = env.step(action_t.cpu().numpy())
-        next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
-        buffer.obs[step], buffer.next_obs[step], buffer.actions[step] = obs_t, next_t, action_t
-        buffer.terminated[step], buffer.size = float(terminated), step + 1
-        ep_return, ep_length = ep_return + float(reward), ep_length + 1
-        last_step = step == n - 1 or (teacher.gone and args.budget_ends_forward_phase)
-        if terminated or truncated or last_step:  # tag the trajectory; a cut-off last one by where it stands
-            success = buffer.tag_episode(ep_start, step + 1, final_distance(info), args.success_distance)
-            charts = {"episodic_return": ep_return, "episodic_length": ep_length,
-                      "final_distance": final_distance(info), "episode_success": float(success)}  # fmt: skip
-            for tag, value in charts.items():
-                writer.add_scalar(f"charts/{tag}", value, step + 1)
-            last_return, ep_return, ep_length, ep_start = ep_return, 0.0, 0, step + 1
-            next_obs, _ = env.reset(seed=reset_seed)
-            next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
-        obs_t = next_t
-
-        if step >= args.tamer_learning_starts and taught:
-            idx = torch.randint(0, step + 1, (args.tamer_batch_size,), device=device)
-            obs_b = buffer.obs[idx]
-            with amp:
-                h_loss = tamer_loss(h_net, obs_b, buffer.actions[idx], buffer.feedback[idx])
-            h_optimizer.zero_grad(set_to_none=True)
-            h_loss.backward()
-            h_optimizer.step()
-            if step % args.tamer_policy_frequency == 0:  # the actor maximises H, SAC-style
-                update_actor(h_net, tamer_actor, obs_b, log_ent_coef, actor_optimizer, ent_coef_optimizer,
-                             -float(act_dim), args.bf16)  # fmt: skip
-        # TRY NOT TO MODIFY: logging and periodic evaluation
-        if (step + 1) % args.log_frequency == 0 or last_step:
-            scalars = {"losses/tamer_loss": h_loss.item(), "losses/tamer_entropy_coef": log_ent_coef.exp().item(),
-                       "feedback/positive": teacher.positives, "feedback/positive_rate": teacher.positives / (step + 1),
-                       "feedback/alpha": feedback_alpha, "charts/SPS": progress.sps(step + 1)}  # fmt: skip
-            for tag, value in scalars.items():
-                writer.add_scalar(tag, value, step + 1)
-        report = {"return": last_return}
-        if (step + 1) % args.eval_frequency == 0 or last_step:
-            t_eval = time.time()
-            report["eval return"] = evaluator("tamer", tamer_actor, step + 1, args.periodic_eval_episodes)[
-                "eval/tamer_return"]  # fmt: skip
-            progress.excluded += time.time() - t_eval
-        progress(step + 1, **report)
-        if last_step:
-            break
-
-    positives, n = teacher.positives, buffer.size
-    n_success = sum(d < args.success_distance for _, _, d in buffer.episodes)
-    print(f"[tamer] feedback +1 on {positives}/{n} steps ({positives / n:.1%}); "
-          f"{n_success}/{len(buffer.episodes)} episodes tagged success", flush=True)  # fmt: skip
-    return h_net, tamer_actor, {
-        "feedback/positive": positives, "feedback/perfect_positive": teacher.perfect_positives, "feedback/steps": n,
-        "feedback/positive_rate": positives / n, "sleep/success_episodes": int(n_success),
-        "sleep/episodes": len(buffer.episodes)}  # fmt: skip
-
-
-def sleep_phase(args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator, writer, device):
-    """The night: offline IQ-Learn (Eq. 2) on the buffer, the successful trajectories as the expert set."""
-    expert_idx, fallback_episodes = buffer.expert_indices()
-    if fallback_episodes:
-        print(f"[sleep] warning: no successful episode; using the {fallback_episodes} episodes that ended closest to "
-              "the goal as the expert set", flush=True)  # fmt: skip
-    print(f"[sleep] {expert_idx.numel()} expert transitions, {buffer.size} in the buffer", flush=True)
-    obs_dim, act_dim = buffer.obs.shape[1], buffer.actions.shape[1]
-    q_net = QEnsemble(obs_dim, act_dim, args.hidden_size, n=1).to(device)
-    q_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=1).to(device)
-    q_target.load_state_dict(q_net.state_dict())
-    low, high = tamer_actor.action_bias - tamer_actor.action_scale, tamer_actor.action_bias + tamer_actor.action_scale
-    inform_actor = Actor(obs_dim, act_dim, args.hidden_size, low, high).to(device)
-    if args.sleep_init_actor_from_tamer:
-        inform_actor.load_state_dict(tamer_actor.state_dict())
-    amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
-    q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_q_lr, foreach=True)
-    inform_optimizer = torch.optim.Adam(inform_actor.parameters(), lr=args.sleep_policy_lr, foreach=True)
-
-    n, B, total = buffer.size, args.sleep_batch_size, args.sleep_gradient_steps
-    is_expert = torch.cat([torch.zeros(B, dtype=torch.bool), torch.ones(B, dtype=torch.bool)]).to(device)
-    names = ("losses/iq_loss", "losses/iq_expert_term", "losses/iq_value_term", "losses/iq_chi2_term",
-             "losses/inform_actor_loss")  # fmt: skip
-    stats = {"sleep/expert_transitions": int(expert_idx.numel()), "sleep/expert_fallback": int(fallback_episodes > 0)}
-    losses, progress = {}, Progress("sleep", total)
-    for step in range(total):
-        replay = torch.randint(0, n, (B,), device=device)
-        expert = expert_idx[torch.randint(0, expert_idx.numel(), (B,), device=device)]
-        idx = torch.cat([replay, expert])
-        with amp:
-            loss, terms = iq_loss(q_net, q_target, buffer.obs[idx], buffer.actions[idx], buffer.next_obs[idx],
-                                  buffer.terminated[idx], is_expert, args.sleep_gamma, args.sleep_temperature,
-                                  args.sleep_chi2_coef, inform_actor)  # fmt: skip
-        q_optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        q_optimizer.step()
-        q_net.requires_grad_(False)  # the actor's gradient flows through Q, but none is kept on it
-        with amp:
-            pi_loss, _ = actor_loss(q_net, inform_actor, buffer.obs[replay], args.sleep_temperature)
-        inform_optimizer.zero_grad(set_to_none=True)
-        pi_loss.backward()
-        q_net.requires_grad_(True)
-        inform_optimizer.step()
-        soft_update(q_target, q_net, args.tau)
-
-        # TRY NOT TO MODIFY: logging (one host sync per 100 steps to catch divergence) and periodic evaluation
-        log_now = (step + 1) % args.log_frequency == 0 or step == total - 1
-        if log_now or (step + 1) % 100 == 0:
-            values = torch.stack([loss, *terms, pi_loss]).tolist()
-            if not all(map(math.isfinite, values)):
-                last = ", ".join(f"{k.split('/')[1]} {v:.4g}" for k, v in losses.items())
-                raise Diverged(f"the sleep loss diverged (NaN or inf) by gradient step {step + 1}; last finite losses: "
-                               f"{last or 'none yet'}; try a lower --sleep-q-lr or --sleep-policy-lr")  # fmt: skip
-            losses = dict(zip(names, values, strict=True))
-        for tag, value in (*losses.items(), ("sleep/SPS", progress.sps(step + 1))) if log_now else ():
-            writer.add_scalar(tag, value, step + 1)
-        if (step + 1) % args.sleep_eval_frequency == 0 or step == total - 1:
-            t_eval = time.time()
-            res = evaluator("inform", inform_actor, step + 1, args.periodic_eval_episodes)
-            progress.excluded += time.time() - t_eval
-            progress(step + 1, **{"iq_loss": losses.get("losses/iq_loss"), "eval return": res["eval/inform_return"]})
-        else:
-            progress(step + 1, iq_loss=losses.get("losses/iq_loss"))
-    return q_net, inform_actor, {**stats, **losses}
-
-
-def recovered_reward_stats(args: Args, buffer: ReplayBuffer, q_net: QEnsemble, inform_actor: Actor) -> dict:
-    """Eq. 3 on the buffer: the mean recovered reward of success and of failure transitions, for the record."""
-    reward_fn = RecoveredReward(q_net, inform_actor, args.sleep_gamma, args.sleep_temperature, samples=4)
-    b = [x[: buffer.size].cpu().numpy() for x in (buffer.obs, buffer.actions, buffer.next_obs, buffer.terminated)]
-    r_all, succ = reward_fn(*b), buffer.success[: buffer.size].cpu().numpy()
-    return {
-        "sleep/recovered_reward_success_mean": float(r_all[succ].mean()) if succ.any() else float("nan"),
-        "sleep/recovered_reward_failure_mean": float(r_all[~succ].mean()) if (~succ).any() else float("nan"),
-    }
-
-
-def obstacle_test(args: Args, policies: dict, generator: torch.Generator) -> tuple[dict, dict, dict]:
-    """The robustness test: each policy on the obstacle variant, every episode from the run's initial state, sampled
-    actions. Returns the metrics, the final distances, and the object's xy path of one deterministic episode per
-    policy with and without the boxes (Fig. 5a)."""
-    start, goal = start_and_goal(args.env_id, args.seed)
-    boxes = obstacle_positions(args.obstacle_layout, start, goal)
-    results = {
-        "obstacle/box_positions": boxes.round(4).tolist(),
-        "obstacle/min_box_distance_to_path": min(distance_to_segment(b, start, goal) for b in boxes),
-    }
-    distances, paths = {}, {"boxes": boxes, "start": start, "goal": goal}
-    env, plain = make_env(args.env_id, args.seed, obstacles=boxes), make_env(args.env_id, args.seed)
-    at_start = lambda episode: args.seed  # noqa: E731
-    for name, actor in policies.items():
-        res = evaluate(actor, env, args.obstacle_episodes, at_start, False, generator, args.success_distance)
-        det = evaluate(actor, env, 1, at_start, True, generator, args.success_distance)
-        det_plain = evaluate(actor, plain, 1, at_start, True, torch.Generator(), args.success_distance)
-        paths[f"{name}_obstacle"], paths[f"{name}_plain"] = det["paths"][0], det_plain["paths"][0]
-        distances[name] = res["distances"]
-        for key in ("final_distance", "final_distance_std", "success_rate", "return"):
-            results[f"eval/obstacle/{name}_{key}"] = res[key]
-        results[f"eval/obstacle/{name}_final_distance_deterministic"] = det["final_distance"]
-    env.close()
-    plain.close()
-    return results, distances, paths
-
-
-def authors_test(args: Args, policies: dict, generator: torch.Generator) -> dict:
-    """The authors' test: sampled actions, every episode from the run's initial state, on the plain env."""
-    env, results = make_env(args.env_id, args.seed), {}
-    for name, actor in policies.items():
-        res = evaluate(actor, env, args.authors_test_episodes, lambda ep: args.seed, False, generator,
-                       args.success_distance)  # fmt: skip
-        for key in ("return", "final_distance", "success_rate"):
-            results[f"eval/authors_test/{name}_{key}"] = res[key]
-    env.close()
-    return results
-
-
-def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals") -> dict:
-    run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
-    run_start = time.time()
-    run_dir = writer = env = evaluator = None
-    summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
-    status, phase, end_step = "completed", "startup", args.tamer_total_timesteps + args.sleep_gradient_steps
-    try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
-        with stop.held():  # a stop waits until the directory exists and is known, so the summary can go there
-            run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
-        print(f"run dir: {run_dir}", flush=True)
-        random.seed(args.seed)
-        np.random.seed(args.seed)
-        torch.manual_seed(args.seed)
-        torch.backends.cudnn.deterministic = args.torch_deterministic
-        if args.torch_deterministic:
-            os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # CUDA matmuls refuse determinism without it
-        torch.use_deterministic_algorithms(args.torch_deterministic)
-        torch.set_num_threads(args.num_threads)
-        device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
-
-        writer = HeldWriter(run_dir, stop)
-        writer.add_text(
-            "hyperparameters",
-            "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
-        )
-        env, evaluator = make_env(args.env_id, args.seed), Evaluator(args, writer)
-        obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
-
-        # ---- oracle: the simulated teacher (docs/protocol.md, "Oracles and the expert bar")
-        phase, t0 = "oracle", time.time()
-        if oracle_ckpt is not None:
-            oracle_actor, oracle_qf = oracle_from_checkpoint(oracle_ckpt, device)
-            steps = oracle_ckpt.get("training_steps", "?")
-            print(f"[oracle] loaded {oracle_ckpt['path']} ({steps} SAC steps)", flush=True)
-        else:
-            print(f"[oracle] training SAC on the env reward for {args.oracle_total_timesteps} steps", flush=True)
-            oracle_actor, oracle_qf, summary["sps/oracle"] = train_oracle(args, writer, device)
-            if args.save_model:
-                save_oracle(f"{run_dir}/oracle.pt", args, oracle_actor, oracle_qf, env.action_space)
-        for p in (*oracle_actor.parameters(), *oracle_qf.parameters()):
-            p.requires_grad_(False)
-        summary["time/oracle_s"] = time.time() - t0
-        evaluator("oracle", oracle_actor, 0, args.periodic_eval_episodes)
-
-        # ---- forward phase ("day"): TAMER with simulated feedback, every transition remembered
-        phase, t0, eval_s0 = "tamer", time.time(), evaluator.seconds
-        buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, act_dim, device)
-        h_net, tamer_actor, stats = forward_phase(args, env, oracle_actor, oracle_qf, buffer, evaluator, writer, device)
-        summary.update(stats)
-        summary["time/tamer_s"] = time.time() - t0 - (evaluator.seconds - eval_s0)
-        summary["sps/tamer"] = summary["feedback/steps"] / max(summary["time/tamer_s"], 1e-9)
-        if args.save_model:
-            save_actor(f"{run_dir}/tamer_actor.pt", tamer_actor, env_id=args.env_id)
-            save_critic(f"{run_dir}/tamer_h.pt", h_net, obs_dim, act_dim, env_id=args.env_id)
-
-        # ---- sleep phase ("night"): offline IQ-Learn on the buffer, no environment steps
-        phase, t0, eval_s0 = "sleep", time.time(), evaluator.seconds
-        q_net, inform_actor, stats = sleep_phase(args, buffer, tamer_actor, evaluator, writer, device)
-        summary.update(stats)
-        summary["time/sleep_s"] = time.time() - t0 - (evaluator.seconds - eval_s0)
-        summary["sps/sleep"] = args.sleep_gradient_steps / max(summary["time/sleep_s"], 1e-9)
-        if args.save_model:
-            save_actor(f"{run_dir}/inform_actor.pt", inform_actor, env_id=args.env_id)
-            save_critic(f"{run_dir}/inform_critic.pt", q_net, obs_dim, act_dim, env_id=args.env_id,
-                        gamma=args.sleep_gamma, temperature=args.sleep_temperature)  # fmt: skip
-
-        # ---- the recovered reward (Eq. 3), then the final evaluation and the obstacle robustness test
-        phase = "reward"
-        summary.update(recovered_reward_stats(args, buffer, q_net, inform_actor))
-        phase, policies = "eval", {"oracle": oracle_actor, "tamer": tamer_actor, "inform": inform_actor}
-        print("[eval] final evaluation", flush=True)
-        for name, actor in policies.items():
-            evaluator(name, actor, end_step, args.eval_episodes)
-        t = time.time()
-        obstacle, distances, paths = obstacle_test(args, policies, evaluator.generator)
-        summary.update(obstacle)
-        np.savez(f"{run_dir}/obstacle_distances.npz", **distances)
-        np.savez(f"{run_dir}/obstacle_paths.npz", **paths)
-        summary.update(authors_test(args, policies, evaluator.generator))
-        for tag, value in summary.items():
-            if tag.startswith(("eval/obstacle/", "eval/authors_test/", "obstacle/min")):
-                writer.add_scalar(tag, value, end_step)
-        evaluator.seconds += time.time() - t
-        if args.capture_video:  # after every number is in: filming changes none of them
-            phase = "video"
-            record_videos(args, policies, paths["boxes"], evaluator.reset_seed(0), run_dir)
-    except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
-        status, stop.broken_pipe = "interrupted", isinstance(e, BrokenPipeError)
-    except Diverged as e:
-        status = "diverged"
-        summary["error"] = str(e)
-
-    # the summary first, then the messages: no signal cuts this short (StopSignals only notes the later ones)
-    stop.finished = True
-    if run_dir is not None:
-        summary = {**(evaluator.final if evaluator else {}), **summary,
-                   "time/eval_s": evaluator.seconds if evaluator else 0.0,
-                   "oracle_path": oracle_ckpt["path"] if oracle_ckpt is not None else None,
-                   "wall_time_s": time.time() - run_start, "seed": args.seed, "script": os.path.basename(__file__),
-                   "status": status, "args": asdict(args)}  # fmt: skip
-        if status != "completed":
-            summary["phase"] = phase
-        if status == "interrupted":
-            summary["signal"] = stop.reason()
-        write_json_atomic(f"{run_dir}/summary.json", summary)
-    for closing in (env, evaluator.env if evaluator else None, writer):
-        if closing is not None:
-            closing.close()
-    if status == "interrupted":
-        saved = f"what finished is saved in {run_dir}" if run_dir else "no run was made"
-        say(f"interrupted ({stop.reason()}) during the {phase} phase; {saved}", sys.stderr)
-    elif status == "diverged":
-        say(f"error: {summary['error']}", sys.stderr)
-    if run_dir is not None:
-        print_results(summary, run_dir)
-    summary.setdefault("status", status)
-    return summary
-
-
-# ---------------------------------------------------------------------------------------------------------------
-# TRY NOT TO MODIFY: the armour. Checks before anything is written, checkpoints, files, signals, --evaluate
-
-
-class InputError(Exception):
-    """Bad input from the user: a flag value, a file. Reported as one line, before anything is written."""
-
-
-NON_NEGATIVE_INTS = ("seed", "teacher_delay")  # every other integer flag (--feedback-budget too) must be >= 1
-FLOAT_RANGES = {
-    "tau": "(0, 1]",
-    "sleep_chi2_coef": "[0, inf)",
-    **dict.fromkeys(
-        (
-            "feedback_alpha_start",
-            "feedback_alpha_end",
-            "sleep_gamma",
-            "oracle_gamma",
-            "teacher_noise",
-            "teacher_sparsity",
-        ),
-        "[0, 1]",
-    ),
-}
-# every other float flag (learning rates, temperature, success distance) must be in (0, inf)  # fmt: skip
-
-
-def check_args(args: Args) -> None:
-    """What tyro cannot know: the env id, ranges, flags that exclude each other. Raises InputError."""
-    if args.env_id not in ENV_IDS:
-        raise InputError(f"unknown --env-id {args.env_id!r}; this script trains on one of {', '.join(ENV_IDS)}")
-    if args.env_id == "Pusher-v4" and mujoco_major() >= 3:
-        raise InputError("Pusher-v4 needs mujoco<3 (Gymnasium issue 950); use --env-id Pusher-v5, or run in a "
-                         "separate venv with `pip install mujoco==2.3.7`")  # fmt: skip
-    for f in fields(args):
-        value, flag, low = getattr(args, f.name), "--" + f.name.replace("_", "-"), int(f.name not in NON_NEGATIVE_INTS)
-        if f.type in (int, int | None) and value is not None and value < low:
-            raise InputError(f"{flag} must be >= {low}, got {value}")
-        interval = FLOAT_RANGES.get(f.name, "(0, inf)") if f.type is float else None
-        if interval and not (
-            (value >= 0.0 if interval[0] == "[" else value > 0.0)  # NaN fails both tests
-            and (value <= 1.0 if interval.endswith("1]") else value < math.inf)
-        ):
-            raise InputError(f"{flag} must be in {interval}, got {value}")  # fmt: skip
-    if args.tamer_learning_starts >= args.tamer_total_timesteps:
-        raise InputError(f"--tamer-learning-starts ({args.tamer_learning_starts}) must be below "
-                         f"--tamer-total-timesteps ({args.tamer_total_timesteps}), or H is never trained")  # fmt: skip
-    if max(args.tamer_batch_size, args.sleep_batch_size) > args.tamer_total_timesteps:
-        raise InputError(f"--tamer-batch-size ({args.tamer_batch_size}) and --sleep-batch-size "
-                         f"({args.sleep_batch_size}) must not exceed --tamer-total-timesteps "
-                         f"({args.tamer_total_timesteps}), the size of the buffer")  # fmt: skip
-    if args.oracle_path is not None and args.train_oracle:
-        raise InputError("--oracle-path and --train-oracle exclude each other; pass one of them")
-
-
-def mujoco_major() -> int:
-    import mujoco
-
-    return int(mujoco.__version__.split(".")[0])
-
-
-def shipped_oracle_paths(env_id: str) -> list[str]:
-    """Where the shipped teacher may be: beside the script (a clone) and under the working directory (a copy)."""
-    name = os.path.join("oracles", f"{env_id}__sac_oracle.pt")
-    return list(dict.fromkeys([os.path.join(REPO_DIR, name), os.path.abspath(name)]))
-
-
-def load_oracle(args: Args) -> dict | None:
-    """The oracle checkpoint to use (--oracle-path, else the shipped one), or None to train one here."""
-    path = args.oracle_path
-    if path is None and not args.train_oracle:
-        path = next((p for p in shipped_oracle_paths(args.env_id) if os.path.isfile(p)), None)
-        if path is None:  # a copied script: say so before an hour of training starts
-            print(f"[oracle] no shipped teacher found (looked for {' and '.join(shipped_oracle_paths(args.env_id))}); "
-                  f"training one here for {args.oracle_total_timesteps} env steps, about "
-                  f"{args.oracle_total_timesteps / 100 / 60:.0f} min on one core at ~100 steps/s. To skip this, pass "
-                  "--oracle-path PATH (a checkpoint of oracle_train.py, e.g. the repo's oracles/), or --train-oracle "
-                  "to silence this note", file=sys.stderr, flush=True)  # fmt: skip
-    if path is not None:
-        return {**read_checkpoint(path, "--oracle-path", args.env_id), "path": path}
-    if args.oracle_batch_size > args.oracle_total_timesteps:
-        raise InputError(f"--oracle-batch-size ({args.oracle_batch_size}) exceeds --oracle-total-timesteps "
-                         f"({args.oracle_total_timesteps})")  # fmt: skip
-    if args.oracle_learning_starts >= args.oracle_total_timesteps:
-        raise InputError(f"--oracle-learning-starts ({args.oracle_learning_starts}) must be below "
-                         f"--oracle-total-timesteps ({args.oracle_total_timesteps})")  # fmt: skip
-    return None
 
 
 def env_shapes(env_id: str) -> tuple[int, int]:
@@ -1114,23 +1138,31 @@ def read_checkpoint(path: str, flag: str, env_id: str) -> dict:
         message = f"cannot be read as a weights-only torch checkpoint ({type(e).__name__})"
         raise InputError(f"{flag} {path}: {message}") from None
     oracle = flag == "--oracle-path"
-    networks = ("actor_state_dict", "qf_state_dict") if oracle else ("actor_state_dict" if "actor_state_dict" in
-                                                                        ckpt else "state_dict",)  # fmt: skip
+    networks = (
+        ("actor_state_dict", "qf_state_dict")
+        if oracle
+        else ("actor_state_dict" if "actor_state_dict" in ckpt else "state_dict",)
+    )
     required = ("env_id", "kwargs", *networks, "action_low", "action_high")
     if not isinstance(ckpt, dict) or any(k not in ckpt for k in required) or not isinstance(ckpt["kwargs"], dict):
-        raise InputError(f"{flag} {path}: not an {'oracle' if oracle else 'actor'} checkpoint (needs keys "
-                         f"{', '.join(required)})")  # fmt: skip
+        raise InputError(
+            f"{flag} {path}: not an {'oracle' if oracle else 'actor'} checkpoint (needs keys {', '.join(required)})"
+        )
     if ckpt["env_id"] != env_id:
         raise InputError(f"{flag} {path}: trained on {ckpt['env_id']}, not {env_id}; pass --env-id")
-    kw, (obs_dim, act_dim) = ckpt["kwargs"], env_shapes(env_id)
+    kw = ckpt["kwargs"]
+    (obs_dim, act_dim) = env_shapes(env_id)
     if (kw.get("obs_dim"), kw.get("act_dim")) != (obs_dim, act_dim):
-        raise InputError(f"{flag} {path}: shapes obs {kw.get('obs_dim')} act {kw.get('act_dim')} do not match "
-                         f"{env_id} (obs {obs_dim}, act {act_dim})")  # fmt: skip
+        raise InputError(
+            f"{flag} {path}: shapes obs {kw.get('obs_dim')} act {kw.get('act_dim')} do not match "
+            f"{env_id} (obs {obs_dim}, act {act_dim})"
+        )
     try:
         oracle_from_checkpoint(ckpt, torch.device("cpu")) if oracle else actor_from_checkpoint(ckpt)
     except Exception as e:
-        raise InputError(f"{flag} {path}: the networks do not load ({type(e).__name__}: "
-                         f"{' '.join(str(e).split())[:100]})") from None  # fmt: skip
+        raise InputError(
+            f"{flag} {path}: the networks do not load ({type(e).__name__}: {' '.join(str(e).split())[:100]})"
+        ) from None
     return ckpt
 
 
@@ -1150,24 +1182,40 @@ def actor_from_checkpoint(ckpt: dict) -> Actor:  # a saved actor, or an oracle's
     return actor
 
 
-def make_run_dir(run_name: str) -> str:
-    """runs/{run_name}, never an existing directory: a clash gets a numeric suffix."""
-    path, n = f"runs/{run_name}", 0
-    while True:
-        try:
-            os.makedirs(path)
-            return path
-        except FileExistsError:
-            n += 1
-            path = f"runs/{run_name}_{n}"
+def shipped_oracle_paths(env_id: str) -> list[str]:
+    """Where the shipped teacher may be: beside the script (a clone) and under the working directory (a copy)."""
+    name = os.path.join("oracles", f"{env_id}__sac_oracle.pt")
+    return list(dict.fromkeys([os.path.join(REPO_DIR, name), os.path.abspath(name)]))
 
 
-def write_json_atomic(path: str, data: dict) -> None:
-    # strict JSON: a metric that does not exist in this run (e.g. no success episodes) is null, not NaN
-    data = {k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in data.items()}
-    with open(path + ".tmp", "w") as f:
-        json.dump(data, f, indent=2, allow_nan=False)
-    os.replace(path + ".tmp", path)
+def load_oracle(args: Args) -> dict | None:
+    """The oracle checkpoint to use (--oracle-path, else the shipped one), or None to train one here."""
+    path = args.oracle_path
+    if path is None and not args.train_oracle:
+        path = next((p for p in shipped_oracle_paths(args.env_id) if os.path.isfile(p)), None)
+        if path is None:  # a copied script: say so before an hour of training starts
+            print(
+                f"[oracle] no shipped teacher found (looked for {' and '.join(shipped_oracle_paths(args.env_id))}); "
+                f"training one here for {args.oracle_total_timesteps} env steps, about "
+                f"{args.oracle_total_timesteps / 100 / 60:.0f} min on one core at ~100 steps/s. To skip this, pass "
+                "--oracle-path PATH (a checkpoint of oracle_train.py, e.g. the repo's oracles/), or --train-oracle "
+                "to silence this note",
+                file=sys.stderr,
+                flush=True,
+            )
+    if path is not None:
+        return {**read_checkpoint(path, "--oracle-path", args.env_id), "path": path}
+    if args.oracle_batch_size > args.oracle_total_timesteps:
+        raise InputError(
+            f"--oracle-batch-size ({args.oracle_batch_size}) exceeds --oracle-total-timesteps "
+            f"({args.oracle_total_timesteps})"
+        )
+    if args.oracle_learning_starts >= args.oracle_total_timesteps:
+        raise InputError(
+            f"--oracle-learning-starts ({args.oracle_learning_starts}) must be below "
+            f"--oracle-total-timesteps ({args.oracle_total_timesteps})"
+        )
+    return None
 
 
 def save_atomic(obj: dict, path: str) -> None:
@@ -1182,9 +1230,11 @@ def state_dict_cpu(net: nn.Module) -> dict:
 
 def save_actor(path: str, actor: Actor, **extra) -> None:
     kwargs = {"obs_dim": actor.fc1.in_features, "act_dim": actor.fc_mean.out_features, "hidden": actor.fc1.out_features}
-    low, high = (actor.action_bias - actor.action_scale).cpu(), (actor.action_bias + actor.action_scale).cpu()
-    save_atomic({"state_dict": state_dict_cpu(actor), "kwargs": kwargs, "action_low": low, "action_high": high,
-                 **extra}, path)  # fmt: skip
+    low = (actor.action_bias - actor.action_scale).cpu()
+    high = (actor.action_bias + actor.action_scale).cpu()
+    save_atomic(
+        {"state_dict": state_dict_cpu(actor), "kwargs": kwargs, "action_low": low, "action_high": high, **extra}, path
+    )
 
 
 def save_critic(path: str, q_net: QEnsemble, obs_dim: int, act_dim: int, **extra) -> None:
@@ -1194,13 +1244,95 @@ def save_critic(path: str, q_net: QEnsemble, obs_dim: int, act_dim: int, **extra
 
 def save_oracle(path: str, args: Args, actor: Actor, qf: QEnsemble, action_space: gym.spaces.Box) -> None:
     """oracle_train.py's format, so --oracle-path loads either."""
-    obs_dim, act_dim = actor.fc1.in_features, actor.fc_mean.out_features
-    save_atomic({"algorithm": "sac", "env_id": args.env_id, "obs_shape": [obs_dim], "act_shape": [act_dim],
-                 "kwargs": {"obs_dim": obs_dim, "act_dim": act_dim, "hidden": args.hidden_size},
-                 "action_low": torch.as_tensor(action_space.low), "action_high": torch.as_tensor(action_space.high),
-                 "actor_state_dict": state_dict_cpu(actor), "qf_state_dict": state_dict_cpu(qf),
-                 "training_steps": args.oracle_total_timesteps, "training_seed": args.seed,
-                 "random_starts": args.oracle_random_starts}, path)  # fmt: skip
+    obs_dim = actor.fc1.in_features
+    act_dim = actor.fc_mean.out_features
+    save_atomic(
+        {
+            "algorithm": "sac",
+            "env_id": args.env_id,
+            "obs_shape": [obs_dim],
+            "act_shape": [act_dim],
+            "kwargs": {"obs_dim": obs_dim, "act_dim": act_dim, "hidden": args.hidden_size},
+            "action_low": torch.as_tensor(action_space.low),
+            "action_high": torch.as_tensor(action_space.high),
+            "actor_state_dict": state_dict_cpu(actor),
+            "qf_state_dict": state_dict_cpu(qf),
+            "training_steps": args.oracle_total_timesteps,
+            "training_seed": args.seed,
+            "random_starts": args.oracle_random_starts,
+        },
+        path,
+    )
+
+
+class InputError(Exception):
+    """Bad input from the user: a flag value, a file. Reported as one line, before anything is written."""
+
+
+NON_NEGATIVE_INTS = ("seed", "teacher_delay")  # every other integer flag (--feedback-budget too) must be >= 1
+
+
+FLOAT_RANGES = {
+    "tau": "(0, 1]",
+    "sleep_chi2_coef": "[0, inf)",
+    **dict.fromkeys(
+        (
+            "feedback_alpha_start",
+            "feedback_alpha_end",
+            "sleep_gamma",
+            "oracle_gamma",
+            "teacher_noise",
+            "teacher_sparsity",
+        ),
+        "[0, 1]",
+    ),
+}
+
+
+def check_args(args: Args) -> None:
+    """What tyro cannot know: the env id, ranges, flags that exclude each other. Raises InputError."""
+    if args.env_id not in ENV_IDS:
+        raise InputError(f"unknown --env-id {args.env_id!r}; this script trains on one of {', '.join(ENV_IDS)}")
+    if args.env_id == "Pusher-v4" and mujoco_major() >= 3:
+        raise InputError(
+            "Pusher-v4 needs mujoco<3 (Gymnasium issue 950); use --env-id Pusher-v5, or run in a "
+            "separate venv with `pip install mujoco==2.3.7`"
+        )
+    for f in fields(args):
+        value = getattr(args, f.name)
+        flag = "--" + f.name.replace("_", "-")
+        low = int(f.name not in NON_NEGATIVE_INTS)
+        if f.type in (int, int | None) and value is not None and value < low:
+            raise InputError(f"{flag} must be >= {low}, got {value}")
+        interval = FLOAT_RANGES.get(f.name, "(0, inf)") if f.type is float else None
+        if interval and not (
+            (value >= 0.0 if interval[0] == "[" else value > 0.0)  # NaN fails both tests
+            and (value <= 1.0 if interval.endswith("1]") else value < math.inf)
+        ):
+            raise InputError(f"{flag} must be in {interval}, got {value}")
+    if args.tamer_learning_starts >= args.tamer_total_timesteps:
+        raise InputError(
+            f"--tamer-learning-starts ({args.tamer_learning_starts}) must be below "
+            f"--tamer-total-timesteps ({args.tamer_total_timesteps}), or H is never trained"
+        )
+    if max(args.tamer_batch_size, args.sleep_batch_size) > args.tamer_total_timesteps:
+        raise InputError(
+            f"--tamer-batch-size ({args.tamer_batch_size}) and --sleep-batch-size "
+            f"({args.sleep_batch_size}) must not exceed --tamer-total-timesteps "
+            f"({args.tamer_total_timesteps}), the size of the buffer"
+        )
+    if args.oracle_path is not None and args.train_oracle:
+        raise InputError("--oracle-path and --train-oracle exclude each other; pass one of them")
+
+
+def mujoco_major() -> int:
+    import mujoco
+
+    return int(mujoco.__version__.split(".")[0])
+
+
+class Diverged(Exception):
+    """The sleep loss became NaN or inf."""
 
 
 class StopSignals:
@@ -1210,7 +1342,11 @@ class StopSignals:
     then waits for the thread's next flush, up to 120 s. Later signals, and any after the summary, are only noted."""
 
     def __init__(self):
-        self.received, self.holding, self.pending, self.finished, self.broken_pipe = [], 0, False, False, False
+        self.received = []
+        self.holding = 0
+        self.pending = False
+        self.finished = False
+        self.broken_pipe = False
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
             if signal.getsignal(sig) is not signal.SIG_IGN:
                 signal.signal(sig, self.handler)
@@ -1276,13 +1412,70 @@ def say(text: str, file=None) -> None:
             os.dup2(os.open(os.devnull, os.O_WRONLY), file.fileno())  # the exit's final flush then succeeds too
 
 
+def make_run_dir(run_name: str) -> str:
+    """runs/{run_name}, never an existing directory: a clash gets a numeric suffix."""
+    path = f"runs/{run_name}"
+    n = 0
+    while True:
+        try:
+            os.makedirs(path)
+            return path
+        except FileExistsError:
+            n += 1
+            path = f"runs/{run_name}_{n}"
+
+
+def write_json_atomic(path: str, data: dict) -> None:
+    # strict JSON: a metric that does not exist in this run (e.g. no success episodes) is null, not NaN
+    data = {k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in data.items()}
+    with open(path + ".tmp", "w") as f:
+        json.dump(data, f, indent=2, allow_nan=False)
+    os.replace(path + ".tmp", path)
+
+
+def end_run(args, summary, status, phase, run_dir, run_start, oracle_ckpt, evaluator, closing, stop) -> dict:
+    """The summary first, then the messages: no signal cuts this short (StopSignals only notes the later ones)."""
+    stop.finished = True
+    if run_dir is not None:
+        summary = {
+            **(evaluator.final if evaluator else {}),
+            **summary,
+            "time/eval_s": evaluator.seconds if evaluator else 0.0,
+            "oracle_path": oracle_ckpt["path"] if oracle_ckpt is not None else None,
+            "wall_time_s": time.time() - run_start,
+            "seed": args.seed,
+            "script": os.path.basename(__file__),
+            "status": status,
+            "args": asdict(args),
+        }
+        if status != "completed":
+            summary["phase"] = phase
+        if status == "interrupted":
+            summary["signal"] = stop.reason()
+        write_json_atomic(f"{run_dir}/summary.json", summary)
+    for thing in (*closing, evaluator.env if evaluator else None):
+        if thing is not None:
+            thing.close()
+    if status == "interrupted":
+        saved = f"what finished is saved in {run_dir}" if run_dir else "no run was made"
+        say(f"interrupted ({stop.reason()}) during the {phase} phase; {saved}", sys.stderr)
+    elif status == "diverged":
+        say(f"error: {summary['error']}", sys.stderr)
+    if run_dir is not None:
+        print_results(summary, run_dir)
+    summary.setdefault("status", status)
+    return summary
+
+
 def print_results(summary: dict, run_dir: str) -> None:
     if summary["status"] == "completed":
         for p in POLICIES:
             e = {k[len("eval/") :].replace(p, "@"): v for k, v in summary.items() if k.startswith("eval/")}
-            say(f"{p:>6}: return {e['@_return']:.2f} (sampled {e['@_return_sampled']:.2f}) | final distance "
+            say(
+                f"{p:>6}: return {e['@_return']:.2f} (sampled {e['@_return_sampled']:.2f}) | final distance "
                 f"{e['@_final_distance']:.3f} | success {e['@_success_rate']:.2f} | obstacle distance "
-                f"{e['obstacle/@_final_distance']:.3f} +- {e['obstacle/@_final_distance_std']:.3f}")  # fmt: skip
+                f"{e['obstacle/@_final_distance']:.3f} +- {e['obstacle/@_final_distance_std']:.3f}"
+            )
         say(" | ".join(f"{k} {v:.0f}" for k, v in summary.items() if k.startswith(("time/", "sps/"))))
     say(f"{summary['status']} in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json")
 
@@ -1304,12 +1497,16 @@ def evaluate_saved(args: Args) -> dict:
 # ffmpeg that Gymnasium's RecordVideo reaches through moviepy. A fixed camera in the model (mujoco 2.3.7 cannot set a
 # free camera's lookat) looks down on the table from behind the goal: arm, object (white), goal (red), boxes (blue).
 VIDEO_CAMERA = {"lookat": (0.42, -0.2, -0.3), "distance": 1.0, "elevation": -75.0}  # metres, degrees
+
+
 VIDEO_SIZE = 480  # pixels, square; a multiple of 16, as H.264 wants
 
 
 def video_camera() -> dict:
     """The camera's MJCF attributes: VIDEO_CAMERA's distance from its lookat, seen from +x (image up is -x)."""
-    (x, y, z), d, el = VIDEO_CAMERA["lookat"], VIDEO_CAMERA["distance"], math.radians(VIDEO_CAMERA["elevation"])
+    x, y, z = VIDEO_CAMERA["lookat"]
+    d = VIDEO_CAMERA["distance"]
+    el = math.radians(VIDEO_CAMERA["elevation"])
     pos = f"{x + d * math.cos(el):.4f} {y} {z - d * math.sin(el):.4f}"
     xyaxes = f"0 1 0 {math.sin(el):.4f} 0 {math.cos(el):.4f}"
     return {"name": "inform_video", "mode": "fixed", "pos": pos, "xyaxes": xyaxes}
@@ -1327,8 +1524,10 @@ def check_video(env_id: str) -> None:
 
         imageio_ffmpeg.get_ffmpeg_exe()
     except Exception as e:
-        raise InputError(f"--capture-video writes mp4 with imageio-ffmpeg, which is missing ({type(e).__name__}): "
-                         "pip install imageio-ffmpeg==0.8.1") from None  # fmt: skip
+        raise InputError(
+            f"--capture-video writes mp4 with imageio-ffmpeg, which is missing ({type(e).__name__}): "
+            "pip install imageio-ffmpeg==0.8.1"
+        ) from None
     try:
         with warnings.catch_warnings():  # a failing backend warns before it raises: one line is enough
             warnings.simplefilter("ignore")
@@ -1337,17 +1536,20 @@ def check_video(env_id: str) -> None:
             frame = env.render()
             env.close()
     except Exception as e:
-        raise InputError(f"--capture-video: MuJoCo cannot render with MUJOCO_GL={os.environ.get('MUJOCO_GL')} "
-                         f"({type(e).__name__}); install EGL (Debian: apt-get install libegl1 libegl-mesa0) or "
-                         "OSMesa (apt-get install libosmesa6, then MUJOCO_GL=osmesa)") from None  # fmt: skip
+        raise InputError(
+            f"--capture-video: MuJoCo cannot render with MUJOCO_GL={os.environ.get('MUJOCO_GL')} "
+            f"({type(e).__name__}); install EGL (Debian: apt-get install libegl1 libegl-mesa0) or "
+            "OSMesa (apt-get install libosmesa6, then MUJOCO_GL=osmesa)"
+        ) from None
     if not isinstance(frame, np.ndarray) or frame.shape != (16, 16, 3):
         raise InputError(f"--capture-video: MuJoCo rendered no image with MUJOCO_GL={os.environ.get('MUJOCO_GL')}")
 
 
 def video_env(env_id: str, seed: int, obstacles=None, size: int = VIDEO_SIZE) -> gym.Env:
     """The evaluation env, rendering every reset and step into a list (Gymnasium's RenderCollection)."""
-    return gym.wrappers.RenderCollection(make_env(env_id, seed, obstacles, render_mode="rgb_array", width=size,
-                                                  height=size))  # fmt: skip
+    return gym.wrappers.RenderCollection(
+        make_env(env_id, seed, obstacles, render_mode="rgb_array", width=size, height=size)
+    )
 
 
 def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
@@ -1356,8 +1558,15 @@ def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
 
     tmp = path[: -len(".mp4")] + ".tmp.mp4"  # ffmpeg reads the container from the extension
     try:
-        writer = imageio_ffmpeg.write_frames(tmp, frames[0].shape[1::-1], fps=fps, codec="libx264", quality=6,
-                                             macro_block_size=16, ffmpeg_log_level="error")  # fmt: skip
+        writer = imageio_ffmpeg.write_frames(
+            tmp,
+            frames[0].shape[1::-1],
+            fps=fps,
+            codec="libx264",
+            quality=6,
+            macro_block_size=16,
+            ffmpeg_log_level="error",
+        )
         writer.send(None)
         for frame in frames:
             writer.send(np.ascontiguousarray(frame))
@@ -1374,16 +1583,21 @@ def record_videos(args: Args, policies: dict, boxes: np.ndarray, reset_seed: int
     no other random stream moves. Writes videos/{policy}[_obstacle].mp4 and videos/videos.json (frames, final
     distance and reset seed of each)."""
     os.makedirs(f"{run_dir}/videos", exist_ok=True)
-    record, t = {}, time.time()
+    record = {}
+    t = time.time()
     for suffix, obstacles, seed in (("", None, reset_seed), ("_obstacle", boxes, args.seed)):
         env = video_env(args.env_id, args.seed, obstacles)
         for name, actor in policies.items():
             res = evaluate(actor, env, 1, lambda ep, s=seed: s, True, torch.Generator(), args.success_distance)
             frames = env.render()
             write_video(f"{run_dir}/videos/{name}{suffix}.mp4", frames, env.metadata["render_fps"])
-            record[f"{name}{suffix}"] = {"file": f"{name}{suffix}.mp4", "frames": len(frames),
-                                         "size": list(frames[0].shape), "final_distance": res["final_distance"],
-                                         "reset_seed": seed}  # fmt: skip
+            record[f"{name}{suffix}"] = {
+                "file": f"{name}{suffix}.mp4",
+                "frames": len(frames),
+                "size": list(frames[0].shape),
+                "final_distance": res["final_distance"],
+                "reset_seed": seed,
+            }
         env.close()
     write_json_atomic(f"{run_dir}/videos/videos.json", record)
     print(f"[video] {len(record)} episodes filmed in {time.time() - t:.1f}s: {run_dir}/videos/", flush=True)
