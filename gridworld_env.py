@@ -31,7 +31,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-ROWS, COLS = 6, 6
+ROWS = 6
+COLS = 6
 BLOCKED = frozenset({(1, 1), (2, 1), (3, 1), (4, 1), (2, 3), (2, 4)})
 # Walls between two free cells, as pairs of (row, col); read off the drawing in the module docstring.
 PLAIN_WALLS = frozenset(
@@ -51,8 +52,10 @@ VARIANT_WALLS = {"plain": PLAIN_WALLS, "wall": WALL_VARIANT_WALLS}
 
 CELLS = [(r, c) for r in range(ROWS) for c in range(COLS) if (r, c) not in BLOCKED]  # cell index -> (row, col)
 CELL_INDEX = {rc: i for i, rc in enumerate(CELLS)}
-N_CELLS, N_ACTIONS = len(CELLS), 4
-START, GOAL = 4, 5
+N_CELLS = len(CELLS)
+N_ACTIONS = 4
+START = 4
+GOAL = 5
 START_SET = (7, 8, 9, 12, 15, 16, 17, 20, 21, 22)  # the authors' generalisation starts
 MOVES = ((-1, 0), (1, 0), (0, -1), (0, 1))  # up, down, left, right
 ACTION_NAMES = ("up", "down", "left", "right")

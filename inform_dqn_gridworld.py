@@ -1,12 +1,14 @@
-"""INFORM on the Knox & Stone maze: TAMER from a simulated teacher's yes/no feedback ("day"), then offline
-IQ-Learn on the remembered transitions ("sleep"), giving a far-sighted policy and a recovered reward.
+"""INFORM on the Knox & Stone maze: TAMER learns from a simulated teacher's yes/no feedback ("day"), then offline
+IQ-Learn on the remembered transitions ("sleep") gives a far-sighted policy and a recovered reward.
 
-Reproduces the gridworld experiment of Tarakli & Di Nuovo, "Learning while Sleeping" (ICDL 2024), Algorithm 1,
-Fig. 3 (episode length of TAMER, INFORM and the expert). What the paper leaves open: docs/protocol.md.
+Tarakli & Di Nuovo, "Learning while Sleeping" (ICDL 2024): Algorithm 1 and Fig. 3 (episode length of TAMER, INFORM
+and the expert) on the 30-cell maze; what the paper leaves open is in docs/protocol.md. Read top to bottom down to
+`main`: Args, the network, Eq. 1-4 and the teacher, the buffer, the day, the night, main. Everything else comes after
+main.
 
     python inform_dqn_gridworld.py --seed 1
     python inform_dqn_gridworld.py --teacher-noise 0.2 --teacher-delay 1 --credit-window 2   # a human-like teacher
-    python inform_dqn_gridworld.py --teacher human --tamer-learning-starts 32   # teach it yourself (docs/teachers.md)
+    python inform_dqn_gridworld.py --teacher human   # teach it yourself (docs/teachers.md)
 """
 
 import collections
@@ -21,7 +23,7 @@ import signal
 import sys
 import time
 import zipfile
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from typing import Literal
 
 
@@ -91,12 +93,12 @@ class Args:
     # Forward phase: TAMER (Eq. 1) with simulated feedback (Eq. 4)
     tamer_total_timesteps: int = 10000
     """environment steps of the forward phase"""
-    tamer_learning_rate: float = 1e-3
-    """Adam learning rate of the feedback model H"""
-    tamer_batch_size: int = 32
-    """batch size of the H regression"""
     tamer_learning_starts: int | None = None
     """environment steps before H is trained (None: 1000; with --teacher human 1, H learns from your first answer)"""
+    tamer_batch_size: int = 32
+    """batch size of the H regression"""
+    tamer_h_lr: float = 1e-3
+    """Adam learning rate of the feedback model H"""
     tamer_train_frequency: int = 1
     """environment steps between H updates"""
     start_e: float | None = None
@@ -124,7 +126,7 @@ class Args:
     credit_window: int = 1
     """each arriving signal labels this many most recent transitions (teacher_delay + 1 covers the right one)"""
     feedback_budget: int | None = None
-    """the teacher leaves after this many +1 signals (None: never); then H and the TAMER policy are frozen"""
+    """the teacher leaves after this many +1 signals (None: never); then TAMER stops learning"""
     budget_ends_forward_phase: bool = False
     """when the budget is spent, end the forward phase and sleep (otherwise keep acting, without feedback)"""
     human_updates_per_answer: int = 20
@@ -135,8 +137,8 @@ class Args:
     sleep_gradient_steps: int = 3000
     """gradient steps of the sleep phase"""
     sleep_batch_size: int = 32
-    """transitions drawn from the success set, and as many from the whole buffer, per step"""
-    sleep_learning_rate: float = 1e-3
+    """transitions from the success set, and as many from the whole buffer, per step"""
+    sleep_q_lr: float = 1e-3
     """Adam learning rate of the soft Q network"""
     sleep_gamma: float = 0.99
     """discount of the sleep phase (non-myopic, unlike TAMER's 0)"""
@@ -144,105 +146,22 @@ class Args:
     """temperature of the soft value V(s) = temp * logsumexp(Q(s, .) / temp)"""
     sleep_chi2_coef: float = 0.5
     """weight of the chi-squared regulariser, 1 / (4 * 0.5) as IQ-Learn; 0 turns it off"""
-    sleep_tau: float = 1.0
-    """soft-update rate of the target Q network per step (1 copies it every step, as the authors did)"""
+    tau: float = 1.0
+    """soft-update rate of the sleep's target Q network per step (1 copies it every step, as the authors did)"""
 
     # Evaluation
     eval_frequency: int = 500
     """forward-phase environment steps between greedy evaluations"""
     sleep_eval_frequency: int = 500
     """sleep-phase gradient steps between greedy evaluations"""
+    log_frequency: int | None = None
+    """steps between scalar logs (losses, SPS, feedback) (None: 100; with --teacher human 1, every answer)"""
     evaluate: str | None = None
     """re-evaluate a saved tamer_h.pt or inform_q.pt, print its episode lengths as JSON, train nothing"""
 
 
-# The defaults that depend on who teaches: the paper's simulated teacher, or a person who answers every move
-TEACHER_DEFAULTS = {
-    "oracle": {"tamer_learning_starts": 1000, "start_e": 1.0, "end_e": 0.05},
-    "human": {"tamer_learning_starts": 1, "start_e": 0.0, "end_e": 0.0},
-}
-
-
-def fill_teacher_defaults(args: Args) -> Args:
-    """The flags left at None take the default of --teacher (the simulated teacher's are the paper's)."""
-    for name, value in TEACHER_DEFAULTS[args.teacher].items():
-        if getattr(args, name) is None:
-            setattr(args, name, value)
-    return args
-
-
-class InputError(Exception):
-    """Bad input from the user: a flag value, a file. Reported as one line, before anything is written."""
-
-
-class Diverged(Exception):
-    """The sleep loss became NaN or inf."""
-
-
-def check_args(args: Args) -> None:
-    """Reject bad flag values before anything is written; each message says what is wrong and how to fix it."""
-    fill_teacher_defaults(args)
-    if args.seed < 0:
-        raise InputError(f"--seed must be >= 0 (numpy refuses negative seeds), got {args.seed}")
-    positive_ints = [
-        "num_threads",
-        "tamer_total_timesteps",
-        "tamer_batch_size",
-        "tamer_train_frequency",
-        "success_max_steps",
-        "sleep_gradient_steps",
-        "sleep_batch_size",
-        "eval_frequency",
-        "sleep_eval_frequency",
-        "human_updates_per_answer",
-    ]
-    for name in positive_ints:
-        if getattr(args, name) < 1:
-            raise InputError(f"--{name.replace('_', '-')} must be a positive integer, got {getattr(args, name)}")
-    unit_interval = ["feedback_alpha_start", "feedback_alpha_end", "start_e", "end_e", "sleep_gamma", "oracle_gamma"]
-    for name in unit_interval:
-        if not 0.0 <= getattr(args, name) <= 1.0:
-            raise InputError(f"--{name.replace('_', '-')} must be in [0, 1], got {getattr(args, name)}")
-    positive_floats = ["tamer_learning_rate", "sleep_learning_rate", "sleep_temperature", "exploration_fraction"]
-    for name in positive_floats:
-        if not 0.0 < getattr(args, name) < math.inf:
-            raise InputError(f"--{name.replace('_', '-')} must be a finite number > 0, got {getattr(args, name)}")
-    if not 0.0 < args.sleep_tau <= 1.0:
-        raise InputError(f"--sleep-tau must be in (0, 1], got {args.sleep_tau}")
-    if not 0.0 <= args.sleep_chi2_coef < math.inf:
-        raise InputError(f"--sleep-chi2-coef must be a finite number >= 0 (0 turns it off), got {args.sleep_chi2_coef}")
-    if args.oracle_gamma >= 1.0:
-        raise InputError("--oracle-gamma must be below 1 for value iteration to converge")
-    if args.tamer_learning_starts < 1:
-        raise InputError(f"--tamer-learning-starts must be a positive integer, got {args.tamer_learning_starts}")
-    if args.teacher == "oracle" and args.tamer_learning_starts < args.tamer_batch_size:
-        raise InputError(
-            f"--tamer-learning-starts ({args.tamer_learning_starts}) must be at least "
-            f"--tamer-batch-size ({args.tamer_batch_size})"
-        )
-    if args.tamer_learning_starts >= args.tamer_total_timesteps:
-        raise InputError(
-            f"--tamer-total-timesteps ({args.tamer_total_timesteps}) must exceed "
-            f"--tamer-learning-starts ({args.tamer_learning_starts}), or H is never trained"
-        )
-    if args.env_id not in MAZE_IDS:
-        raise InputError(f"unknown --env-id {args.env_id!r}; this script trains on one of {', '.join(MAZE_IDS)}")
-    for name in ("teacher_noise", "teacher_sparsity"):
-        if not 0.0 <= getattr(args, name) <= 1.0:
-            raise InputError(f"--{name.replace('_', '-')} is a probability, in [0, 1]; got {getattr(args, name)}")
-    if args.teacher_delay < 0:
-        raise InputError(f"--teacher-delay must be >= 0 env steps, got {args.teacher_delay}")
-    if args.credit_window < 1:
-        raise InputError(f"--credit-window must be >= 1 (1 labels only the transition a signal arrives on), "
-                         f"got {args.credit_window}")  # fmt: skip
-    if args.feedback_budget is not None and args.feedback_budget < 1:
-        raise InputError(f"--feedback-budget must be >= 1 positive signal (or None: unlimited), "
-                         f"got {args.feedback_budget}")  # fmt: skip
-    distortions = {"teacher_noise": 0.0, "teacher_sparsity": 1.0, "teacher_delay": 0, "credit_window": 1}
-    changed = [f"--{k.replace('_', '-')}" for k, v in distortions.items() if getattr(args, k) != v]
-    if args.teacher == "human" and changed:
-        raise InputError(f"--teacher human takes your answers as they are; drop {', '.join(changed)} "
-                         f"(they distort the simulated teacher only)")  # fmt: skip
+# ---------------------------------------------------------------------------------------------------------------------
+# the network: each is rebuilt from the `kwargs` saved beside its state_dict
 
 
 class QNetwork(nn.Module):
@@ -258,39 +177,23 @@ class QNetwork(nn.Module):
         return self.network(x)
 
 
-class ReplayBuffer:
-    """Keeps every forward-phase transition (s, a, s', h, terminated) and the success tag of its episode."""
+def soft_update(target: nn.Module, source: nn.Module, tau: float) -> None:
+    with torch.no_grad():
+        for param, target_param in zip(source.parameters(), target.parameters(), strict=True):
+            target_param.lerp_(param, tau)
 
-    def __init__(self, capacity: int, obs_dim: int, device: torch.device):
-        self.obs = torch.zeros((capacity, obs_dim), device=device)
-        self.next_obs = torch.zeros((capacity, obs_dim), device=device)
-        self.actions = torch.zeros(capacity, dtype=torch.long, device=device)
-        self.feedback = torch.zeros(capacity, device=device)
-        self.terminated = torch.zeros(capacity, device=device)
-        self.success = torch.zeros(capacity, dtype=torch.bool, device=device)
-        self.size = 0
 
-    def add(self, obs, action, next_obs, feedback, terminated):
-        i = self.size
-        self.obs[i] = torch.as_tensor(obs)
-        self.next_obs[i] = torch.as_tensor(next_obs)
-        self.actions[i], self.feedback[i], self.terminated[i] = action, feedback, float(terminated)
-        self.size += 1
-
-    def tag_episode(self, start: int, success: bool):
-        """Tag the trajectory buffer[start:size], which just ended, as a success or a failure."""
-        self.success[start : self.size] = success
-
-    def batch(self, idx):
-        return self.obs[idx], self.actions[idx], self.next_obs[idx], self.feedback[idx], self.terminated[idx]
+# ---------------------------------------------------------------------------------------------------------------------
+# the pieces of Algorithm 1, named after the paper: Eq. 1-4 and the teacher
 
 
 def linear_schedule(start: float, end: float, duration: int, t: int) -> float:
-    return start + (end - start) * min(t / duration, 1.0)
+    """From `start` at t = 0 to `end` at t = duration, then constant."""
+    return start + (end - start) * min(t, duration) / max(duration, 1)
 
 
-def oracle_feedback(q_star_sa, q_star_best, alpha):  # Eq. 4, sign-safe
-    """h = 1 if Q*(s, a) >= Q*(s, a*) - (1 - alpha) |Q*(s, a*)|, else 0 (no feedback)."""
+def oracle_feedback(q_star_sa, q_star_best, alpha):
+    # Eq. 4, sign-safe: h = 1 if Q*(s, a) >= Q*(s, a*) - (1 - alpha) |Q*(s, a*)|, else 0
     return (q_star_sa >= q_star_best - (1.0 - alpha) * abs(q_star_best)) * 1.0
 
 
@@ -309,13 +212,21 @@ class Teacher:
     """
 
     def __init__(self, noise=0.0, sparsity=1.0, delay=0, credit_window=1, budget=None, seed=0):
-        self.noise, self.sparsity, self.delay, self.credit_window, self.budget = (
-            noise, sparsity, delay, credit_window, budget,
-        )  # fmt: skip
+        self.noise = noise
+        self.sparsity = sparsity
+        self.delay = delay
+        self.credit_window = credit_window
+        self.budget = budget
         self.rng = np.random.default_rng(seed)
         self.in_flight = collections.deque()  # clicks on their way, oldest first
         self.positives = 0  # +1 signals delivered
         self.perfect_positives = 0  # +1 answers of the perfect teacher (Eq. 4), for the record
+
+    @classmethod
+    def from_args(cls, args) -> "Teacher":
+        """The person that the --teacher-* flags describe, with a generator of its own."""
+        flags = ("teacher_noise", "teacher_sparsity", "teacher_delay", "credit_window", "feedback_budget")
+        return cls(*(getattr(args, flag) for flag in flags), seed=args.seed + 7919)
 
     @property
     def gone(self) -> bool:
@@ -337,28 +248,33 @@ class Teacher:
         return list(range(max(0, step - self.credit_window + 1), step + 1))
 
 
-def tamer_loss(h_net, obs, actions, feedback):  # Eq. 1: E[(H(s, a) - h)^2], gamma = 0, no bootstrapping
+def tamer_loss(h_net, obs, actions, feedback):
+    # Eq. 1: E[(H(s, a) - h)^2], gamma = 0: no bootstrapping, no target network
     return F.mse_loss(h_net(obs).gather(1, actions[:, None]).squeeze(1), feedback)
 
 
-def soft_value(q, temperature: float):  # V(s) = temp * logsumexp(Q(s, .) / temp)
+def soft_value(q, temperature: float):
+    """V(s) = temp * logsumexp(Q(s, .) / temp) (discrete IQ-Learn)."""
     return temperature * torch.logsumexp(q / temperature, dim=1)
 
 
-def iq_loss(q_net, target_net, obs, actions, next_obs, terminated, is_expert, gamma, temperature, chi2_coef):  # Eq. 2
-    """IQ-Learn's loss to minimise; `is_expert` marks the success-set rows of the batch, all rows are "all"."""
+# ALGO LOGIC: the sleep loss. The Pusher script's signature and return, without the actor that V(s) needs there.
+def iq_loss(q_net, target_net, obs, actions, next_obs, terminated, is_expert, gamma, temperature, chi2_coef):
+    # Eq. 2 (to minimise): y = (1 - done) gamma V_target(s');
+    # L = -E_success[Q(s,a) - y] + E_all[V(s) - y] + chi2 * E_all[(Q(s,a) - y)^2]
     q = q_net(obs)
     q_sa = q.gather(1, actions[:, None]).squeeze(1)
     with torch.no_grad():
-        y = (1.0 - terminated) * gamma * soft_value(target_net(next_obs), temperature)  # V_target(s'), not of s
-    td = q_sa - y
-    expert_term = -td[is_expert].mean()
-    value_term = (soft_value(q, temperature) - y).mean()
-    chi2_term = chi2_coef * td.pow(2).mean()
+        y = (1.0 - terminated) * gamma * soft_value(target_net(next_obs), temperature)  # V_target of s', not of s
+    v_s = soft_value(q, temperature)
+    expert_term = -(q_sa - y)[is_expert].mean()
+    value_term = (v_s - y).mean()
+    chi2_term = chi2_coef * (q_sa - y).pow(2).mean()
     return expert_term + value_term + chi2_term, (expert_term, value_term, chi2_term)
 
 
-def recover_reward(q_sa, v_next, terminated, gamma):  # Eq. 3: r(s, a, s') = Q(s, a) - (1 - terminated) gamma V(s')
+def recover_reward(q_sa, v_next, terminated, gamma):
+    # Eq. 3: r(s, a, s') = Q(s, a) - (1 - terminated) gamma V(s')
     return q_sa - (1.0 - terminated) * gamma * v_next
 
 
@@ -382,9 +298,305 @@ def is_success(terminated: bool, length: int, max_steps: int) -> bool:
     return bool(terminated) and length < max_steps
 
 
+class ReplayBuffer:
+    """Every forward-phase transition (s, a, s', h, terminated), preallocated, and the success tag of its episode."""
+
+    def __init__(self, capacity: int, obs_dim: int, device: torch.device):
+        self.obs = torch.zeros(capacity, obs_dim, device=device)
+        self.next_obs = torch.zeros(capacity, obs_dim, device=device)
+        self.actions = torch.zeros(capacity, dtype=torch.long, device=device)
+        self.feedback = torch.zeros(capacity, device=device)  # h, written by the teacher when a signal arrives
+        self.terminated = torch.zeros(capacity, device=device)
+        self.success = torch.zeros(capacity, dtype=torch.bool, device=device)
+        self.size = 0  # transitions stored (fewer than the capacity when the teacher stops early)
+
+    def add(self, obs, action, next_obs, terminated) -> None:
+        self.obs[self.size] = torch.as_tensor(obs)
+        self.actions[self.size] = action
+        self.next_obs[self.size] = torch.as_tensor(next_obs)
+        self.terminated[self.size] = float(terminated)
+        self.size += 1
+
+    def tag_episode(self, start: int, success: bool) -> bool:
+        """Tag the trajectory buffer[start:size], which just ended, as a success or a failure."""
+        self.success[start : self.size] = success
+        return success
+
+    def batch(self, idx: torch.Tensor):
+        return self.obs[idx], self.actions[idx], self.next_obs[idx], self.feedback[idx], self.terminated[idx]
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# the phases of Algorithm 1, then main
+
+
+def forward_phase(args: Args, env, q_star: np.ndarray, buffer: ReplayBuffer, evaluator, writer, device):
+    """The day: TAMER (Eq. 1, gamma = 0) acts on H and fits it to the teacher's yes/no feedback (Eq. 4 through the
+    Teacher, or a person at the terminal); every transition is remembered, every episode tagged."""
+    h_net = QNetwork(buffer.obs.shape[1], int(env.action_space.n)).to(device)
+    h_optimizer = torch.optim.Adam(h_net.parameters(), lr=args.tamer_h_lr, fused=True)
+    teacher = Teacher.from_args(args)
+    human = (
+        HumanTeacher(env.unwrapped.variant, args.success_max_steps, h_net, device) if args.teacher == "human" else None
+    )
+    n = args.tamer_total_timesteps
+    progress = Progress("tamer", n, warmup=args.tamer_learning_starts, evaluator=evaluator)
+    h_loss = torch.zeros((), device=device)
+    optimum_at = None  # (step, +1 signals) at the first evaluation where TAMER's greedy path is the shortest
+    evaluated_at = 0
+    ep_start = ep_length = successes = 0
+    obs, _ = env.reset(seed=args.seed)
+    for step in range(n):
+        epsilon = linear_schedule(args.start_e, args.end_e, int(args.exploration_fraction * n), step)
+        explore = random.random() < epsilon
+        cell = int(obs.argmax())
+        if explore:
+            action = env.action_space.sample()
+        else:
+            with torch.no_grad():
+                h_values = h_net(torch.as_tensor(obs, device=device))
+            action = int(h_values.argmax()) if human is None else human.propose(h_values, cell)
+
+        # ALGO LOGIC: the teacher watches (s, a): the perfect answer (Eq. 4), then the person's (Teacher), or yours
+        taught = not teacher.gone  # after the budget is spent, TAMER has nothing to learn from
+        feedback_alpha = linear_schedule(args.feedback_alpha_start, args.feedback_alpha_end, n - 1, step)
+        h_star = oracle_feedback(q_star[cell, action], q_star[cell].max(), feedback_alpha) if taught else 0.0
+        if human is not None and taught:
+            h_star = human(cell, action, explore, step + 1, teacher.positives, h_star, successes)
+            if h_star is None:  # q or the end of the input: stop teaching, the sleep starts
+                break
+        labelled = teacher(step, h_star)  # the transitions that this step's arriving signal labels
+        buffer.feedback[labelled] = 1.0
+
+        next_obs, _, terminated, truncated, _ = env.step(action)
+        buffer.add(obs, action, next_obs, terminated)
+        ep_length += 1
+        obs = next_obs
+        if terminated or truncated:  # an episode cut off by the end of the phase stays untagged: a failure
+            success = buffer.tag_episode(ep_start, is_success(terminated, ep_length, args.success_max_steps))
+            successes += success
+            writer.add_scalar("charts/episodic_return", float(terminated), step + 1)
+            writer.add_scalar("charts/episodic_length", ep_length, step + 1)
+            ep_start = step + 1
+            ep_length = 0
+            obs, _ = env.reset()
+
+        # ALGO LOGIC: TAMER's update: H regresses on the feedback (Eq. 1); a person's answer gets several (below main)
+        if taught and human is not None and step + 1 >= args.tamer_learning_starts:
+            h_loss = human.learn(h_optimizer, buffer, args.human_updates_per_answer, args.tamer_batch_size)
+        elif taught and step >= args.tamer_learning_starts and (step + 1) % args.tamer_train_frequency == 0:
+            idx = torch.randint(0, buffer.size, (args.tamer_batch_size,), device=device)
+            obs_b, actions_b, _, feedback_b, _ = buffer.batch(idx)
+            h_loss = tamer_loss(h_net, obs_b, actions_b, feedback_b)
+            h_optimizer.zero_grad()
+            h_loss.backward()
+            h_optimizer.step()
+
+        # TRY NOT TO MODIFY: logging and periodic evaluation
+        last_step = step == n - 1 or (teacher.gone and args.budget_ends_forward_phase)
+        if (step + 1) % args.log_frequency == 0 or last_step:
+            writer.add_scalar("losses/tamer_loss", h_loss.item(), step + 1)
+            writer.add_scalar("feedback/positive", teacher.positives, step + 1)
+            writer.add_scalar("feedback/positive_rate", teacher.positives / (step + 1), step + 1)
+            writer.add_scalar("feedback/alpha", feedback_alpha, step + 1)
+            writer.add_scalar("charts/epsilon", epsilon, step + 1)
+            writer.add_scalar("charts/SPS", progress.sps(step + 1), step + 1)
+        report = {"positives": teacher.positives}
+        if (step + 1) % args.eval_frequency == 0 or last_step:
+            metrics = evaluator("tamer", greedy_actions(h_net, device), step + 1)
+            evaluated_at = step + 1
+            report["eval length"] = metrics["eval/tamer_episode_length"]
+            if optimum_at is None and report["eval length"] == OPTIMUM:
+                optimum_at = (step + 1, teacher.positives)
+        progress(step + 1, **report)
+        if last_step:
+            break
+
+    if evaluated_at != buffer.size:  # the person stopped between two evaluations
+        evaluator("tamer", greedy_actions(h_net, device), buffer.size)
+    if human is not None:
+        human.finish(buffer.size, teacher.positives, successes)
+    stats = {
+        "feedback/positive": teacher.positives,
+        "feedback/perfect_positive": teacher.perfect_positives,
+        "feedback/steps": buffer.size,
+        "feedback/positive_rate": teacher.positives / max(buffer.size, 1),
+        "feedback/step_to_tamer_optimum": None if optimum_at is None else optimum_at[0],
+        "feedback/positive_to_tamer_optimum": None if optimum_at is None else optimum_at[1],
+    }
+    if human is not None:
+        stats["feedback/oracle_agreement"] = human.agreement / max(human.answers, 1)
+        stats["feedback/answers"] = human.answers
+        stats["feedback/answers_to_tamer_goal"] = human.answers_to_goal  # until H's greedy path from S reached G
+    return h_net, stats
+
+
+def sleep_phase(args: Args, buffer: ReplayBuffer, n_actions: int, evaluator, writer, device):
+    """The night: offline IQ-Learn (Eq. 2) on the buffer, the successful trajectories as the expert set. Without a
+    success there is nothing to consolidate: no INFORM policy (None)."""
+    expert_idx = buffer.success[: buffer.size].nonzero().squeeze(1)
+    stats = {"sleep/expert_transitions": int(expert_idx.numel()), "sleep/replay_transitions": buffer.size}
+    stats["sleep_skipped"] = expert_idx.numel() == 0
+    if stats["sleep_skipped"]:
+        how = "raise --tamer-total-timesteps"
+        if args.teacher == "human":
+            how = "next time keep teaching until the agent has walked from S to G in time at least once"
+        print(
+            f"warning: the sleep is skipped and no INFORM policy is made: no episode reached G in fewer than "
+            f"{args.success_max_steps} steps, so there is nothing to consolidate; {how}",
+            file=sys.stderr,
+        )
+        return None, stats
+    q_net = QNetwork(buffer.obs.shape[1], n_actions).to(device)
+    q_target = QNetwork(buffer.obs.shape[1], n_actions).to(device)
+    q_target.load_state_dict(q_net.state_dict())
+    q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_q_lr, fused=True)
+    batch_size = args.sleep_batch_size
+    gamma = args.sleep_gamma
+    temperature = args.sleep_temperature
+    chi2 = args.sleep_chi2_coef
+    is_expert = torch.arange(2 * batch_size, device=device) >= batch_size  # the batch: replay rows, then expert rows
+    names = ("losses/iq_loss", "losses/iq_expert_term", "losses/iq_value_term", "losses/iq_chi2_term")
+    losses = {}
+    progress = Progress("sleep", args.sleep_gradient_steps, evaluator=evaluator)
+    for step in range(1, args.sleep_gradient_steps + 1):
+        # ALGO LOGIC: the sleep update: Q by IQ-Learn (Eq. 2), the target Q follows softly
+        replay = torch.randint(0, buffer.size, (batch_size,), device=device)
+        expert = expert_idx[torch.randint(0, expert_idx.numel(), (batch_size,), device=device)]
+        obs, actions, next_obs, _, terminated = buffer.batch(torch.cat([replay, expert]))
+        loss, terms = iq_loss(q_net, q_target, obs, actions, next_obs, terminated, is_expert, gamma, temperature, chi2)
+        q_optimizer.zero_grad()
+        loss.backward()
+        q_optimizer.step()
+        soft_update(q_target, q_net, args.tau)
+
+        # TRY NOT TO MODIFY: logging (one host sync per 100 steps to catch divergence) and periodic evaluation
+        last_step = step == args.sleep_gradient_steps
+        log_now = step % args.log_frequency == 0 or last_step
+        if log_now or step % 100 == 0:
+            values = torch.stack([loss, *terms]).tolist()
+            if not all(map(math.isfinite, values)):
+                last = ", ".join(f"{k.split('/')[1]} {v:.4g}" for k, v in losses.items())
+                raise Diverged(
+                    f"the sleep loss diverged (NaN or inf) by gradient step {step}; last finite losses: "
+                    f"{last or 'none yet'}; try a lower --sleep-q-lr"
+                )
+            losses = dict(zip(names, values, strict=True))
+        if log_now:
+            for tag, value in losses.items():
+                writer.add_scalar(tag, value, step)
+            writer.add_scalar("sleep/SPS", progress.sps(step), step)
+        report = {"iq_loss": losses.get("losses/iq_loss")}
+        if step % args.sleep_eval_frequency == 0 or last_step:
+            metrics = evaluator("inform", greedy_actions(q_net, device), step)
+            report["eval length"] = metrics["eval/inform_episode_length"]
+            if "sleep/step_to_inform_optimum" not in stats and report["eval length"] == OPTIMUM:
+                stats["sleep/step_to_inform_optimum"] = step
+        progress(step, **report)
+    return q_net, {**stats, **losses}
+
+
+def main(args: Args, stop: "StopSignals", oracle_q: np.ndarray | None = None) -> dict:
+    run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
+    run_start = time.time()
+    run_dir = writer = env = evaluator = None
+    summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
+    status = "completed"
+    phase = "startup"
+    try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
+        with stop.held():  # a stop waits until the directory exists and is known, so the summary can go there
+            run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
+        print(f"run directory: {run_dir}", flush=True)
+        random.seed(args.seed)
+        np.random.seed(args.seed)
+        torch.manual_seed(args.seed)
+        torch.backends.cudnn.deterministic = args.torch_deterministic
+        if args.torch_deterministic:
+            os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # CUDA matmuls refuse determinism without it
+        torch.use_deterministic_algorithms(args.torch_deterministic)
+        torch.set_num_threads(args.num_threads)
+        device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
+
+        writer = HeldWriter(run_dir, stop)
+        writer.add_text(
+            "hyperparameters",
+            "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
+        )
+        env = gym.make(args.env_id)
+        env.action_space.seed(args.seed)
+        evaluator = Evaluator(writer, args.success_max_steps)
+        obs_dim = env.observation_space.shape[0]
+        n_actions = int(env.action_space.n)
+
+        # ---- oracle: exact Q* by value iteration (the "fully trained model"), or a teacher saved by oracle_train.py
+        phase = "oracle"
+        t0 = time.time()
+        q_star = gridworld_env.optimal_q(env.unwrapped.variant, args.oracle_gamma) if oracle_q is None else oracle_q
+        summary["time/oracle_s"] = time.time() - t0
+        evaluator("oracle", q_star.argmax(1), 0)
+
+        # ---- forward phase ("day"): TAMER with simulated feedback, every transition remembered
+        phase = "tamer"
+        t0 = time.time() - evaluator.seconds  # the phase's clock stops during its evaluations
+        buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, device)
+        h_net, stats = forward_phase(args, env, q_star, buffer, evaluator, writer, device)
+        summary.update(stats)
+        summary["time/tamer_s"] = time.time() - evaluator.seconds - t0
+        if args.save_model:
+            save_network(f"{run_dir}/tamer_h.pt", h_net, env_id=args.env_id)
+
+        # ---- sleep phase ("night"): offline IQ-Learn on the buffer, no environment steps
+        phase = "sleep"
+        t0 = time.time() - evaluator.seconds
+        q_net, stats = sleep_phase(args, buffer, n_actions, evaluator, writer, device)
+        summary.update(stats)
+        summary["time/sleep_s"] = time.time() - evaluator.seconds - t0
+
+        # ---- the recovered reward (Eq. 3) on the maze the agent learned in, then the final evaluation
+        phase = "eval"
+        policies = {"oracle": q_star.argmax(1), "tamer": greedy_actions(h_net, device)}
+        if q_net is not None:
+            policies["inform"] = greedy_actions(q_net, device)
+            reward = reward_table(q_net, env.unwrapped.next_cell, args.sleep_gamma, args.sleep_temperature, device)
+            figure = reward_figure(reward.numpy(), f"recovered reward, seed {args.seed}")
+            writer.add_figure("sleep/recovered_reward", figure)
+            if args.save_model:
+                extra = {"env_id": args.env_id, "gamma": args.sleep_gamma, "temperature": args.sleep_temperature}
+                save_network(f"{run_dir}/inform_q.pt", q_net, **extra)
+                torch.save({"reward": reward, **extra}, f"{run_dir}/recovered_reward.pt")
+        final_evaluation(args, env, policies, h_net, q_net, evaluator, run_dir, summary["feedback/steps"])
+    except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
+        status = "interrupted"
+        stop.broken_pipe = isinstance(e, BrokenPipeError)
+    except Diverged as e:
+        status = "diverged"
+        summary["error"] = str(e)
+    return end_run(args, summary, status, phase, run_dir, run_start, evaluator, (env, writer), stop)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# TRY NOT TO MODIFY: everything else, below main. Evaluation, progress lines, the person at the terminal, the reward
+# figure, checkpoints, input checks, signals and the run's end, --evaluate, videos
+
+
+def final_evaluation(args: Args, env, policies: dict, h_net, q_net, evaluator, run_dir: str, forward_steps: int):
+    """The greedy policies' final evaluation (INFORM's at the sleep's last step, the others at the day's), the GIFs
+    with --capture-video, and for a person who taught: TAMER's and INFORM's paths from S, drawn."""
+    for name, policy in policies.items():
+        evaluator(name, policy, args.sleep_gradient_steps if name == "inform" else forward_steps)
+    if args.capture_video:  # after the evaluation: drawing changes no number
+        record_videos(run_dir, {name: policy for name, policy in policies.items() if name != "oracle"})
+    if args.teacher == "human":
+        variant = env.unwrapped.variant
+        print("\nTAMER (what you taught), greedy from S:\n" + draw_greedy_path(policies["tamer"], variant))
+        if "inform" in policies:
+            print("\nINFORM (after the sleep), greedy from S:\n" + draw_greedy_path(policies["inform"], variant))
+
+
 def evaluate(env: gym.Env, policy: np.ndarray, start_cells, success_max_steps: int):
     """Run the greedy table policy once from each start cell; mean episode length and success rate."""
-    lengths, successes = [], []
+    lengths = []
+    successes = []
     for cell in start_cells:
         obs, _ = env.reset(options={"start_cell": cell})
         terminated = truncated = False
@@ -441,37 +653,95 @@ class Evaluator:
             env.close()
 
 
+class Progress:
+    """One line per ~5% of a phase: steps, SPS and ETA, plus whatever the phase reports. The clock stops while the
+    `evaluator` runs. The first line comes early (`warmup` + 500 steps), and the ETA counts only the steps after
+    `warmup` (random-action steps before learning starts are much faster than the rest)."""
+
+    def __init__(self, phase: str, total: int, warmup: int = 0, evaluator=None):
+        self.phase = phase
+        self.total = total
+        self.every = max(total // 20, 1)
+        self.warmup = min(warmup, total)
+        self.early = min(warmup + 500, total)
+        self.evaluator = evaluator
+        self.start = self.clock()
+        self.warm_start = None
+
+    def clock(self) -> float:
+        """Seconds, without those spent in evaluations."""
+        return time.time() - (self.evaluator.seconds if self.evaluator is not None else 0.0)
+
+    def sps(self, step: int) -> float:
+        return step / max(self.clock() - self.start, 1e-9)
+
+    def __call__(self, step: int, **info):
+        if step == self.warmup:
+            self.warm_start = self.clock()
+        if step % self.every == 0 or step == self.total or step == self.early:
+            sps = self.sps(step)
+            rate = sps
+            if self.warm_start is not None and step > self.warmup:
+                rate = (step - self.warmup) / max(self.clock() - self.warm_start, 1e-9)
+            eta = (self.total - step) / max(rate, 1e-9)
+            info = {k: v for k, v in info.items() if v is not None and v == v}  # not measured yet: not shown (nan)
+            extra = "".join(f" | {k} {v:.4g}" if isinstance(v, float) else f" | {k} {v}" for k, v in info.items())
+            print(
+                f"[{self.phase}] {step}/{self.total} {100 * step // self.total}% | {sps:,.0f} SPS | "
+                f"ETA {int(eta // 60)}m{int(eta % 60):02d}s{extra}",
+                flush=True,
+            )
+
+
 class HumanTeacher:
     """You as the teacher (docs/teachers.md). The maze is drawn with the agent and its move; you answer on standard
     input: y (+1), Enter (no feedback) or q (stop teaching: the sleep starts). The end of the input counts as q, so
     a pipe or a file of answers works as well as a keyboard."""
 
-    def __init__(self, variant: str, success_max_steps: int):
-        self.variant, self.next_cell = variant, gridworld_env.transition_table(variant)
+    def __init__(self, variant: str, success_max_steps: int, h_net: QNetwork, device: torch.device):
+        self.variant = variant
+        self.h_net = h_net
+        self.device = device
+        self.own_way = self.greedy_length()  # the length of the agent's own (greedy) way from S; 200: it never ends
+        self.next_cell = gridworld_env.transition_table(variant)
         self.answers = self.agreement = 0  # answers given, and how many Eq. 4 (the oracle) would have given too
         self.refused = np.zeros((gridworld_env.N_CELLS, gridworld_env.N_ACTIONS))  # Enter answers per (cell, move)
         self.answers_to_goal = None  # answers given when the agent's own (greedy) way from S first reached G
         self.echo = not sys.stdin.isatty()  # piped answers are not echoed by a terminal: print them
-        print("You are the teacher. The agent A must reach G by the shortest path (19 steps from S).\n"
-              "For each move answer: y = good (+1), Enter = no feedback, q = stop teaching (the sleep starts).\n"
-              "A move you answer with Enter is not proposed again in that cell while it has moves you have not "
-              f"judged.\nThe sleep learns from the walks from S to G in fewer than {success_max_steps} steps: "
-              "teach until there is at least one.", flush=True)  # fmt: skip
+        print(
+            "You are the teacher. The agent A must reach G by the shortest path (19 steps from S).\n"
+            "For each move answer: y = good (+1), Enter = no feedback, q = stop teaching (the sleep starts).\n"
+            "A move you answer with Enter is not proposed again in that cell while it has moves you have not "
+            f"judged.\nThe sleep learns from the walks from S to G in fewer than {success_max_steps} steps: "
+            "teach until there is at least one.",
+            flush=True,
+        )
 
     def propose(self, h_values: torch.Tensor, cell: int) -> int:
         """The agent's move: greedy on H, but never a move you refused in this cell before the ones you have not."""
         return int(np.argmax(h_values.cpu().numpy() - 2.0 * self.refused[cell]))  # H is in about [0, 1]
 
-    def __call__(self, cell: int, action: int, explore: bool, step: int, positives: int, h_oracle: float,
-                 own_way: int, successes: int):  # fmt: skip
+    def __call__(
+        self,
+        cell: int,
+        action: int,
+        explore: bool,
+        step: int,
+        positives: int,
+        h_oracle: float,
+        successes: int,
+    ):
         """Your answer about the move `action` from `cell`: 1.0, 0.0, or None to stop teaching."""
         how = " (exploring: a random move)" if explore else ""
         how += " into a wall: it stays where it is" if self.next_cell[cell, action] == cell else ""
-        way = f"reaches G in {own_way} steps" if own_way < 200 else "does not reach G yet"
-        print(f"\nstep {step} | answers {self.answers} | positives given {positives} | its own way from S: {way} | "
-              f"walks to G in time: {successes}\n"
-              + gridworld_env.draw_maze(self.variant, agent=cell, arrows={cell: action})
-              + f"the agent moves {gridworld_env.ACTION_NAMES[action]}{how}", flush=True)  # fmt: skip
+        way = f"reaches G in {self.own_way} steps" if self.own_way < 200 else "does not reach G yet"
+        print(
+            f"\nstep {step} | answers {self.answers} | positives given {positives} | its own way from S: {way} | "
+            f"walks to G in time: {successes}\n"
+            + gridworld_env.draw_maze(self.variant, agent=cell, arrows={cell: action})
+            + f"the agent moves {gridworld_env.ACTION_NAMES[action]}{how}",
+            flush=True,
+        )
         while True:
             print("good move? [y / Enter / q] ", end="", flush=True)
             line = sys.stdin.readline()
@@ -488,44 +758,48 @@ class HumanTeacher:
                 return h
             print(f"{answer!r}? type y for +1, press Enter for no feedback, or type q to stop teaching", flush=True)
 
+    def greedy_length(self) -> int:
+        return gridworld_env.greedy_episode_length(greedy_actions(self.h_net, self.device), self.variant)
+
+    def learn(self, h_optimizer, buffer: ReplayBuffer, updates: int, batch_size: int) -> torch.Tensor:
+        """TAMER's update (Eq. 1) after your answer: several gradient steps, each on the newest answer and a replay of
+        the earlier ones (Deep TAMER's remedies), so that the answer takes effect before the next move."""
+        for _ in range(updates):
+            replay = torch.randint(0, buffer.size, (batch_size - 1,), device=self.device)
+            newest = torch.tensor([buffer.size - 1], device=self.device)
+            obs_b, actions_b, _, feedback_b, _ = buffer.batch(torch.cat([newest, replay]))
+            h_loss = tamer_loss(self.h_net, obs_b, actions_b, feedback_b)
+            h_optimizer.zero_grad()
+            h_loss.backward()
+            h_optimizer.step()
+        self.own_way = self.greedy_length()
+        if self.own_way < 200 and self.answers_to_goal is None:
+            self.answers_to_goal = self.answers
+        return h_loss
+
     def finish(self, steps: int, positives: int, successes: int):
         then = "now the agent sleeps" if successes else "the agent did not walk from S to G in time, so it cannot sleep"
-        print(f"\nthank you: {steps} steps taught, {positives} positives given ({self.agreement} of "
-              f"{self.answers} answers as the oracle's, Eq. 4); {then}", flush=True)  # fmt: skip
+        print(
+            f"\nthank you: {steps} steps taught, {positives} positives given ({self.agreement} of "
+            f"{self.answers} answers as the oracle's, Eq. 4); {then}",
+            flush=True,
+        )
 
 
 def draw_greedy_path(policy: np.ndarray, variant: str) -> str:
     """A greedy table policy's path from S drawn on the maze, and where it ends."""
     next_cell = gridworld_env.transition_table(variant)
-    cell, arrows = gridworld_env.START, {}
+    cell = gridworld_env.START
+    arrows = {}
     while cell != gridworld_env.GOAL and cell not in arrows:  # a deterministic path either ends in G or loops
         arrows[cell] = int(policy[cell])
         cell = int(next_cell[cell, policy[cell]])
-    ending = (f"reaches G in {len(arrows)} steps" if cell == gridworld_env.GOAL
-              else "never reaches G: it goes round in a loop or bumps into a wall")  # fmt: skip
+    ending = (
+        f"reaches G in {len(arrows)} steps"
+        if cell == gridworld_env.GOAL
+        else "never reaches G: it goes round in a loop or bumps into a wall"
+    )
     return gridworld_env.draw_maze(variant, agent=gridworld_env.START, arrows=arrows) + ending
-
-
-class Progress:
-    """One line per ~5% of a phase: steps, SPS and ETA, plus whatever the phase reports."""
-
-    def __init__(self, phase: str, total: int):
-        self.phase, self.total, self.start = phase, total, time.time()
-        self.every = max(total // 20, 1)
-
-    def __call__(self, step: int, **info):
-        if step % self.every and step != self.total:
-            return
-        elapsed = time.time() - self.start
-        sps = step / max(elapsed, 1e-9)
-        eta = (self.total - step) / max(sps, 1e-9)
-        info = {k: v for k, v in info.items() if v is not None}  # a value not measured yet is not shown
-        extra = "".join(f" | {k} {v:.4g}" if isinstance(v, float) else f" | {k} {v}" for k, v in info.items())
-        print(
-            f"[{self.phase}] {step}/{self.total} {100 * step // self.total:3d}% | {sps:,.0f} SPS | "
-            f"ETA {eta:.0f}s{extra}",
-            flush=True,
-        )
 
 
 def reward_figure(table: np.ndarray, title: str):
@@ -534,7 +808,8 @@ def reward_figure(table: np.ndarray, title: str):
     ax = fig.subplots()
     visited = np.arange(gridworld_env.N_CELLS) != gridworld_env.GOAL  # the agent never acts in G (terminal)
     lim = max(float(np.abs(table[visited]).max()), 1e-8)
-    cmap, norm = matplotlib.colormaps["coolwarm"], matplotlib.colors.Normalize(-lim, lim)
+    cmap = matplotlib.colormaps["coolwarm"]
+    norm = matplotlib.colors.Normalize(-lim, lim)
     # triangle corners for up, down, left, right, in (x, y) with y pointing down
     corners = {0: [(0, 0), (1, 0)], 1: [(0, 1), (1, 1)], 2: [(0, 0), (0, 1)], 3: [(1, 0), (1, 1)]}
     for cell, (r, c) in enumerate(gridworld_env.CELLS):
@@ -568,8 +843,10 @@ def read_checkpoint(path: str) -> dict:
         ckpt = torch.load(path, weights_only=True, map_location="cpu")
     except pickle.UnpicklingError as e:
         unsupported = [line.strip() for line in str(e).splitlines() if "unsupported" in line.lower()]
-        raise InputError(f"{path}: refused, it holds more than tensors and plain values (it could run code): "
-                         f"{(unsupported or [type(e).__name__])[0][:160]}") from None  # fmt: skip
+        raise InputError(
+            f"{path}: refused, it holds more than tensors and plain values (it could run code): "
+            f"{(unsupported or [type(e).__name__])[0][:160]}"
+        ) from None
     except Exception as e:  # a damaged archive: torch raises RuntimeError, EOFError, ...
         raise InputError(
             f"{path}: corrupt checkpoint: {(str(e).strip() or type(e).__name__).splitlines()[0][:160]}"
@@ -592,8 +869,9 @@ def load_oracle(path: str, env_id: str) -> np.ndarray:
         gridworld_env.N_ACTIONS,
     ):
         shape = tuple(q_table.shape) if isinstance(q_table, torch.Tensor) else type(q_table).__name__
-        raise InputError(f"{path}: q_table has shape {shape}, expected ({gridworld_env.N_CELLS}, "
-                         f"{gridworld_env.N_ACTIONS})")  # fmt: skip
+        raise InputError(
+            f"{path}: q_table has shape {shape}, expected ({gridworld_env.N_CELLS}, {gridworld_env.N_ACTIONS})"
+        )
     return q_table.double().numpy()
 
 
@@ -612,191 +890,6 @@ def load_q_network(path: str) -> QNetwork:
     return net
 
 
-def forward_phase(args, env, q_star, h_net, buffer, evaluator, writer, device) -> dict:
-    """TAMER ("day"): act on H, get the teacher's feedback (Eq. 4 through Teacher, or a person), fit H by Eq. 1,
-    remember and tag every transition."""
-    h_optimizer = torch.optim.Adam(h_net.parameters(), lr=args.tamer_learning_rate, fused=True)
-    progress = Progress("tamer", args.tamer_total_timesteps)
-    teacher = Teacher(args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window,
-                      args.feedback_budget, seed=args.seed + 7919)  # fmt: skip
-    variant = env.unwrapped.variant
-    human = HumanTeacher(variant, args.success_max_steps) if args.teacher == "human" else None
-    episode_positives = episode_length = episode_start = steps_run = successes = 0
-    own_way = gridworld_env.greedy_episode_length(greedy_actions(h_net, device), variant) if human else None
-    optimum_at = None  # (step, +1 signals) at the first evaluation where TAMER's greedy path is the shortest
-    evaluated_at = -1
-    start_time = time.time()
-    obs, _ = env.reset(seed=args.seed)
-    for global_step in range(1, args.tamer_total_timesteps + 1):
-        epsilon = linear_schedule(args.start_e, args.end_e, int(args.exploration_fraction * args.tamer_total_timesteps),
-                                  global_step - 1)  # fmt: skip
-        explore = random.random() < epsilon
-        if explore:
-            action = env.action_space.sample()
-        else:
-            with torch.no_grad():
-                h_values = h_net(torch.as_tensor(obs, device=device))
-            action = int(h_values.argmax()) if human is None else human.propose(h_values, int(obs.argmax()))
-
-        # the teacher watches (s, a): the perfect answer (Eq. 4) or a person's; once it has left, H stays frozen
-        taught = not teacher.gone
-        alpha = linear_schedule(args.feedback_alpha_start, args.feedback_alpha_end, args.tamer_total_timesteps,
-                                global_step - 1)  # fmt: skip
-        q_star_s = q_star[int(obs.argmax())]
-        h_star = oracle_feedback(q_star_s[action], q_star_s.max(), alpha)
-        if human is not None and taught:
-            h_star = human(int(obs.argmax()), action, explore, global_step, teacher.positives, h_star, own_way,
-                           successes)  # fmt: skip
-            if h_star is None:  # q or the end of the input: stop teaching, the sleep starts
-                break
-        next_obs, _, terminated, truncated, _ = env.step(action)
-        buffer.add(obs, action, next_obs, 0.0, terminated)
-        if taught:
-            labelled = teacher(buffer.size - 1, h_star)
-            buffer.feedback[labelled] = 1.0
-            episode_positives += int(bool(labelled))
-        episode_length += 1
-        steps_run = global_step
-
-        obs = next_obs
-        if terminated or truncated:
-            success = is_success(terminated, episode_length, args.success_max_steps)
-            buffer.tag_episode(episode_start, success)
-            successes += success
-            writer.add_scalar("charts/episodic_return", float(terminated), global_step)
-            writer.add_scalar("charts/episodic_length", episode_length, global_step)
-            writer.add_scalar("feedback/positive_rate", episode_positives / episode_length, global_step)
-            episode_start, episode_positives, episode_length = buffer.size, 0, 0
-            obs, _ = env.reset()
-
-        if human is not None and taught and global_step >= args.tamer_learning_starts:
-            # a person: several updates per answer, on the newest answer and a replay of the earlier ones (Deep TAMER)
-            for _ in range(args.human_updates_per_answer):
-                replay = torch.randint(buffer.size, (args.tamer_batch_size - 1,), device=device)
-                idx = torch.cat([torch.tensor([buffer.size - 1], device=device), replay])
-                b_obs, b_actions, _, b_feedback, _ = buffer.batch(idx)
-                loss = tamer_loss(h_net, b_obs, b_actions, b_feedback)
-                h_optimizer.zero_grad()
-                loss.backward()
-                h_optimizer.step()
-            writer.add_scalar("losses/tamer_loss", loss.item(), global_step)
-            own_way = gridworld_env.greedy_episode_length(greedy_actions(h_net, device), variant)
-            if own_way < 200 and human.answers_to_goal is None:
-                human.answers_to_goal = human.answers
-        elif taught and global_step > args.tamer_learning_starts and global_step % args.tamer_train_frequency == 0:
-            idx = torch.randint(buffer.size, (args.tamer_batch_size,), device=device)
-            b_obs, b_actions, _, b_feedback, _ = buffer.batch(idx)
-            loss = tamer_loss(h_net, b_obs, b_actions, b_feedback)
-            h_optimizer.zero_grad()
-            loss.backward()
-            h_optimizer.step()
-            if global_step % 100 == 0:
-                writer.add_scalar("losses/tamer_loss", loss.item(), global_step)
-
-        if global_step % 100 == 0:
-            writer.add_scalar("feedback/positive", teacher.positives, global_step)
-            writer.add_scalar("feedback/alpha", alpha, global_step)
-            writer.add_scalar("charts/epsilon", epsilon, global_step)
-        if global_step % 1000 == 0:
-            writer.add_scalar("charts/SPS", int(global_step / (time.time() - start_time)), global_step)
-        phase_ends = teacher.gone and args.budget_ends_forward_phase
-        if global_step % args.eval_frequency == 0 or global_step == args.tamer_total_timesteps or phase_ends:
-            metrics, evaluated_at = evaluator("tamer", greedy_actions(h_net, device), global_step), global_step
-            progress(global_step, positives=teacher.positives, eval_length=metrics["eval/tamer_episode_length"])
-            if optimum_at is None and metrics["eval/tamer_episode_length"] == OPTIMUM:
-                optimum_at = (global_step, teacher.positives)
-        if phase_ends:
-            break
-    # an episode cut off by the end of the phase never reached the goal: it stays untagged (failure)
-    if evaluated_at != steps_run:  # the person stopped between two evaluations
-        evaluator("tamer", greedy_actions(h_net, device), steps_run)
-    if human is not None:
-        human.finish(steps_run, teacher.positives, successes)
-    stats = {
-        "feedback/positive": teacher.positives,
-        "feedback/perfect_positive": teacher.perfect_positives,
-        "feedback/steps": steps_run,
-        "feedback/positive_rate": teacher.positives / max(steps_run, 1),
-        "feedback/step_to_tamer_optimum": None if optimum_at is None else optimum_at[0],
-        "feedback/positive_to_tamer_optimum": None if optimum_at is None else optimum_at[1],
-    }
-    if human is not None:
-        stats["feedback/oracle_agreement"] = human.agreement / max(human.answers, 1)
-        stats["feedback/answers"] = human.answers
-        stats["feedback/answers_to_tamer_goal"] = human.answers_to_goal  # until H's greedy path from S reached G
-    return stats
-
-
-def sleep_phase(args, buffer, q_net, target_net, evaluator, writer, device) -> dict:
-    """Offline IQ-Learn ("sleep", Eq. 2) on the buffer, successful trajectories as the expert set."""
-    success_idx = buffer.success[: buffer.size].nonzero().squeeze(1)
-    stats = {"sleep/expert_transitions": int(success_idx.numel()), "sleep/replay_transitions": buffer.size,
-             "sleep_skipped": success_idx.numel() == 0}  # fmt: skip
-    if stats["sleep_skipped"]:
-        how = ("next time keep teaching until the agent has walked from S to G in fewer than "
-               f"{args.success_max_steps} steps at least once" if args.teacher == "human"
-               else "raise --tamer-total-timesteps")  # fmt: skip
-        print(
-            f"warning: the sleep is skipped and no INFORM policy is made: no episode reached G in fewer than "
-            f"{args.success_max_steps} steps, so there is nothing to consolidate; {how}",
-            file=sys.stderr,
-        )
-        return stats
-    q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_learning_rate, fused=True)
-    is_expert = torch.arange(2 * args.sleep_batch_size, device=device) < args.sleep_batch_size
-    progress = Progress("sleep", args.sleep_gradient_steps)
-    start_time = time.time()
-    for sleep_step in range(1, args.sleep_gradient_steps + 1):
-        expert_idx = success_idx[torch.randint(success_idx.numel(), (args.sleep_batch_size,), device=device)]
-        replay_idx = torch.randint(buffer.size, (args.sleep_batch_size,), device=device)
-        b_obs, b_actions, b_next_obs, _, b_terminated = buffer.batch(torch.cat([expert_idx, replay_idx]))
-        loss, terms = iq_loss(q_net, target_net, b_obs, b_actions, b_next_obs, b_terminated, is_expert,
-                              args.sleep_gamma, args.sleep_temperature, args.sleep_chi2_coef)  # fmt: skip
-        q_optimizer.zero_grad()
-        loss.backward()
-        q_optimizer.step()
-        with torch.no_grad():
-            for param, target_param in zip(q_net.parameters(), target_net.parameters(), strict=True):
-                target_param.lerp_(param, args.sleep_tau)
-
-        if sleep_step % 100 == 0 or sleep_step == args.sleep_gradient_steps:  # one host sync per 100 steps
-            values = torch.stack([loss, *terms]).tolist()
-            if not all(map(np.isfinite, values)):
-                last = ", ".join(f"{k.split('/')[1]} {v:.4g}" for k, v in stats.items() if k.startswith("losses/"))
-                raise Diverged(f"the sleep loss diverged (NaN or inf) by gradient step {sleep_step}; last finite "
-                               f"losses: {last or 'none yet'}; try a lower --sleep-learning-rate")  # fmt: skip
-            names = ("losses/iq_loss", "losses/iq_expert_term", "losses/iq_value_term", "losses/iq_chi2_term")
-            stats.update(zip(names, values, strict=True))
-            for tag in names:
-                writer.add_scalar(tag, stats[tag], sleep_step)
-            writer.add_scalar("sleep/SPS", int(sleep_step / (time.time() - start_time)), sleep_step)
-        if sleep_step % args.sleep_eval_frequency == 0 or sleep_step == args.sleep_gradient_steps:
-            metrics = evaluator("inform", greedy_actions(q_net, device), sleep_step)
-            progress(sleep_step, iq_loss=stats.get("losses/iq_loss"),  # synced every 100 steps
-                     eval_length=metrics["eval/inform_episode_length"])  # fmt: skip
-            if "sleep/step_to_inform_optimum" not in stats and metrics["eval/inform_episode_length"] == OPTIMUM:
-                stats["sleep/step_to_inform_optimum"] = sleep_step
-    return stats
-
-
-def make_run_dir(run_name: str) -> str:
-    """runs/{run_name}, never an existing directory: a clash gets a numeric suffix."""
-    path, n = f"runs/{run_name}", 0
-    while True:
-        try:
-            os.makedirs(path)
-            return path
-        except FileExistsError:
-            n += 1
-            path = f"runs/{run_name}_{n}"
-
-
-def write_json_atomic(path: str, data: dict) -> None:
-    with open(path + ".tmp", "w") as f:
-        json.dump(data, f, indent=2)
-    os.replace(path + ".tmp", path)
-
-
 def save_network(path: str, net: nn.Module, **extra) -> None:
     """A state_dict plus what rebuilds the network; torch.load(path, weights_only=True) reads it."""
     kwargs = {
@@ -807,130 +900,86 @@ def save_network(path: str, net: nn.Module, **extra) -> None:
     torch.save({"state_dict": net.state_dict(), "kwargs": kwargs, **extra}, path)
 
 
-def main(args: Args, stop: "StopSignals", oracle_q: np.ndarray | None = None) -> dict:
-    run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
-    run_start = time.time()
-    run_dir = writer = evaluator = env = None
-    summary, status, phase = {}, "completed", "startup"
-    try:
-        with stop.held():  # a stop waits until the directory exists and is known, so the summary can go there
-            run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
-        print(f"run directory: {run_dir}", flush=True)
-        random.seed(args.seed)
-        np.random.seed(args.seed)
-        torch.manual_seed(args.seed)
-        torch.backends.cudnn.deterministic = args.torch_deterministic
-        if args.torch_deterministic:
-            os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # CUDA matmuls refuse determinism without it
-        torch.use_deterministic_algorithms(args.torch_deterministic)
-        torch.set_num_threads(args.num_threads)
-        device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
+# The defaults that depend on who teaches: the paper's simulated teacher, or a person who answers every move
+TEACHER_DEFAULTS = {
+    "oracle": {"tamer_learning_starts": 1000, "start_e": 1.0, "end_e": 0.05, "log_frequency": 100},
+    "human": {"tamer_learning_starts": 1, "start_e": 0.0, "end_e": 0.0, "log_frequency": 1},
+}
 
-        env = gym.make(args.env_id)
-        env.action_space.seed(args.seed)
-        obs_dim, n_actions = env.observation_space.shape[0], int(env.action_space.n)
 
-        # Oracle: exact Q* by value iteration (the "fully trained model"), or a teacher saved by oracle_train.py
-        phase, t0 = "oracle", time.time()
-        if oracle_q is not None:
-            q_star = oracle_q  # read and checked before the run directory was made
-        else:
-            q_star = gridworld_env.optimal_q(env.unwrapped.variant, args.oracle_gamma)
-        summary["time/oracle_s"] = time.time() - t0
+def fill_teacher_defaults(args: Args) -> Args:
+    """The flags left at None take the default of --teacher (the simulated teacher's are the paper's)."""
+    for name, value in TEACHER_DEFAULTS[args.teacher].items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
+    return args
 
-        writer = HeldWriter(run_dir, stop)
-        writer.add_text(
-            "hyperparameters",
-            "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
+
+class InputError(Exception):
+    """Bad input from the user: a flag value, a file. Reported as one line, before anything is written."""
+
+
+NON_NEGATIVE_INTS = ("seed", "teacher_delay")  # every other integer flag (--feedback-budget too) must be >= 1
+FLOAT_RANGES = {
+    "tau": "(0, 1]",
+    "sleep_chi2_coef": "[0, inf)",
+    **dict.fromkeys(
+        (
+            "feedback_alpha_start",
+            "feedback_alpha_end",
+            "start_e",
+            "end_e",
+            "sleep_gamma",
+            "oracle_gamma",
+            "teacher_noise",
+            "teacher_sparsity",
+        ),
+        "[0, 1]",
+    ),
+}
+# every other float flag (learning rates, temperature, exploration fraction) must be in (0, inf)
+
+
+def check_args(args: Args) -> None:
+    """What tyro cannot know: ranges, the env id, flags that exclude each other. Raises InputError."""
+    fill_teacher_defaults(args)
+    for f in fields(args):
+        value = getattr(args, f.name)
+        flag = "--" + f.name.replace("_", "-")
+        low = int(f.name not in NON_NEGATIVE_INTS)
+        if f.type in (int, int | None) and value is not None and value < low:
+            raise InputError(f"{flag} must be >= {low}, got {value}")
+        interval = FLOAT_RANGES.get(f.name, "(0, inf)") if f.type in (float, float | None) else None
+        if interval and not (
+            (value >= 0.0 if interval[0] == "[" else value > 0.0)  # NaN fails both tests
+            and (value <= 1.0 if interval.endswith("1]") else value < math.inf)
+        ):
+            raise InputError(f"{flag} must be in {interval}, got {value}")
+    if args.env_id not in MAZE_IDS:
+        raise InputError(f"unknown --env-id {args.env_id!r}; this script trains on one of {', '.join(MAZE_IDS)}")
+    if args.oracle_gamma >= 1.0:
+        raise InputError("--oracle-gamma must be below 1 for value iteration to converge")
+    if args.teacher == "oracle" and args.tamer_learning_starts < args.tamer_batch_size:
+        raise InputError(
+            f"--tamer-learning-starts ({args.tamer_learning_starts}) must be at least "
+            f"--tamer-batch-size ({args.tamer_batch_size})"
         )
-        evaluator = Evaluator(writer, args.success_max_steps)
-
-        h_net = QNetwork(obs_dim, n_actions).to(device)
-        buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, device)
-        q_net = QNetwork(obs_dim, n_actions).to(device)
-        target_net = QNetwork(obs_dim, n_actions).to(device)
-        target_net.load_state_dict(q_net.state_dict())
-        evaluator("oracle", q_star.argmax(1), 0)
-
-        # Forward phase ("day"): TAMER with a myopic H(s, a), simulated feedback, every transition remembered
-        phase, t0, eval_s0 = "tamer", time.time(), evaluator.seconds
-        summary.update(forward_phase(args, env, q_star, h_net, buffer, evaluator, writer, device))
-        summary["time/tamer_s"] = time.time() - t0 - (evaluator.seconds - eval_s0)
-        if args.save_model:
-            save_network(f"{run_dir}/tamer_h.pt", h_net, env_id=args.env_id)
-
-        # Sleep phase: offline IQ-Learn on the buffer; no environment steps
-        phase, t0, eval_s0 = "sleep", time.time(), evaluator.seconds
-        summary.update(sleep_phase(args, buffer, q_net, target_net, evaluator, writer, device))
-        summary["time/sleep_s"] = time.time() - t0 - (evaluator.seconds - eval_s0)
-        slept = not summary["sleep_skipped"]
-
-        # Recovered reward (Eq. 3) on the maze the agent learned in
-        phase = "reward"
-        if slept:
-            reward = reward_table(q_net, env.unwrapped.next_cell, args.sleep_gamma, args.sleep_temperature, device)
-            writer.add_figure(
-                "sleep/recovered_reward", reward_figure(reward.numpy(), f"recovered reward, seed {args.seed}")
-            )
-        if args.save_model and slept:
-            save_network(f"{run_dir}/inform_q.pt", q_net, env_id=args.env_id, gamma=args.sleep_gamma,
-                         temperature=args.sleep_temperature)  # fmt: skip
-            torch.save({"reward": reward, "env_id": args.env_id, "gamma": args.sleep_gamma,
-                        "temperature": args.sleep_temperature}, f"{run_dir}/recovered_reward.pt")  # fmt: skip
-
-        # Final evaluation of the three policies (INFORM's only if the sleep made one)
-        phase = "eval"
-        evaluator("oracle", q_star.argmax(1), summary["feedback/steps"])
-        evaluator("tamer", greedy_actions(h_net, device), summary["feedback/steps"])
-        if slept:
-            evaluator("inform", greedy_actions(q_net, device), args.sleep_gradient_steps)
-        if args.capture_video:  # after the evaluation: drawing changes no number
-            policies = {"tamer": greedy_actions(h_net, device)}
-            if slept:
-                policies["inform"] = greedy_actions(q_net, device)
-            record_videos(run_dir, policies)
-        if args.teacher == "human":
-            for name, net in (("TAMER (what you taught)", h_net), ("INFORM (after the sleep)", q_net))[: 1 + slept]:
-                print(
-                    f"\n{name}, greedy from S:\n" + draw_greedy_path(greedy_actions(net, device), env.unwrapped.variant)
-                )
-    except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
-        status, stop.broken_pipe = "interrupted", isinstance(e, BrokenPipeError)
-    except Diverged as e:
-        status = "diverged"
-        summary["error"] = str(e)
-
-    # the summary first, then the messages: no signal cuts this short (StopSignals only notes the later ones)
-    stop.finished = True
-    reason = stop.reason()
-    if run_dir is not None:
-        if evaluator is not None:
-            summary.update(evaluator.final)
-            summary["time/eval_s"] = evaluator.seconds
-        summary.update({"wall_time_s": time.time() - run_start, "seed": args.seed, "script": os.path.basename(__file__),
-                        "status": status, "args": asdict(args)})  # fmt: skip
-        if status != "completed":
-            summary["phase"] = phase
-        if status == "interrupted":
-            summary["signal"] = reason
-        write_json_atomic(f"{run_dir}/summary.json", summary)
-    for closing in (evaluator, env, writer):
-        if closing is not None:
-            closing.close()
-    if status == "interrupted":
-        saved = f"what finished is saved in {run_dir}" if run_dir else "no run was made"
-        say(f"interrupted ({reason}) during the {phase} phase; {saved}", sys.stderr)
-    elif status == "diverged":
-        say(f"error: {summary['error']}", sys.stderr)
-    elif "eval/inform_episode_length" in summary:
-        say(" | ".join(f"{p}: {summary[f'eval/{p}_episode_length']:.0f} steps" for p in POLICIES))
-    if run_dir is not None:
-        say(f"{status} in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json")
-    return summary
+    if args.tamer_learning_starts >= args.tamer_total_timesteps:
+        raise InputError(
+            f"--tamer-learning-starts ({args.tamer_learning_starts}) must be below "
+            f"--tamer-total-timesteps ({args.tamer_total_timesteps}), or H is never trained"
+        )
+    distortions = {"teacher_noise": 0.0, "teacher_sparsity": 1.0, "teacher_delay": 0, "credit_window": 1}
+    changed = [f"--{k.replace('_', '-')}" for k, v in distortions.items() if getattr(args, k) != v]
+    if args.teacher == "human" and changed:
+        raise InputError(
+            f"--teacher human takes your answers as they are; drop {', '.join(changed)} "
+            "(they distort the simulated teacher only)"
+        )
 
 
-# ---------------------------------------------------------------------------------------------------------------
-# TRY NOT TO MODIFY: how a run ends. Signals, a dead reader of our output, messages that cannot crash the exit
+class Diverged(Exception):
+    """The sleep loss became NaN or inf."""
 
 
 class StopSignals:
@@ -940,7 +989,11 @@ class StopSignals:
     then waits for the thread's next flush, up to 120 s. Later signals, and any after the summary, are only noted."""
 
     def __init__(self):
-        self.received, self.holding, self.pending, self.finished, self.broken_pipe = [], 0, False, False, False
+        self.received = []
+        self.holding = 0
+        self.pending = False
+        self.finished = False
+        self.broken_pipe = False
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
             if signal.getsignal(sig) is not signal.SIG_IGN:
                 signal.signal(sig, self.handler)
@@ -1006,6 +1059,67 @@ def say(text: str, file=None) -> None:
             os.dup2(os.open(os.devnull, os.O_WRONLY), file.fileno())  # the exit's final flush then succeeds too
 
 
+def make_run_dir(run_name: str) -> str:
+    """runs/{run_name}, never an existing directory: a clash gets a numeric suffix."""
+    path = f"runs/{run_name}"
+    n = 0
+    while True:
+        try:
+            os.makedirs(path)
+            return path
+        except FileExistsError:
+            n += 1
+            path = f"runs/{run_name}_{n}"
+
+
+def write_json_atomic(path: str, data: dict) -> None:
+    # strict JSON: a metric that does not exist in this run (e.g. no success episodes) is null, not NaN
+    data = {k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in data.items()}
+    with open(path + ".tmp", "w") as f:
+        json.dump(data, f, indent=2, allow_nan=False)
+    os.replace(path + ".tmp", path)
+
+
+def end_run(args, summary, status, phase, run_dir, run_start, evaluator, closing, stop) -> dict:
+    """The summary first, then the messages: no signal cuts this short (StopSignals only notes the later ones)."""
+    stop.finished = True
+    if run_dir is not None:
+        summary = {
+            **(evaluator.final if evaluator else {}),
+            **summary,
+            "time/eval_s": evaluator.seconds if evaluator else 0.0,
+            "wall_time_s": time.time() - run_start,
+            "seed": args.seed,
+            "script": os.path.basename(__file__),
+            "status": status,
+            "args": asdict(args),
+        }
+        if status != "completed":
+            summary["phase"] = phase
+        if status == "interrupted":
+            summary["signal"] = stop.reason()
+        write_json_atomic(f"{run_dir}/summary.json", summary)
+    for thing in (*closing, evaluator):
+        if thing is not None:
+            thing.close()
+    if status == "interrupted":
+        saved = f"what finished is saved in {run_dir}" if run_dir else "no run was made"
+        say(f"interrupted ({stop.reason()}) during the {phase} phase; {saved}", sys.stderr)
+    elif status == "diverged":
+        say(f"error: {summary['error']}", sys.stderr)
+    if run_dir is not None:
+        print_results(summary, run_dir)
+    summary.setdefault("status", status)
+    return summary
+
+
+def print_results(summary: dict, run_dir: str) -> None:
+    if summary["status"] == "completed":
+        lengths = {p: summary.get(f"eval/{p}_episode_length") for p in POLICIES}  # no INFORM if the sleep was skipped
+        say(" | ".join(f"{p}: {v:.0f} steps" for p, v in lengths.items() if v is not None) + f" (optimum: {OPTIMUM})")
+    say(f"{summary['status']} in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json")
+
+
 def evaluate_saved(path: str, success_max_steps: int) -> dict:
     """Re-evaluate a saved tamer_h.pt or inform_q.pt: its greedy policy on the plain and wall mazes, the start set."""
     evaluator = Evaluator(None, success_max_steps)
@@ -1016,6 +1130,8 @@ def evaluate_saved(path: str, success_max_steps: int) -> dict:
 
 # --capture-video: the greedy episodes drawn as the recovered-reward figure draws the maze, written as GIFs by Pillow
 VIDEO_START_CELLS = (7, 12, 17, 22)  # every third cell of the authors' start set (gridworld_env.START_SET)
+
+
 VIDEO_MAZES = {"plain": "KnoxStoneMaze-v0", "wall": "KnoxStoneMazeWall-v0"}
 
 
@@ -1025,7 +1141,10 @@ def greedy_episode(policy: np.ndarray, variant: str, start: int) -> tuple[list[i
     episode length, and whether G was reached."""
     env = gym.make(VIDEO_MAZES[variant])
     obs, _ = env.reset(options={"start_cell": start})
-    cells, length, terminated, truncated = [start], 0, False, False
+    cells = [start]
+    length = 0
+    terminated = False
+    truncated = False
     while not (terminated or truncated):
         obs, _, terminated, truncated, info = env.step(policy[int(obs.argmax())])
         length += 1
@@ -1040,7 +1159,8 @@ def maze_frames(cells: list[int], variant: str, title: str, length: int, reached
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     fig = Figure(figsize=(3.2, 3.4), dpi=80)
-    canvas, ax = FigureCanvasAgg(fig), fig.subplots()
+    canvas = FigureCanvasAgg(fig)
+    ax = fig.subplots()
     fig.subplots_adjust(0.02, 0.02, 0.98, 0.86)
     for r, c in gridworld_env.CELLS:
         ax.add_patch(Rectangle((c, r), 1, 1, facecolor="white", edgecolor="0.85"))
@@ -1075,8 +1195,7 @@ def write_gif(path: str, frames: list[np.ndarray], durations_ms: list[int]) -> N
     from PIL import Image
 
     images = [Image.fromarray(frame) for frame in frames]
-    images[0].save(path + ".tmp", format="GIF", save_all=True, append_images=images[1:], loop=0,
-                   duration=durations_ms)  # fmt: skip
+    images[0].save(path + ".tmp", format="GIF", save_all=True, append_images=images[1:], loop=0, duration=durations_ms)
     os.replace(path + ".tmp", path)
 
 
@@ -1085,7 +1204,8 @@ def record_videos(run_dir: str, policies: dict[str, np.ndarray]) -> dict:
     the plain maze one after the other, as videos/{policy}_{plain,wall,starts}.gif; videos/videos.json says how
     each episode ended."""
     os.makedirs(f"{run_dir}/videos", exist_ok=True)
-    record, t0 = {}, time.time()
+    record = {}
+    t0 = time.time()
     for name, policy in policies.items():
         episodes = [("plain", "plain", gridworld_env.START), ("wall", "wall", gridworld_env.START)]
         episodes += [("starts", "plain", start) for start in VIDEO_START_CELLS]
@@ -1095,11 +1215,17 @@ def record_videos(run_dir: str, policies: dict[str, np.ndarray]) -> dict:
             maze = "wall maze" if variant == "wall" else "maze"
             title = f"{name.upper()}, {maze}, from {'S' if start == gridworld_env.START else f'cell {start}'}"
             episode = maze_frames(cells, variant, title, length, reached)
-            frames.setdefault(clip, []).extend((frame, 1500 if t == len(episode) - 1 else 250)
-                                               for t, frame in enumerate(episode))  # the end is held  # fmt: skip
-            record[f"{name}_{clip}_{start}"] = {"file": f"{name}_{clip}.gif", "variant": variant, "start_cell": start,
-                                                "episode_length": length, "reached_goal": reached,
-                                                "frames": len(cells)}  # fmt: skip
+            frames.setdefault(clip, []).extend(
+                (frame, 1500 if t == len(episode) - 1 else 250) for t, frame in enumerate(episode)
+            )  # the end is held
+            record[f"{name}_{clip}_{start}"] = {
+                "file": f"{name}_{clip}.gif",
+                "variant": variant,
+                "start_cell": start,
+                "episode_length": length,
+                "reached_goal": reached,
+                "frames": len(cells),
+            }
         for clip, timed in frames.items():
             write_gif(f"{run_dir}/videos/{name}_{clip}.gif", [f for f, _ in timed], [ms for _, ms in timed])
     write_json_atomic(f"{run_dir}/videos/videos.json", record)
@@ -1111,8 +1237,9 @@ if __name__ == "__main__":
     try:
         args = tyro.cli(Args)  # a malformed flag: tyro's own message, exit 2
         if gridworld_env is None:
-            raise InputError("gridworld_env.py (the maze) is not importable: copy it next to this script, or run "
-                             "from the repo")  # fmt: skip
+            raise InputError(
+                "gridworld_env.py (the maze) is not importable: copy it next to this script, or run from the repo"
+            )
         check_args(args)
         if args.evaluate:
             print(json.dumps(evaluate_saved(args.evaluate, args.success_max_steps), indent=2))

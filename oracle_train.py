@@ -58,7 +58,8 @@ PUSHER_IDS = ("Pusher-v5", "Pusher-v4")
 MAZE_IDS = tuple(gridworld_env.ENV_IDS)
 SUPPORTED_ENV_IDS = PUSHER_IDS + MAZE_IDS
 METHODS = {"pusher": ("sac",), "maze": ("value-iteration", "q-learning", "dqn")}
-LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
+LOG_STD_MIN = -5.0
+LOG_STD_MAX = 2.0
 SUCCESS_DISTANCE = 0.08
 # Reset seeds of the evaluations. Training seeds its env once (--seed, or --seed + step on --resume) and then
 # draws its starts from the env's own RNG, so these fixed blocks are starts it never trains from. The periodic
@@ -66,9 +67,23 @@ SUCCESS_DISTANCE = 0.08
 # evaluation of the written oracle uses another block, so the choice is not judged on the starts it was chosen on.
 SELECTION_EVAL_SEED = 1_000_000
 FINAL_EVAL_SEED = 20_000
-TRAINING_STATE_KEYS = ("actor", "qf", "qf_target", "q_optimizer", "actor_optimizer", "a_optimizer", "log_alpha",
-                       "buf_n", "buf_obs", "buf_next_obs", "buf_act", "buf_rew", "buf_term", "global_step",
-                       "torch_rng")  # fmt: skip
+TRAINING_STATE_KEYS = (
+    "actor",
+    "qf",
+    "qf_target",
+    "q_optimizer",
+    "actor_optimizer",
+    "ent_coef_optimizer",
+    "log_ent_coef",
+    "buf_n",
+    "buf_obs",
+    "buf_next_obs",
+    "buf_act",
+    "buf_rew",
+    "buf_term",
+    "global_step",
+    "torch_rng",
+)
 
 
 @dataclass
@@ -114,8 +129,8 @@ class Args:
     """width of the two hidden layers of actor and critics"""
     autotune: bool = True
     """automatic tuning of the entropy coefficient"""
-    alpha: float = 0.2
-    """entropy regularization coefficient (when not autotuned)"""
+    ent_coef: float = 0.2
+    """the entropy coefficient when it is not autotuned (CleanRL's --alpha)"""
 
     # Evaluation, logging and checkpointing
     eval_frequency: int = 10000
@@ -184,13 +199,14 @@ def check_args(args: Args) -> None:
         raise InputError(f"--seed must be in [0, 2**32), got {args.seed}")
     if args.num_threads < 1 or args.hidden_size < 1:
         raise InputError(f"--num-threads ({args.num_threads}) and --hidden-size ({args.hidden_size}) must be positive")
-    if not (args.policy_lr > 0.0 and args.q_lr > 0.0 and args.alpha > 0.0):
-        raise InputError("--policy-lr, --q-lr and --alpha must be > 0")
+    if not (args.policy_lr > 0.0 and args.q_lr > 0.0 and args.ent_coef > 0.0):
+        raise InputError("--policy-lr, --q-lr and --ent-coef must be > 0")
     if args.output_path is not None and (not args.output_path or os.path.isdir(args.output_path)):
         raise InputError(f"--output-path {args.output_path!r} must name a file (it is empty or a directory)")
     if args.resume is not None and args.env_id not in PUSHER_IDS:
-        raise InputError("--resume continues a SAC (Pusher) run; the maze methods train in seconds and have no "
-                         "training state")  # fmt: skip
+        raise InputError(
+            "--resume continues a SAC (Pusher) run; the maze methods train in seconds and have no training state"
+        )
     if args.maze_episodes < 1 or not 0.0 < args.maze_alpha <= 1.0 or not 0.0 <= args.maze_epsilon <= 1.0:
         raise InputError("--maze-episodes must be >= 1, --maze-alpha in (0, 1] and --maze-epsilon in [0, 1]")
     check_maze_dqn_args(args)
@@ -198,8 +214,10 @@ def check_args(args: Args) -> None:
         import mujoco
 
         if int(mujoco.__version__.split(".")[0]) >= 3:
-            raise InputError(f"Pusher-v4 needs mujoco<3 (installed: {mujoco.__version__}); use --env-id Pusher-v5 "
-                             "or `pip install mujoco==2.3.7` in a separate venv")  # fmt: skip
+            raise InputError(
+                f"Pusher-v4 needs mujoco<3 (installed: {mujoco.__version__}); use --env-id Pusher-v5 "
+                "or `pip install mujoco==2.3.7` in a separate venv"
+            )
     positive = ["total_timesteps", "batch_size", "eval_frequency", "eval_episodes", "final_eval_episodes"]
     positive += ["learning_starts", "log_frequency", "checkpoint_frequency", "policy_frequency", "buffer_size"]
     for name in positive:
@@ -228,11 +246,15 @@ def check_maze_dqn_args(args: Args) -> None:
     if not 0.0 <= args.maze_dqn_end_e <= 1.0 or not 0.0 <= args.maze_dqn_start_e <= 1.0:
         raise InputError("--maze-dqn-start-e and --maze-dqn-end-e must be in [0, 1]")
     if args.maze_dqn_batch_size > args.maze_dqn_timesteps:
-        raise InputError(f"--maze-dqn-batch-size {args.maze_dqn_batch_size} is larger than --maze-dqn-timesteps "
-                         f"{args.maze_dqn_timesteps}")  # fmt: skip
+        raise InputError(
+            f"--maze-dqn-batch-size {args.maze_dqn_batch_size} is larger than --maze-dqn-timesteps "
+            f"{args.maze_dqn_timesteps}"
+        )
     if args.maze_dqn_learning_starts >= args.maze_dqn_timesteps:
-        raise InputError(f"--maze-dqn-learning-starts ({args.maze_dqn_learning_starts}) must be below "
-                         f"--maze-dqn-timesteps ({args.maze_dqn_timesteps}), or the DQN never learns")  # fmt: skip
+        raise InputError(
+            f"--maze-dqn-learning-starts ({args.maze_dqn_learning_starts}) must be below "
+            f"--maze-dqn-timesteps ({args.maze_dqn_timesteps}), or the DQN never learns"
+        )
 
 
 def make_env(env_id: str, seed: int) -> gym.Env:
@@ -318,11 +340,15 @@ def soft_update(target: nn.Module, source: nn.Module, tau: float) -> None:
 def evaluate(actor: Actor, env_id: str, episodes: int, seed: int, device: torch.device) -> dict:
     """Deterministic (mean-action) episodes from random starts: return, final distance, success. The unused sample
     comes from its own generator, so evaluating never moves the training RNG."""
-    env, generator = gym.make(env_id), torch.Generator(device=device).manual_seed(seed)
-    returns, distances = [], []
+    env = gym.make(env_id)
+    generator = torch.Generator(device=device).manual_seed(seed)
+    returns = []
+    distances = []
     for ep in range(episodes):
         obs, _ = env.reset(seed=seed + ep)
-        done, ep_return, info = False, 0.0, {}
+        done = False
+        ep_return = 0.0
+        info = {}
         while not done:
             obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device).unsqueeze(0)
             _, _, action = actor.get_action(obs_t, generator)
@@ -377,22 +403,29 @@ def read_training_state(path: str) -> dict:
             state = torch.load(path, weights_only=True, map_location="cpu")
     except pickle.UnpicklingError as e:
         unsupported = [line.strip() for line in str(e).splitlines() if "unsupported" in line.lower()]
-        raise InputError(f"--resume {path}: refused, it holds more than tensors and plain values (it could run "
-                         f"code): {(unsupported or [type(e).__name__])[0][:160]}") from None  # fmt: skip
+        raise InputError(
+            f"--resume {path}: refused, it holds more than tensors and plain values (it could run "
+            f"code): {(unsupported or [type(e).__name__])[0][:160]}"
+        ) from None
     except Exception as e:  # a damaged archive: torch raises RuntimeError, EOFError, ...
         first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
         raise InputError(f"--resume {path}: corrupt checkpoint: {first}") from None
+    for old, new in (("a_optimizer", "ent_coef_optimizer"), ("log_alpha", "log_ent_coef")):  # an older state's names
+        if isinstance(state, dict) and old in state:
+            state[new] = state.pop(old)
     missing = [k for k in TRAINING_STATE_KEYS if not isinstance(state, dict) or k not in state]
     if missing:
         more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
-        raise InputError(f"--resume {path}: not a training_state.pt of oracle_train.py "
-                         f"(missing {', '.join(missing[:3])}{more})")  # fmt: skip
+        raise InputError(
+            f"--resume {path}: not a training_state.pt of oracle_train.py (missing {', '.join(missing[:3])}{more})"
+        )
     return state
 
 
 def new_run_dir(args: Args) -> str:
     run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
-    run_dir, suffix = os.path.join("runs", run_name), 0
+    run_dir = os.path.join("runs", run_name)
+    suffix = 0
     while os.path.exists(run_dir):
         suffix += 1
         run_dir = os.path.join("runs", f"{run_name}_{suffix}")
@@ -414,7 +447,8 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     env = make_env(args.env_id, args.seed)
     obs_dim = int(np.prod(env.observation_space.shape))
     act_dim = int(np.prod(env.action_space.shape))
-    low, high = env.action_space.low, env.action_space.high
+    low = env.action_space.low
+    high = env.action_space.high
 
     actor = Actor(obs_dim, act_dim, args.hidden_size, low, high).to(device)
     qf = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
@@ -423,10 +457,10 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     q_optimizer = torch.optim.Adam(qf.parameters(), lr=args.q_lr)
     actor_optimizer = torch.optim.Adam(actor.parameters(), lr=args.policy_lr)
     target_entropy = -float(act_dim)
-    log_alpha = torch.zeros(1, device=device, requires_grad=True)  # the entropy coefficient is exp(log_alpha)
-    a_optimizer = torch.optim.Adam([log_alpha], lr=args.q_lr)
+    log_ent_coef = torch.zeros(1, device=device, requires_grad=True)  # SAC's entropy coefficient, exp(log_ent_coef)
+    ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.q_lr)
     if not args.autotune:
-        log_alpha.data.fill_(math.log(args.alpha))
+        log_ent_coef.data.fill_(math.log(args.ent_coef))
 
     # preallocated replay buffer (float32; Pusher never terminates but the flag is kept)
     size = min(args.buffer_size, args.total_timesteps)
@@ -435,17 +469,28 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     buf_act = torch.zeros(size, act_dim, device=device)
     buf_rew = torch.zeros(size, device=device)
     buf_term = torch.zeros(size, device=device)
-    buffers = {"buf_obs": buf_obs, "buf_next_obs": buf_next_obs, "buf_act": buf_act, "buf_rew": buf_rew,
-               "buf_term": buf_term}  # fmt: skip
-    modules = {"actor": actor, "qf": qf, "qf_target": qf_target, "q_optimizer": q_optimizer,
-               "actor_optimizer": actor_optimizer, "a_optimizer": a_optimizer}  # fmt: skip
+    buffers = {
+        "buf_obs": buf_obs,
+        "buf_next_obs": buf_next_obs,
+        "buf_act": buf_act,
+        "buf_rew": buf_rew,
+        "buf_term": buf_term,
+    }
+    modules = {
+        "actor": actor,
+        "qf": qf,
+        "qf_target": qf_target,
+        "q_optimizer": q_optimizer,
+        "actor_optimizer": actor_optimizer,
+        "ent_coef_optimizer": ent_coef_optimizer,
+    }
     buf_n = start_step = 0
     if args.resume is not None:
         run_dir = os.path.dirname(os.path.abspath(args.resume))
         try:
             for key, module in modules.items():
                 module.load_state_dict(resume_state[key])
-            log_alpha.data.copy_(resume_state["log_alpha"])
+            log_ent_coef.data.copy_(resume_state["log_ent_coef"])
             buf_n = int(resume_state["buf_n"])
             for key, buf in buffers.items():
                 buf[: min(buf_n, size)] = resume_state[key][: min(buf_n, size)]
@@ -465,14 +510,18 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
             "hyperparameters",
             "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
         )
-    print(f"run dir: {run_dir}", flush=True)
+    print(f"run directory: {run_dir}", flush=True)
 
     def save_training_state(global_step: int) -> None:
         n = min(buf_n, size)
         state = {key: module.state_dict() for key, module in modules.items()}
         state.update({key: buf[:n].clone() for key, buf in buffers.items()})
-        state.update(log_alpha=log_alpha.detach().clone(), buf_n=buf_n, global_step=global_step,
-                     torch_rng=torch.get_rng_state())  # fmt: skip
+        state.update(
+            log_ent_coef=log_ent_coef.detach().clone(),
+            buf_n=buf_n,
+            global_step=global_step,
+            torch_rng=torch.get_rng_state(),
+        )
         atomic_save(state, os.path.join(run_dir, "training_state.pt"))
 
     def save_oracle(step: int, evaluation: dict, path: str) -> None:
@@ -481,7 +530,8 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     # the best evaluation so far (SB3's EvalCallback): success rate first, then final distance; a resumed run goes on
     # from the best.pt in its run directory
     best_path = os.path.join(run_dir, "best.pt")
-    best_key, best_step = (-1.0, -math.inf), None
+    best_key = (-1.0, -math.inf)
+    best_step = None
     if os.path.isfile(best_path):
         best = torch.load(best_path, weights_only=True, map_location="cpu")
         best_key = (best["evaluation"]["success_rate"], -best["evaluation"]["final_distance"])
@@ -489,9 +539,12 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
 
     obs, _ = env.reset(seed=args.seed + start_step)  # random starts: seed once, then the env RNG runs on
     obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
-    ep_return, ep_length = 0.0, 0
-    t0, t_last, step_last = time.time(), time.time(), start_step
-    qf_loss = actor_loss = alpha_loss = torch.zeros((), device=device)
+    ep_return = 0.0
+    ep_length = 0
+    t0 = time.time()
+    t_last = time.time()
+    step_last = start_step
+    qf_loss = actor_loss = ent_coef_loss = torch.zeros((), device=device)
     last_eval = {}
     report_every = max(1, (args.total_timesteps - start_step) // 20)
     for global_step in range(start_step, args.total_timesteps):
@@ -504,15 +557,20 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
         next_obs, reward, terminated, truncated, info = env.step(action)
         next_obs_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
         i = buf_n % size
-        buf_obs[i], buf_next_obs[i], buf_act[i] = obs_t, next_obs_t, torch.as_tensor(action, device=device)
-        buf_rew[i], buf_term[i] = float(reward), float(terminated)
+        buf_obs[i] = obs_t
+        buf_next_obs[i] = next_obs_t
+        buf_act[i] = torch.as_tensor(action, device=device)
+        buf_rew[i] = float(reward)
+        buf_term[i] = float(terminated)
         buf_n += 1
-        ep_return, ep_length = ep_return + float(reward), ep_length + 1
+        ep_return = ep_return + float(reward)
+        ep_length = ep_length + 1
         if terminated or truncated:
             writer.add_scalar("charts/episodic_return", ep_return, global_step)
             writer.add_scalar("charts/episodic_length", ep_length, global_step)
             writer.add_scalar("charts/final_distance", abs(float(info["reward_dist"])), global_step)
-            ep_return, ep_length = 0.0, 0
+            ep_return = 0.0
+            ep_length = 0
             next_obs, _ = env.reset()
             next_obs_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
         obs_t = next_obs_t
@@ -520,17 +578,15 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
         # ALGO LOGIC: one SAC update per env step, as inform_sac_pusher.py's train_oracle
         if global_step >= args.learning_starts:
             idx = torch.randint(0, min(buf_n, size), (args.batch_size,), device=device)
-            b_obs, b_next, b_act, b_rew, b_term = (
-                buf_obs[idx],
-                buf_next_obs[idx],
-                buf_act[idx],
-                buf_rew[idx],
-                buf_term[idx],
-            )
-            alpha = log_alpha.detach().exp()
+            b_obs = buf_obs[idx]
+            b_next = buf_next_obs[idx]
+            b_act = buf_act[idx]
+            b_rew = buf_rew[idx]
+            b_term = buf_term[idx]
+            ent_coef = log_ent_coef.detach().exp()
             with torch.no_grad():
                 next_act, next_logp, _ = actor.get_action(b_next)
-                min_q_next = qf_target(b_next, next_act).min(0).values - alpha * next_logp
+                min_q_next = qf_target(b_next, next_act).min(0).values - ent_coef * next_logp
                 target_q = b_rew + (1.0 - b_term) * args.gamma * min_q_next
             qf_loss = (qf(b_obs, b_act) - target_q.unsqueeze(0)).pow(2).mean(-1).sum()  # summed over the twins
             q_optimizer.zero_grad(set_to_none=True)
@@ -539,16 +595,16 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
 
             if global_step % args.policy_frequency == 0:
                 pi, logp, _ = actor.get_action(b_obs)
-                actor_loss = (alpha * logp - qf(b_obs, pi).min(0).values).mean()
+                actor_loss = (ent_coef * logp - qf(b_obs, pi).min(0).values).mean()
                 actor_optimizer.zero_grad(set_to_none=True)
                 actor_loss.backward()
                 actor_optimizer.step()
                 qf.zero_grad(set_to_none=True)  # the actor loss left gradients on the critic
                 if args.autotune:
-                    alpha_loss = (-log_alpha.exp() * (logp.detach() + target_entropy)).mean()
-                    a_optimizer.zero_grad(set_to_none=True)
-                    alpha_loss.backward()
-                    a_optimizer.step()
+                    ent_coef_loss = (-log_ent_coef.exp() * (logp.detach() + target_entropy)).mean()
+                    ent_coef_optimizer.zero_grad(set_to_none=True)
+                    ent_coef_loss.backward()
+                    ent_coef_optimizer.step()
             soft_update(qf_target, qf, args.tau)
 
         # TRY NOT TO MODIFY: logging, evaluation, checkpoints
@@ -557,8 +613,8 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
             sps = (step - step_last) / max(time.time() - t_last, 1e-9)
             writer.add_scalar("losses/qf_loss", qf_loss.item(), step)
             writer.add_scalar("losses/actor_loss", actor_loss.item(), step)
-            writer.add_scalar("losses/alpha", log_alpha.exp().item(), step)
-            writer.add_scalar("losses/alpha_loss", alpha_loss.item(), step)
+            writer.add_scalar("losses/ent_coef", log_ent_coef.exp().item(), step)
+            writer.add_scalar("losses/ent_coef_loss", ent_coef_loss.item(), step)
             writer.add_scalar("charts/SPS", sps, step)
         if step % args.eval_frequency == 0 or step == args.total_timesteps:
             last_eval = evaluate(actor, args.env_id, args.eval_episodes, SELECTION_EVAL_SEED, device)
@@ -566,7 +622,8 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
             writer.add_scalar("eval/oracle_final_distance", last_eval["final_distance"], step)
             writer.add_scalar("eval/oracle_success_rate", last_eval["success_rate"], step)
             if (last_eval["success_rate"], -last_eval["final_distance"]) > best_key:
-                best_key, best_step = (last_eval["success_rate"], -last_eval["final_distance"]), step
+                best_key = (last_eval["success_rate"], -last_eval["final_distance"])
+                best_step = step
                 save_oracle(step, {**last_eval, "reset_seed": SELECTION_EVAL_SEED}, best_path)
             writer.add_scalar("eval/best_success_rate", best_key[0], step)
             writer.add_scalar("eval/best_final_distance", -best_key[1], step)
@@ -579,8 +636,11 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
                     f" | eval return {last_eval['return']:.1f} dist {last_eval['final_distance']:.3f} success "
                     f"{last_eval['success_rate']:.2f} | best {best_key[0]:.2f} / {-best_key[1]:.3f} at {best_step}"
                 )
-            print(f"[oracle] {step}/{args.total_timesteps} {100 * step // args.total_timesteps}% | {sps:.0f} SPS"
-                  f" | ETA {int(eta // 60)}m{int(eta % 60):02d}s{ev}", flush=True)  # fmt: skip
+            print(
+                f"[oracle] {step}/{args.total_timesteps} {100 * step // args.total_timesteps}% | {sps:.0f} SPS"
+                f" | ETA {int(eta // 60)}m{int(eta % 60):02d}s{ev}",
+                flush=True,
+            )
         if step % args.checkpoint_frequency == 0 or step == args.total_timesteps:
             save_training_state(step)
             save_oracle(step, last_eval or {}, os.path.join(run_dir, "oracle_latest.pt"))
@@ -638,7 +698,8 @@ def maze_q_learning(env: gym.Env, args: Args) -> tuple[np.ndarray, int]:
     steps = 0
     obs, _ = env.reset(seed=args.seed)
     for _ in range(args.maze_episodes):
-        s, done = int(obs.argmax()), False
+        s = int(obs.argmax())
+        done = False
         while not done:
             best = np.flatnonzero(q[s] == q[s].max())
             a = (
@@ -649,7 +710,9 @@ def maze_q_learning(env: gym.Env, args: Args) -> tuple[np.ndarray, int]:
             obs, reward, terminated, truncated, _ = env.step(a)
             s_next = int(obs.argmax())
             q[s, a] += args.maze_alpha * (reward + args.gamma * (1.0 - terminated) * q[s_next].max() - q[s, a])
-            s, done, steps = s_next, terminated or truncated, steps + 1
+            s = s_next
+            done = terminated or truncated
+            steps = steps + 1
         obs, _ = env.reset()
     return q, steps
 
@@ -683,7 +746,8 @@ def maze_dqn(env: gym.Env, args: Args) -> tuple[MazeQNetwork, int]:
     random.seed(args.seed)
     np.random.seed(args.seed)
     torch.manual_seed(args.seed)
-    obs_dim, n_actions = gridworld_env.N_CELLS, gridworld_env.N_ACTIONS
+    obs_dim = gridworld_env.N_CELLS
+    n_actions = gridworld_env.N_ACTIONS
     q_network = MazeQNetwork(obs_dim, n_actions, args.maze_dqn_hidden)
     target_network = MazeQNetwork(obs_dim, n_actions, args.maze_dqn_hidden)
     target_network.load_state_dict(q_network.state_dict())
@@ -711,7 +775,11 @@ def maze_dqn(env: gym.Env, args: Args) -> tuple[MazeQNetwork, int]:
         obs, reward, terminated, truncated, _ = env.step(action)
         s_next = int(obs.argmax())
         i = global_step % size
-        buf_s[i], buf_a[i], buf_r[i], buf_s_next[i], buf_term[i] = s, action, float(reward), s_next, float(terminated)
+        buf_s[i] = s
+        buf_a[i] = action
+        buf_r[i] = float(reward)
+        buf_s_next[i] = s_next
+        buf_term[i] = float(terminated)
         s = s_next
         if terminated or truncated:
             obs, _ = env.reset()
@@ -753,7 +821,8 @@ def train_maze(args: Args) -> None:
             "state_dict": {k: v.detach().cpu().clone() for k, v in q_network.state_dict().items()},
         }
     else:
-        q, steps = gridworld_env.optimal_q(variant, args.gamma), 0
+        q = gridworld_env.optimal_q(variant, args.gamma)
+        steps = 0
     env.close()
     length = gridworld_env.greedy_episode_length(q.argmax(1), variant)
     ckpt = {
@@ -769,8 +838,11 @@ def train_maze(args: Args) -> None:
         "evaluation": {"episode_length": float(length)},
         **extra,
     }
-    print(f"[oracle] {args.method} on {args.env_id}: {steps} env steps, greedy episode length {length} "
-          f"({time.time() - start:.1f}s)", flush=True)  # fmt: skip
+    print(
+        f"[oracle] {args.method} on {args.env_id}: {steps} env steps, greedy episode length {length} "
+        f"({time.time() - start:.1f}s)",
+        flush=True,
+    )
     if args.save_model:
         os.makedirs(os.path.dirname(os.path.abspath(args.output_path)), exist_ok=True)
         atomic_save(ckpt, args.output_path)
@@ -786,7 +858,9 @@ VIDEO_EPISODES = 3
 
 def video_camera() -> dict:
     """The camera's MJCF attributes: VIDEO_CAMERA's distance from its lookat, seen from +x (image up is -x)."""
-    (x, y, z), d, el = VIDEO_CAMERA["lookat"], VIDEO_CAMERA["distance"], math.radians(VIDEO_CAMERA["elevation"])
+    x, y, z = VIDEO_CAMERA["lookat"]
+    d = VIDEO_CAMERA["distance"]
+    el = math.radians(VIDEO_CAMERA["elevation"])
     pos = f"{x + d * math.cos(el):.4f} {y} {z - d * math.sin(el):.4f}"
     xyaxes = f"0 1 0 {math.sin(el):.4f} 0 {math.cos(el):.4f}"
     return {"name": "inform_video", "mode": "fixed", "pos": pos, "xyaxes": xyaxes}
@@ -824,8 +898,10 @@ def check_video(env_id: str) -> None:
     """Before anything is written: pick the headless GL backend (egl when MUJOCO_GL is unset and there is no display),
     render one frame, and find ffmpeg. InputError, one line, if either is missing."""
     if env_id not in PUSHER_IDS:
-        raise InputError(f"--capture-video films a Pusher teacher; the maze's are drawn by inform_dqn_gridworld.py "
-                         f"--capture-video, not for {env_id}")  # fmt: skip
+        raise InputError(
+            f"--capture-video films a Pusher teacher; the maze's are drawn by inform_dqn_gridworld.py "
+            f"--capture-video, not for {env_id}"
+        )
     if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
         os.environ["MUJOCO_GL"] = "egl"
     try:
@@ -833,8 +909,10 @@ def check_video(env_id: str) -> None:
 
         imageio_ffmpeg.get_ffmpeg_exe()
     except Exception as e:
-        raise InputError(f"--capture-video writes mp4 with imageio-ffmpeg, which is missing ({type(e).__name__}): "
-                         "pip install imageio-ffmpeg==0.8.1") from None  # fmt: skip
+        raise InputError(
+            f"--capture-video writes mp4 with imageio-ffmpeg, which is missing ({type(e).__name__}): "
+            "pip install imageio-ffmpeg==0.8.1"
+        ) from None
     try:
         with warnings.catch_warnings():  # a failing backend warns before it raises: one line is enough
             warnings.simplefilter("ignore")
@@ -843,9 +921,11 @@ def check_video(env_id: str) -> None:
             frame = env.render()[-1]
             env.close()
     except Exception as e:
-        raise InputError(f"--capture-video: MuJoCo cannot render with MUJOCO_GL={os.environ.get('MUJOCO_GL')} "
-                         f"({type(e).__name__}); install EGL (Debian: apt-get install libegl1 libegl-mesa0) or "
-                         "OSMesa (apt-get install libosmesa6, then MUJOCO_GL=osmesa)") from None  # fmt: skip
+        raise InputError(
+            f"--capture-video: MuJoCo cannot render with MUJOCO_GL={os.environ.get('MUJOCO_GL')} "
+            f"({type(e).__name__}); install EGL (Debian: apt-get install libegl1 libegl-mesa0) or "
+            "OSMesa (apt-get install libosmesa6, then MUJOCO_GL=osmesa)"
+        ) from None
     if not isinstance(frame, np.ndarray) or frame.shape != (16, 16, 3):
         raise InputError(f"--capture-video: MuJoCo rendered no image with MUJOCO_GL={os.environ.get('MUJOCO_GL')}")
 
@@ -856,8 +936,15 @@ def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
 
     tmp = path[: -len(".mp4")] + ".tmp.mp4"  # ffmpeg reads the container from the extension
     try:
-        writer = imageio_ffmpeg.write_frames(tmp, frames[0].shape[1::-1], fps=fps, codec="libx264", quality=6,
-                                             macro_block_size=16, ffmpeg_log_level="error")  # fmt: skip
+        writer = imageio_ffmpeg.write_frames(
+            tmp,
+            frames[0].shape[1::-1],
+            fps=fps,
+            codec="libx264",
+            quality=6,
+            macro_block_size=16,
+            ffmpeg_log_level="error",
+        )
         writer.send(None)
         for frame in frames:
             writer.send(np.ascontiguousarray(frame))
@@ -874,26 +961,37 @@ def record_teacher(args: Args, actor: Actor, run_dir: str, device: torch.device)
     the reset seeds `evaluate` gives them, back to back in videos/oracle.mp4; videos/videos.json has each episode's
     reset seed, frames and final distance."""
     os.makedirs(os.path.join(run_dir, "videos"), exist_ok=True)
-    env, generator = video_env(args.env_id), torch.Generator(device=device).manual_seed(FINAL_EVAL_SEED)
-    frames, record, t0 = [], {}, time.time()
+    env = video_env(args.env_id)
+    generator = torch.Generator(device=device).manual_seed(FINAL_EVAL_SEED)
+    frames = []
+    record = {}
+    t0 = time.time()
     for ep in range(VIDEO_EPISODES):
         obs, _ = env.reset(seed=FINAL_EVAL_SEED + ep)
-        done, info = False, {}
+        done = False
+        info = {}
         while not done:
-            _, _, action = actor.get_action(torch.as_tensor(obs, dtype=torch.float32, device=device).unsqueeze(0),
-                                            generator)  # fmt: skip
+            _, _, action = actor.get_action(
+                torch.as_tensor(obs, dtype=torch.float32, device=device).unsqueeze(0), generator
+            )
             obs, _, terminated, truncated, info = env.step(action[0].cpu().numpy())
             done = terminated or truncated
         episode = env.render()
         frames += episode
-        record[f"episode_{ep}"] = {"reset_seed": FINAL_EVAL_SEED + ep, "frames": len(episode),
-                                   "final_distance": abs(float(info["reward_dist"]))}  # fmt: skip
+        record[f"episode_{ep}"] = {
+            "reset_seed": FINAL_EVAL_SEED + ep,
+            "frames": len(episode),
+            "final_distance": abs(float(info["reward_dist"])),
+        }
     write_video(os.path.join(run_dir, "videos", "oracle.mp4"), frames, env.metadata["render_fps"])
     env.close()
     with open(os.path.join(run_dir, "videos", "videos.json"), "w") as f:
         json.dump({"file": "oracle.mp4", "size": list(frames[0].shape), "episodes": record}, f, indent=1)
-    print(f"[video] {VIDEO_EPISODES} episodes of the oracle filmed in {time.time() - t0:.1f}s: "
-          f"{os.path.join(run_dir, 'videos', 'oracle.mp4')}", flush=True)  # fmt: skip
+    print(
+        f"[video] {VIDEO_EPISODES} episodes of the oracle filmed in {time.time() - t0:.1f}s: "
+        f"{os.path.join(run_dir, 'videos', 'oracle.mp4')}",
+        flush=True,
+    )
     return record
 
 

@@ -185,12 +185,16 @@ def train_agent(env: gym.Env, reward: dict | None, args: Args, seed: int, varian
     """
     rng = np.random.default_rng(seed)
     q = np.zeros((gridworld_env.N_CELLS, gridworld_env.N_ACTIONS))
-    lengths, steps_at_end, greedy_lengths = [], [], []
+    lengths = []
+    steps_at_end = []
+    greedy_lengths = []
     total_steps = 0
     obs, _ = env.reset(seed=seed)
     for _ in range(args.num_episodes):
         s = int(obs.argmax())
-        length, terminated, truncated = 0, False, False
+        length = 0
+        terminated = False
+        truncated = False
         while not (terminated or truncated):
             a = epsilon_greedy(q[s], args.epsilon, rng)
             obs, env_reward, terminated, truncated, _ = env.step(a)
@@ -290,7 +294,8 @@ def diagnose(reward: np.ndarray, variant: str, gamma: float, epsilon: float) -> 
     """What each update's fixed point does under this reward on this maze: its greedy path from S, and, when that
     path loops, what the loop is worth (staying in it forever) against the shortest way from the loop to G."""
     next_cell = gridworld_env.transition_table(variant)
-    out, q = {}, {}
+    out = {}
+    q = {}
     for name, eps in (("max", 0.0), ("sampled", epsilon)):
         q[name] = value_iteration(reward, next_cell, gamma, eps)
         policy = q[name].argmax(1)
@@ -302,10 +307,12 @@ def diagnose(reward: np.ndarray, variant: str, gamma: float, epsilon: float) -> 
             per_round = sum(gamma**i * reward[c, policy[c]] for i, c in enumerate(loop))
             out[f"{name}/loop_worth"] = float(per_round / (1.0 - gamma ** len(loop)))
             ret, steps = shortest_path_return(reward, next_cell, gamma, loop[0])
-            out[f"{name}/loop_to_goal_return"], out[f"{name}/loop_to_goal_steps"] = ret, steps
+            out[f"{name}/loop_to_goal_return"] = ret
+            out[f"{name}/loop_to_goal_steps"] = steps
     if out["max/loop"]:  # at the max policy's loop: staying against setting off on the shortest way to G
         cell = out["max/loop"][0]
-        stay, go = int(q["max"][cell].argmax()), int(gridworld_env.optimal_q(variant, gamma)[cell].argmax())
+        stay = int(q["max"][cell].argmax())
+        go = int(gridworld_env.optimal_q(variant, gamma)[cell].argmax())
         for name in q:
             out[f"{name}/q_stay_in_max_loop"] = float(q[name][cell, stay])
             out[f"{name}/q_leave_max_loop_for_goal"] = float(q[name][cell, go])
@@ -354,13 +361,16 @@ def main(args: Args, sources: list[dict], stop: "StopSignals | None" = None) -> 
         for s in sources
     ]
     diagnoses = [diagnose(source["reward"]["table"], variant, args.gamma, args.epsilon) for source in sources]
-    arms = {f"{args.bootstrap}_bootstrap/recovered_{args.reward_source}": reward_by_agent,
-            f"{args.bootstrap}_bootstrap/env": [None] * len(seeds)}  # fmt: skip
+    arms = {
+        f"{args.bootstrap}_bootstrap/recovered_{args.reward_source}": reward_by_agent,
+        f"{args.bootstrap}_bootstrap/env": [None] * len(seeds),
+    }
 
     stop = stop or StopSignals()  # SIGINT, SIGTERM (Slurm, kill), SIGHUP stop the run as Ctrl-C does
     run_dir = writer = None
     runs = {arm: [] for arm in arms}
-    times, arm = {}, next(iter(arms))
+    times = {}
+    arm = next(iter(arms))
     try:
         with stop.held():  # a stop waits until the directory exists and is known, so the summary can go there
             run_dir = make_run_dir(run_name)  # only now: every input has been read and checked
@@ -379,7 +389,8 @@ def main(args: Args, sources: list[dict], stop: "StopSignals | None" = None) -> 
             times[f"time/{arm}_s"] = sum(run["seconds"] for run in runs[arm])
     except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
         # what finished is kept: the summary (first) records the agents done per arm and no figure is drawn
-        stop.finished, stop.broken_pipe = True, isinstance(e, BrokenPipeError)
+        stop.finished = True
+        stop.broken_pipe = isinstance(e, BrokenPipeError)
         name = stop.reason()
         summary = {
             **{f"{a}/agents_done": len(runs[a]) for a in arms},
@@ -395,8 +406,11 @@ def main(args: Args, sources: list[dict], stop: "StopSignals | None" = None) -> 
             write_json_atomic(f"{run_dir}/summary.json", summary)
         if writer is not None:
             writer.close()
-        say(f"interrupted ({name}) during {arm}; " + (f"the summary in {run_dir} says what finished" if run_dir
-            else "no run was made"), sys.stderr)  # fmt: skip
+        say(
+            f"interrupted ({name}) during {arm}; "
+            + (f"the summary in {run_dir} says what finished" if run_dir else "no run was made"),
+            sys.stderr,
+        )
         stop.restore()
         return summary
     stop.finished = True  # from here on a signal is only noted: the results below take seconds, then the exit says it
@@ -459,7 +473,7 @@ def main(args: Args, sources: list[dict], stop: "StopSignals | None" = None) -> 
             "reward/paths": [os.path.abspath(s["path"]) for s in sources],
             "reward/tamer_paths": [
                 os.path.abspath(s["tamer_path"]) if s["tamer_policy"] is not None else None for s in sources
-            ],  # fmt: skip
+            ],
             "reward/sleep_gamma_per_run": [s["meta"].get("gamma") for s in sources],
             "reward/temperature_per_run": [s["meta"].get("temperature") for s in sources],
             **times,
@@ -485,7 +499,8 @@ def arm_report(summary: dict, arm: str, optimum: int) -> str:
         median = summary[f"{arm}/{metric}_median"]
         if summary[f"{arm}/{metric}_min"] is None:
             return "never"
-        lo, hi = summary[f"{arm}/{metric}_min"], summary[f"{arm}/{metric}_max"]
+        lo = summary[f"{arm}/{metric}_min"]
+        hi = summary[f"{arm}/{metric}_max"]
         return f"median {'never' if median is None else f'{median:,.0f}'} (reached {lo:,.0f}-{hi:,.0f})"
 
     return (
@@ -538,7 +553,8 @@ def fig6(curves: dict, optimum: int, tamer_length: float | None, title: str, tam
     fig = Figure(figsize=(8, 5.5), layout="constrained")
     ax = fig.subplots()
     for (arm, (grid, values)), colour in zip(curves.items(), ("tab:blue", "tab:orange"), strict=False):
-        mean, std = values.mean(0), values.std(0)
+        mean = values.mean(0)
+        std = values.std(0)
         ax.plot(grid, mean, color=colour, label=f"{arm_label(arm)} (mean, n={len(values)})")
         ax.fill_between(grid, values.min(0), values.max(0), color=colour, alpha=0.12, lw=0)
         ax.fill_between(grid, np.maximum(mean - std, 0), mean + std, color=colour, alpha=0.25, lw=0)
@@ -554,7 +570,8 @@ def fig6(curves: dict, optimum: int, tamer_length: float | None, title: str, tam
 
 def make_run_dir(run_name: str) -> str:
     """runs/{run_name}, never an existing directory: a clash gets a numeric suffix."""
-    path, n = f"runs/{run_name}", 0
+    path = f"runs/{run_name}"
+    n = 0
     while True:
         try:
             os.makedirs(path)
@@ -648,7 +665,8 @@ def load_inform_network(path: str) -> tuple[QNetwork, dict]:
     if dims != (gridworld_env.N_CELLS, gridworld_env.N_ACTIONS):
         raise ValueError(f"{path}: a network for obs {dims[0]}, actions {dims[1]}, not the maze's 30 cells x 4 moves")
     meta = {k: ckpt.get(k) for k in ("env_id", "gamma", "temperature")}
-    gamma, temperature = meta["gamma"], meta["temperature"]
+    gamma = meta["gamma"]
+    temperature = meta["temperature"]
     if not isinstance(gamma, float | int) or not 0.0 <= gamma < 1.0:
         raise ValueError(f"{path}: needs the sleep phase's 'gamma' in [0, 1) to recover the reward, found {gamma!r}")
     if not isinstance(temperature, float | int) or not 0.0 < temperature < float("inf"):
@@ -735,7 +753,11 @@ class StopSignals:
     then waits for the thread's next flush, up to 120 s. Later signals, and any after the summary, are only noted."""
 
     def __init__(self):
-        self.received, self.holding, self.pending, self.finished, self.broken_pipe = [], 0, False, False, False
+        self.received = []
+        self.holding = 0
+        self.pending = False
+        self.finished = False
+        self.broken_pipe = False
         self.previous = {}
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
             if signal.getsignal(sig) is not signal.SIG_IGN:
@@ -811,8 +833,9 @@ if __name__ == "__main__":
     try:
         args = tyro.cli(Args)  # a malformed flag: tyro's own message, exit 2
         if gridworld_env is None:
-            raise ValueError("gridworld_env.py (the maze) is not importable: copy it next to this script, or run "
-                             "from the repo")  # fmt: skip
+            raise ValueError(
+                "gridworld_env.py (the maze) is not importable: copy it next to this script, or run from the repo"
+            )
         check_args(args)
         sources = resolve_sources(args)
     except ValueError as e:

@@ -142,10 +142,10 @@ def test_success_tag():
 def test_buffer_tags_whole_trajectories():
     buf = inform.ReplayBuffer(10, 2, torch.device("cpu"))
     for i in range(3):
-        buf.add(np.eye(2)[0], 1, np.eye(2)[1], 1.0, i == 2)
+        buf.add(np.eye(2)[0], 1, np.eye(2)[1], i == 2)
     buf.tag_episode(0, True)
     for _ in range(2):
-        buf.add(np.eye(2)[1], 0, np.eye(2)[1], 0.0, False)
+        buf.add(np.eye(2)[1], 0, np.eye(2)[1], False)
     buf.tag_episode(3, False)
     assert buf.size == 5 and buf.success[:5].tolist() == [True, True, True, False, False]
     assert buf.terminated[:5].tolist() == [0, 0, 1, 0, 0]
@@ -239,7 +239,7 @@ def test_same_seed_same_numbers(run_script):
         (["--env-id", "CartPole-v1"], "--env-id"),
         (["--sleep-temperature", "0"], "--sleep-temperature"),
         (["--tamer-total-timesteps", "100"], "--tamer-learning-starts"),
-        (["--sleep-tau", "2"], "--sleep-tau"),
+        (["--tau", "2"], "--tau"),
     ],
 )
 def test_bad_input_is_one_line_and_leaves_nothing(run_script, flags, message):
@@ -371,6 +371,7 @@ LONG_PHASE = {
     "sleep": ["--tamer-total-timesteps", "2000", "--tamer-learning-starts", "500", "--sleep-gradient-steps", "20000",
               "--sleep-eval-frequency", "1000"],
 }  # fmt: skip
+FIRST_EVAL = {"tamer": "[tamer] 2000/", "sleep": "[sleep] 1000/"}  # the progress line of the first evaluation
 
 
 def assert_interrupted_run(cwd, phase, signal_name):
@@ -389,7 +390,7 @@ def assert_interrupted_run(cwd, phase, signal_name):
 def test_signal_ends_the_run_cleanly(tmp_path, sig, phase, code):
     """Ctrl-C and SIGTERM (kill, Slurm) both save what finished and write summary.json with status interrupted."""
     child = Child([sys.executable, os.path.join(REPO, SCRIPT), *LONG_PHASE[phase]], tmp_path)
-    child.wait_for_line(f"[{phase}]")
+    child.wait_for_line(FIRST_EVAL[phase])
     child.proc.send_signal(sig)
     returncode, _, stderr = child.finish()
     assert returncode == code and "Traceback" not in stderr, (returncode, stderr)
@@ -408,9 +409,9 @@ def test_sigterm_stops_a_run_started_in_the_background(tmp_path):
         return (tmp_path / name).read_text() if (tmp_path / name).exists() else ""
 
     deadline = time.monotonic() + 180
-    while "[tamer]" not in text("out.txt"):
+    while FIRST_EVAL["tamer"] not in text("out.txt"):
         if time.monotonic() > deadline or child.proc.poll() is not None:
-            child.fail(f"no [tamer] line in out.txt:\n{text('out.txt')[-2000:]}\nerr.txt:\n{text('err.txt')[-2000:]}")
+            child.fail(f"no first evaluation in out.txt:\n{text('out.txt')[-2000:]}\nerr.txt:\n{text('err.txt')[-2000:]}")
         time.sleep(0.2)
     if os.path.exists(f"/proc/{pid}/status"):  # Linux: the background run ignores SIGINT, as the shell set it up
         with open(f"/proc/{pid}/status") as f:
@@ -424,7 +425,7 @@ def test_sigterm_stops_a_run_started_in_the_background(tmp_path):
 
 
 def test_divergence_is_reported(run_script):
-    result = run_script(SCRIPT, *TINY[:4], "--sleep-gradient-steps", "1000", "--sleep-learning-rate", "1e9")
+    result = run_script(SCRIPT, *TINY[:4], "--sleep-gradient-steps", "1000", "--sleep-q-lr", "1e9")
     assert result.returncode == 1
     assert "Traceback" not in result.stderr and "diverged" in result.stderr and "step" in result.stderr
     summary = json.load(open(os.path.join(only_run_dir(run_script.cwd), "summary.json")))

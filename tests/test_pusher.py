@@ -655,7 +655,7 @@ def test_oracle_train_signal_keeps_the_last_training_state(tmp_path, sig):
     flags += ["--checkpoint-frequency", "150", "--log-frequency", "50", "--total-timesteps", "100000"]
     flags += ["--eval-frequency", "100000", "--output-path", "oracle.pt"]
     child = Child([sys.executable, os.path.join(REPO, "oracle_train.py"), *flags], tmp_path)
-    run_dir = child.wait_for_line("run dir:", timeout=120).split(":", 1)[1].strip()
+    run_dir = child.wait_for_line("run directory:", timeout=120).split(":", 1)[1].strip()
     state = tmp_path / run_dir / "training_state.pt"
     deadline = time.time() + 120
     while not state.exists() and time.time() < deadline:  # the first state is saved at step 150
