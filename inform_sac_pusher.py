@@ -1151,7 +1151,7 @@ def read_checkpoint(path: str, flag: str, env_id: str) -> dict:
     if ckpt["env_id"] != env_id:
         raise InputError(f"{flag} {path}: trained on {ckpt['env_id']}, not {env_id}; pass --env-id")
     kw = ckpt["kwargs"]
-    (obs_dim, act_dim) = env_shapes(env_id)
+    obs_dim, act_dim = env_shapes(env_id)
     if (kw.get("obs_dim"), kw.get("act_dim")) != (obs_dim, act_dim):
         raise InputError(
             f"{flag} {path}: shapes obs {kw.get('obs_dim')} act {kw.get('act_dim')} do not match "

@@ -411,7 +411,7 @@ def test_sigterm_stops_a_run_started_in_the_background(tmp_path):
     deadline = time.monotonic() + 180
     while FIRST_EVAL["tamer"] not in text("out.txt"):
         if time.monotonic() > deadline or child.proc.poll() is not None:
-            child.fail(f"no first evaluation in out.txt:\n{text('out.txt')[-2000:]}\nerr.txt:\n{text('err.txt')[-2000:]}")
+            child.fail(f"no evaluation in out.txt:\n{text('out.txt')[-2000:]}\nerr.txt:\n{text('err.txt')[-2000:]}")
         time.sleep(0.2)
     if os.path.exists(f"/proc/{pid}/status"):  # Linux: the background run ignores SIGINT, as the shell set it up
         with open(f"/proc/{pid}/status") as f:
