@@ -6,6 +6,8 @@ import dataclasses
 import inspect
 import os
 
+import pytest
+
 import inform_dqn_gridworld as maze
 import inform_sac_pusher as pusher
 
@@ -104,3 +106,15 @@ def test_the_sleep_batch_is_replay_rows_then_expert_rows_in_both():
         source = inspect.getsource(script.sleep_phase)
         assert "torch.cat([replay, expert])" in source, script.__name__
         assert "is_expert = torch.arange(2 * batch_size, device=device) >= batch_size" in source, script.__name__
+
+
+def test_linear_schedule_by_hand():
+    assert pusher.linear_schedule(1.0, 0.05, 10, 0) == 1.0
+    assert pusher.linear_schedule(1.0, 0.05, 10, 5) == 1.0 + (0.05 - 1.0) * 5 / 10
+    assert pusher.linear_schedule(1.0, 0.05, 10, 10) == pytest.approx(0.05, abs=1e-15)
+    assert pusher.linear_schedule(1.0, 0.05, 10, 25) == pusher.linear_schedule(1.0, 0.05, 10, 10)  # then constant
+    assert pusher.linear_schedule(0.3, 0.7, 0, 0) == 0.3  # a zero duration does not divide by zero
+    # the teacher's alpha over a Pusher forward phase, bit for bit the formula the paper-budget runs used
+    n = 200_000
+    for step in (0, 1, 12_345, n - 1):
+        assert pusher.linear_schedule(0.99, 0.992, n - 1, step) == 0.99 + (0.992 - 0.99) * step / max(n - 1, 1)
