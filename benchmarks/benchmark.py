@@ -341,8 +341,13 @@ class NullWriter:
         pass
 
 
-def null_evaluator(name, actor, step, episodes):  # the phases' periodic evaluation, skipped: not a training step
-    return {f"eval/{name}_return": float("nan")}
+class NullEvaluator:
+    """The phases' periodic evaluation, skipped: it is not a training step."""
+
+    seconds = 0.0  # spent evaluating (the phases' progress lines leave it out of their clock)
+
+    def __call__(self, name, actor, step, episodes):
+        return {f"eval/{name}_return": float("nan")}
 
 
 def phase_runner(module, args: Args, phase: str, flags: dict):
@@ -369,17 +374,17 @@ def phase_runner(module, args: Args, phase: str, flags: dict):
                 n = args.learning_starts + steps
                 buffer = module.ReplayBuffer(n, obs_dim, act_dim, cpu)
                 module.forward_phase(module.Args(**common, tamer_total_timesteps=n), module.make_env(args.env_id, 1),
-                                     oracle_actor, oracle_qf, buffer, null_evaluator, NullWriter(), cpu)  # fmt: skip
+                                     oracle_actor, oracle_qf, buffer, NullEvaluator(), NullWriter(), cpu)  # fmt: skip
             else:
                 if not memory:
                     n = 2000  # random actions only (learning starts = the budget - 1): cheap to make
                     memory.append(module.ReplayBuffer(n, obs_dim, act_dim, cpu))
                     day = module.Args(**{**common, "tamer_learning_starts": n - 1}, tamer_total_timesteps=n)
                     module.forward_phase(day, module.make_env(args.env_id, 1), oracle_actor, oracle_qf, memory[0],
-                                         null_evaluator, NullWriter(), cpu)  # fmt: skip
+                                         NullEvaluator(), NullWriter(), cpu)  # fmt: skip
                     memory[0].success[:200] |= not memory[0].success.any()  # an expert set, whatever the luck
                 module.sleep_phase(module.Args(**common, sleep_gradient_steps=steps), memory[0], oracle_actor,
-                                   null_evaluator, NullWriter(), cpu)  # fmt: skip
+                                   NullEvaluator(), NullWriter(), cpu)  # fmt: skip
 
     return run
 
