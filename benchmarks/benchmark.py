@@ -631,8 +631,9 @@ def main_roofline(args: Args) -> dict:
     torch.set_num_threads(args.num_threads)
     ours = load_script(os.path.join(REPO, "inform_sac_pusher.py"), "inform_sac_pusher_ours")
     machine = f"{platform.machine()}, {os.cpu_count()} cores, torch {torch.__version__}, {args.num_threads} thread(s)"
-    res = {"roofline/args": asdict(args), "roofline/clock": args.clock, "roofline/load_average_start": os.getloadavg(),
-           "roofline/machine": machine, "roofline/date": time.strftime("%Y-%m-%d %H:%M")}  # fmt: skip
+    meta = "roofline" if args.roofline else "variants"  # the run's conditions go beside what it measured
+    res = {f"{meta}/args": asdict(args), f"{meta}/clock": args.clock, f"{meta}/load_average_start": os.getloadavg(),
+           f"{meta}/machine": machine, f"{meta}/date": time.strftime("%Y-%m-%d %H:%M")}  # fmt: skip
     if args.roofline:
         res.update(measure_roofline(args, ours))
         print_roofline(res, f"roofline ({args.clock} clock), ours")
@@ -658,7 +659,7 @@ def main_roofline(args: Args) -> dict:
         times = measure_side_by_side(args, sides, "wall")
         ratios = print_side_by_side(times, list(sides), "two threads against one, interleaved (wall clock)")
         res.update({f"threads/{k}": v for k, v in {**times, **ratios}.items()})
-    res["roofline/load_average_end"] = os.getloadavg()
+    res[f"{meta}/load_average_end"] = os.getloadavg()
     return res
 
 
