@@ -238,6 +238,7 @@ def test_a_stop_never_lands_inside_a_tensorboard_call(module, tmp_path):
     script = importlib.import_module(module)
     handlers = {sig: signal.getsignal(sig) for sig in SIGNALS}
     try:
+        signal.signal(signal.SIGHUP, signal.SIG_DFL)  # under nohup SIGHUP is ignored, and a run leaves it so
         stop = script.StopSignals()
         writer = script.HeldWriter(str(tmp_path), stop)
         calls = []
