@@ -489,10 +489,11 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer
         ep_length += 1
         last_step = step == n - 1 or (teacher.gone and args.budget_ends_forward_phase)
         if terminated or truncated or last_step:  # tag the trajectory; a cut-off last one by where it stands
-            success = buffer.tag_episode(ep_start, final_distance(info), args.success_distance)
+            distance = final_distance(info)
+            success = buffer.tag_episode(ep_start, distance, args.success_distance)
             writer.add_scalar("charts/episodic_return", ep_return, step + 1)
             writer.add_scalar("charts/episodic_length", ep_length, step + 1)
-            writer.add_scalar("charts/final_distance", final_distance(info), step + 1)
+            writer.add_scalar("charts/final_distance", distance, step + 1)
             writer.add_scalar("charts/episode_success", float(success), step + 1)
             last_return = ep_return
             ep_start = step + 1
@@ -630,6 +631,7 @@ def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals") -> dict:
     run_start = time.time()
     run_dir = writer = env = evaluator = None
     summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
+    summary["oracle_path"] = oracle_ckpt["path"] if oracle_ckpt is not None else None
     status = "completed"
     phase = "startup"
     try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
@@ -707,7 +709,7 @@ def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals") -> dict:
     except Diverged as e:
         status = "diverged"
         summary["error"] = str(e)
-    return end_run(args, summary, status, phase, run_dir, run_start, oracle_ckpt, evaluator, (env, writer), stop)
+    return end_run(args, summary, status, phase, run_dir, run_start, evaluator, (env, writer), stop)
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -780,6 +782,9 @@ class Evaluator:
         self.final.update(results)
         self.seconds += time.time() - t
         return results
+
+    def close(self):
+        self.env.close()
 
 
 def final_evaluation(args: Args, buffer, q_net, policies: dict, evaluator, writer, run_dir: str) -> dict:
@@ -1433,7 +1438,7 @@ def write_json_atomic(path: str, data: dict) -> None:
     os.replace(path + ".tmp", path)
 
 
-def end_run(args, summary, status, phase, run_dir, run_start, oracle_ckpt, evaluator, closing, stop) -> dict:
+def end_run(args, summary, status, phase, run_dir, run_start, evaluator, closing, stop) -> dict:
     """The summary first, then the messages: no signal cuts this short (StopSignals only notes the later ones)."""
     stop.finished = True
     if run_dir is not None:
@@ -1441,7 +1446,6 @@ def end_run(args, summary, status, phase, run_dir, run_start, oracle_ckpt, evalu
             **(evaluator.final if evaluator else {}),
             **summary,
             "time/eval_s": evaluator.seconds if evaluator else 0.0,
-            "oracle_path": oracle_ckpt["path"] if oracle_ckpt is not None else None,
             "wall_time_s": time.time() - run_start,
             "seed": args.seed,
             "script": os.path.basename(__file__),
@@ -1453,7 +1457,7 @@ def end_run(args, summary, status, phase, run_dir, run_start, oracle_ckpt, evalu
         if status == "interrupted":
             summary["signal"] = stop.reason()
         write_json_atomic(f"{run_dir}/summary.json", summary)
-    for thing in (*closing, evaluator.env if evaluator else None):
+    for thing in (*closing, evaluator):
         if thing is not None:
             thing.close()
     if status == "interrupted":
@@ -1489,7 +1493,7 @@ def evaluate_saved(args: Args) -> dict:
     evaluator = Evaluator(args, writer=None)
     metrics = evaluator("policy", actor, 0, args.eval_episodes)
     obstacle, _, _ = obstacle_test(args, {"policy": actor}, evaluator.generator)
-    evaluator.env.close()
+    evaluator.close()
     return {**metrics, **obstacle}
 
 

@@ -96,6 +96,19 @@ def run(script, cwd, *flags, env=None):
                           text=True, timeout=600, env=env)  # fmt: skip
 
 
+def run_plain_and_filmed(script, tmp_path, *flags) -> tuple[str, str]:
+    """The same tiny run without and with --capture-video, each in its own directory: (plain run dir, filmed one)."""
+    (tmp_path / "plain").mkdir()
+    (tmp_path / "video").mkdir()
+    assert run(script, tmp_path / "plain", *flags).returncode == 0
+    proc = run(script, tmp_path / "video", *flags, "--capture-video")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    (plain_dir,) = glob.glob(str(tmp_path / "plain" / "runs" / "*"))
+    (run_dir,) = glob.glob(str(tmp_path / "video" / "runs" / "*"))
+    assert not os.path.exists(os.path.join(plain_dir, "videos"))  # without the flag nothing is rendered
+    return plain_dir, run_dir
+
+
 def summary_numbers(run_dir) -> dict:
     with open(os.path.join(run_dir, "summary.json")) as f:
         summary = json.load(f)
@@ -104,15 +117,7 @@ def summary_numbers(run_dir) -> dict:
 
 @pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")
 def test_tiny_pusher_run_films_the_evaluation_and_changes_no_number(tmp_path):
-    flags = ["--oracle-path", SHIPPED, *TINY]
-    (tmp_path / "plain").mkdir()
-    (tmp_path / "video").mkdir()
-    assert run("inform_sac_pusher.py", tmp_path / "plain", *flags).returncode == 0
-    proc = run("inform_sac_pusher.py", tmp_path / "video", *flags, "--capture-video")
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    (plain_dir,) = glob.glob(str(tmp_path / "plain" / "runs" / "*"))
-    (run_dir,) = glob.glob(str(tmp_path / "video" / "runs" / "*"))
-    assert not os.path.exists(os.path.join(plain_dir, "videos"))  # without the flag nothing is rendered
+    plain_dir, run_dir = run_plain_and_filmed("inform_sac_pusher.py", tmp_path, "--oracle-path", SHIPPED, *TINY)
     numbers = summary_numbers(run_dir)
     assert numbers == summary_numbers(plain_dir) and len(numbers) > 40
     with open(os.path.join(run_dir, "videos", "videos.json")) as f:
@@ -198,14 +203,7 @@ def test_a_maze_episode_draws_to_gif(tmp_path):
 
 
 def test_tiny_maze_run_draws_the_greedy_episodes_and_changes_no_number(tmp_path):
-    (tmp_path / "plain").mkdir()
-    (tmp_path / "video").mkdir()
-    assert run("inform_dqn_gridworld.py", tmp_path / "plain", *MAZE_TINY).returncode == 0
-    proc = run("inform_dqn_gridworld.py", tmp_path / "video", *MAZE_TINY, "--capture-video")
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    (plain_dir,) = glob.glob(str(tmp_path / "plain" / "runs" / "*"))
-    (run_dir,) = glob.glob(str(tmp_path / "video" / "runs" / "*"))
-    assert not os.path.exists(os.path.join(plain_dir, "videos"))
+    plain_dir, run_dir = run_plain_and_filmed("inform_dqn_gridworld.py", tmp_path, *MAZE_TINY)
     numbers = summary_numbers(run_dir)
     assert numbers == summary_numbers(plain_dir) and len(numbers) > 20
     with open(os.path.join(run_dir, "videos", "videos.json")) as f:

@@ -25,6 +25,7 @@ SHARED = (
     "say",
     "make_run_dir",
     "write_json_atomic",
+    "end_run",
 )
 # the same concept, the same flag (each script has more of its own)
 SHARED_FLAGS = (
