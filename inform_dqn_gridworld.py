@@ -148,6 +148,15 @@ class Args:
     """weight of the chi-squared regulariser, 1 / (4 * 0.5) as IQ-Learn; 0 turns it off"""
     tau: float = 1.0
     """soft-update rate of the sleep's target Q network per step (1 copies it every step, as the authors did)"""
+    sleep_seed: int | None = None
+    """None: the sleep goes on with the random streams where the day left them; an integer re-seeds them right
+    before the sleep (several different nights on one day)"""
+    save_buffer: bool = False
+    """write the day as it ended (memories, episode table, oracle, TAMER's H, day stats, random states) to
+    runs/{run}/day.pt, for --sleep-from"""
+    sleep_from: str | None = None
+    """run only the night and the final tests on the day saved in this run directory (by --save-buffer), into a new
+    run directory; the day's flags (env, seed, oracle, teacher, TAMER) replace this run's"""
 
     # Evaluation
     eval_frequency: int = 500
@@ -309,6 +318,7 @@ class ReplayBuffer:
         self.terminated = torch.zeros(capacity, device=device)
         self.success = torch.zeros(capacity, dtype=torch.bool, device=device)
         self.size = 0  # transitions stored (fewer than the capacity when the teacher stops early)
+        self.episodes = []  # (start, end) of each episode that ended: buffer[start:end]
 
     def add(self, obs, action, next_obs, terminated) -> None:
         self.obs[self.size] = torch.as_tensor(obs)
@@ -320,6 +330,7 @@ class ReplayBuffer:
     def tag_episode(self, start: int, success: bool) -> bool:
         """Tag the trajectory buffer[start:size], which just ended, as a success or a failure."""
         self.success[start : self.size] = success
+        self.episodes.append((start, self.size))
         return success
 
     def batch(self, idx: torch.Tensor):
@@ -496,11 +507,12 @@ def sleep_phase(args: Args, buffer: ReplayBuffer, n_actions: int, evaluator, wri
     return q_net, {**stats, **losses}
 
 
-def main(args: Args, stop: "StopSignals", oracle_q: np.ndarray | None = None) -> dict:
+def main(args: Args, stop: "StopSignals", oracle_q: np.ndarray | None = None, day: dict | None = None) -> dict:
     run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
     run_start = time.time()
     run_dir = writer = env = evaluator = None
     summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
+    summary["sleep_from"] = os.path.abspath(args.sleep_from) if args.sleep_from else None  # a saved day's run
     status = "completed"
     phase = "startup"
     try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
@@ -528,25 +540,36 @@ def main(args: Args, stop: "StopSignals", oracle_q: np.ndarray | None = None) ->
         obs_dim = env.observation_space.shape[0]
         n_actions = int(env.action_space.n)
 
-        # ---- oracle: exact Q* by value iteration (the "fully trained model"), or a teacher saved by oracle_train.py
-        phase = "oracle"
-        t0 = time.time()
-        q_star = gridworld_env.optimal_q(env.unwrapped.variant, args.oracle_gamma) if oracle_q is None else oracle_q
-        summary["time/oracle_s"] = time.time() - t0
-        evaluator("oracle", q_star.argmax(1), 0)
+        if day is None:
+            # ---- oracle: exact Q* by value iteration (the "fully trained model"), or a teacher from oracle_train.py
+            phase = "oracle"
+            t0 = time.time()
+            q_star = gridworld_env.optimal_q(env.unwrapped.variant, args.oracle_gamma) if oracle_q is None else oracle_q
+            summary["time/oracle_s"] = time.time() - t0
+            evaluator("oracle", q_star.argmax(1), 0)
 
-        # ---- forward phase ("day"): TAMER with simulated feedback, every transition remembered
-        phase = "tamer"
-        t0 = time.time() - evaluator.seconds  # the phase's clock stops during its evaluations
-        buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, device)
-        h_net, stats = forward_phase(args, env, q_star, buffer, evaluator, writer, device)
-        summary.update(stats)
-        summary["time/tamer_s"] = time.time() - evaluator.seconds - t0
+            # ---- forward phase ("day"): TAMER with simulated feedback, every transition remembered
+            phase = "tamer"
+            t0 = time.time() - evaluator.seconds  # the phase's clock stops during its evaluations
+            buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, device)
+            h_net, stats = forward_phase(args, env, q_star, buffer, evaluator, writer, device)
+            summary.update(stats)
+            summary["time/tamer_s"] = time.time() - evaluator.seconds - t0
+            if args.save_buffer:  # the day as it ended, for later nights (--sleep-from)
+                day_stats = {**stats, "time/tamer_s": summary["time/tamer_s"]}
+                save_day(f"{run_dir}/day.pt", args, buffer, h_net, q_star, day_stats)
+        else:  # --sleep-from: a saved day's oracle, memories and H, its random streams where that day left them
+            q_star, buffer, h_net = restore_day(day, device)
+            summary.update(day["day_stats"])
         if args.save_model:
             save_network(f"{run_dir}/tamer_h.pt", h_net, env_id=args.env_id)
 
         # ---- sleep phase ("night"): offline IQ-Learn on the buffer, no environment steps
         phase = "sleep"
+        if args.sleep_seed is not None:  # a night of its own: the random streams start afresh
+            random.seed(args.sleep_seed)
+            np.random.seed(args.sleep_seed)
+            torch.manual_seed(args.sleep_seed)
         t0 = time.time() - evaluator.seconds
         q_net, stats = sleep_phase(args, buffer, n_actions, evaluator, writer, device)
         summary.update(stats)
@@ -892,12 +915,168 @@ def load_q_network(path: str) -> QNetwork:
 
 def save_network(path: str, net: nn.Module, **extra) -> None:
     """A state_dict plus what rebuilds the network; torch.load(path, weights_only=True) reads it."""
-    kwargs = {
+    torch.save({"state_dict": net.state_dict(), "kwargs": network_kwargs(net), **extra}, path)
+
+
+def network_kwargs(net: nn.Module) -> dict:
+    """QNetwork's arguments that rebuild `net`."""
+    return {
         "obs_dim": net.network[0].in_features,
         "n_actions": net.network[-1].out_features,
         "hidden": net.network[0].out_features,
     }
-    torch.save({"state_dict": net.state_dict(), "kwargs": kwargs, **extra}, path)
+
+
+# Saved days (--save-buffer, --sleep-from): one forward phase, many nights. day.pt holds only tensors and plain values
+DAY_FORMAT = "inform-day-1"
+DAY_ARGS = (  # the flags that shape the day: what the oracle, forward_phase and the Teacher read
+    "env_id",
+    "seed",
+    "oracle_gamma",
+    "oracle_path",
+    "tamer_total_timesteps",
+    "tamer_learning_starts",
+    "tamer_batch_size",
+    "tamer_h_lr",
+    "tamer_train_frequency",
+    "start_e",
+    "end_e",
+    "exploration_fraction",
+    "feedback_alpha_start",
+    "feedback_alpha_end",
+    "success_max_steps",
+    "teacher",
+    "teacher_noise",
+    "teacher_sparsity",
+    "teacher_delay",
+    "credit_window",
+    "feedback_budget",
+    "budget_ends_forward_phase",
+    "human_updates_per_answer",
+    "eval_frequency",
+)
+DAY_TENSORS = ("obs", "actions", "next_obs", "feedback", "terminated", "success")  # the buffer, one row a transition
+EPISODE_TABLE = ("episode_start", "episode_end", "episode_length", "episode_success", "episode_ended")
+
+
+def save_day(path: str, args: Args, buffer: ReplayBuffer, h_net: QNetwork, q_star: np.ndarray, day_stats: dict):
+    """The day as it ended: the buffer cut to its size, the episode table (buffer[start:end], one row an episode; the
+    last row, ended False, is the episode cut off by the end of the phase), the oracle's Q table, TAMER's H, the
+    day's stats and flags, and the random states that the sleep goes on from. Written to a temporary name, renamed."""
+    n = buffer.size
+    rows = [(start, end, True) for start, end in buffer.episodes]
+    if (rows[-1][1] if rows else 0) < n:
+        rows.append((rows[-1][1] if rows else 0, n, False))
+    start = torch.tensor([row[0] for row in rows], dtype=torch.int64)
+    end = torch.tensor([row[1] for row in rows], dtype=torch.int64)
+    np_state = np.random.get_state()
+    version, internal, gauss = random.getstate()
+    day = {
+        "format": DAY_FORMAT,
+        "script": os.path.basename(__file__),
+        "env_id": args.env_id,
+        "seed": args.seed,
+        "day_args": {name: getattr(args, name) for name in DAY_ARGS},
+        **{name: getattr(buffer, name)[:n].to("cpu", copy=True) for name in DAY_TENSORS},  # a copy: not the capacity
+        "episode_start": start,
+        "episode_end": end,
+        "episode_length": end - start,
+        "episode_success": buffer.success[:n].cpu()[start],
+        "episode_ended": torch.tensor([row[2] for row in rows], dtype=torch.bool),
+        "h_net": {"state_dict": {k: v.cpu() for k, v in h_net.state_dict().items()}, "kwargs": network_kwargs(h_net)},
+        "q_star": torch.as_tensor(q_star),
+        "rng": {  # the sleep and the final tests draw from torch's only; numpy's and python's are kept all the same
+            "torch": torch.get_rng_state(),
+            "torch_cuda": torch.cuda.get_rng_state_all() if buffer.obs.is_cuda else None,
+            "numpy": [np_state[0], torch.from_numpy(np_state[1].astype(np.int64)), *np_state[2:]],
+            "python": [version, list(internal), gauss],
+        },
+        "day_stats": day_stats,
+    }
+    torch.save(day, path + ".tmp")
+    os.replace(path + ".tmp", path)
+
+
+def load_day(run_dir: str, args: Args) -> dict:
+    """RUN_DIR/day.pt, checked, as torch.load(weights_only=True) reads it; its day flags replace those of `args` (one
+    line says so). Raises InputError before anything is written."""
+    path = os.path.join(run_dir, "day.pt")
+    if not os.path.isdir(run_dir):
+        raise InputError(f"--sleep-from {run_dir}: no such directory")
+    if not os.path.exists(path):
+        raise InputError(f"--sleep-from {run_dir}: no day.pt in it (a run saves its day with --save-buffer)")
+    day = read_checkpoint(path)
+    if day.get("format") != DAY_FORMAT:
+        raise InputError(f"{path}: not a saved day of this script (format {day.get('format')!r}, not {DAY_FORMAT!r})")
+    missing = [key for key in ("day_args", *DAY_TENSORS, *EPISODE_TABLE, "h_net", "q_star", "rng", "day_stats")
+               if key not in day]  # fmt: skip
+    missing += [f"day_args.{name}" for name in DAY_ARGS if name not in day.get("day_args", {})]
+    if missing:
+        raise InputError(f"{path}: an incomplete saved day, no {', '.join(missing)}")
+    if day["day_args"]["env_id"] not in MAZE_IDS:
+        raise InputError(f"{path}: a day on {day['day_args']['env_id']!r}, not on a maze ({', '.join(MAZE_IDS)})")
+    n = day["obs"].shape[0] if isinstance(day["obs"], torch.Tensor) else -1
+    episodes = day["episode_start"].shape[0] if isinstance(day["episode_start"], torch.Tensor) else -1
+    shapes = {name: (n,) for name in DAY_TENSORS} | {name: (episodes,) for name in EPISODE_TABLE}
+    shapes |= {"obs": (n, gridworld_env.N_CELLS), "next_obs": (n, gridworld_env.N_CELLS)}
+    shapes["q_star"] = (gridworld_env.N_CELLS, gridworld_env.N_ACTIONS)
+    for name, shape in shapes.items():
+        found = tuple(day[name].shape) if isinstance(day[name], torch.Tensor) else type(day[name]).__name__
+        if found != shape:
+            raise InputError(f"{path}: {name} has shape {found}, expected {shape}")
+    try:
+        QNetwork(**day["h_net"]["kwargs"]).load_state_dict(day["h_net"]["state_dict"])
+        if day["h_net"]["kwargs"]["obs_dim"] != gridworld_env.N_CELLS:
+            raise ValueError(f"H is a network for {day['h_net']['kwargs']['obs_dim']}-d observations, not the maze's")
+        torch.Generator().set_state(day["rng"]["torch"])
+        np.random.RandomState().set_state(numpy_state(day["rng"]))
+        random.Random().setstate(python_state(day["rng"]))
+    except Exception as e:  # a damaged network or random state: KeyError, TypeError, ValueError, RuntimeError
+        raise InputError(f"{path}: a damaged saved day: {(str(e) or type(e).__name__).splitlines()[0][:160]}") from None
+    for name in DAY_ARGS:
+        setattr(args, name, day["day_args"][name])
+    try:
+        check_args(args)
+    except InputError as e:
+        raise InputError(f"{path}: its day flags are not valid: {e}") from None
+    print(
+        f"[day] sleeping on {run_dir}'s day ({args.env_id}, seed {args.seed}, {n} steps); "
+        "its day flags replace this run's",
+        flush=True,
+    )
+    return day
+
+
+def restore_day(day: dict, device: torch.device) -> tuple[np.ndarray, ReplayBuffer, QNetwork]:
+    """The oracle's Q table, the buffer and H of a day from load_day; then (last: building H draws from torch) the
+    random states as the day left them."""
+    buffer = ReplayBuffer(day["obs"].shape[0], day["obs"].shape[1], device)
+    for name in DAY_TENSORS:
+        getattr(buffer, name).copy_(day[name])
+    buffer.size = day["obs"].shape[0]
+    ended = day["episode_ended"].tolist()
+    starts, ends = day["episode_start"].tolist(), day["episode_end"].tolist()
+    buffer.episodes = [(start, end) for start, end, done in zip(starts, ends, ended, strict=True) if done]
+    h_net = QNetwork(**day["h_net"]["kwargs"]).to(device)
+    h_net.load_state_dict(day["h_net"]["state_dict"])
+    torch.set_rng_state(day["rng"]["torch"])
+    if day["rng"].get("torch_cuda") is not None and device.type == "cuda":
+        torch.cuda.set_rng_state_all(day["rng"]["torch_cuda"])
+    np.random.set_state(numpy_state(day["rng"]))
+    random.setstate(python_state(day["rng"]))
+    return day["q_star"].double().numpy(), buffer, h_net
+
+
+def numpy_state(rng: dict) -> tuple:
+    """np.random.set_state's tuple from a saved day's list."""
+    name, keys, pos, has_gauss, cached_gaussian = rng["numpy"]
+    return name, keys.numpy().astype(np.uint32), int(pos), int(has_gauss), float(cached_gaussian)
+
+
+def python_state(rng: dict) -> tuple:
+    """random.setstate's tuple from a saved day's list."""
+    version, internal, gauss = rng["python"]
+    return version, tuple(internal), gauss
 
 
 # The defaults that depend on who teaches: the paper's simulated teacher, or a person who answers every move
@@ -919,7 +1098,8 @@ class InputError(Exception):
     """Bad input from the user: a flag value, a file. Reported as one line, before anything is written."""
 
 
-NON_NEGATIVE_INTS = ("seed", "teacher_delay")  # every other integer flag (--feedback-budget too) must be >= 1
+# every other integer flag (--feedback-budget too) must be >= 1
+NON_NEGATIVE_INTS = ("seed", "teacher_delay", "sleep_seed")
 FLOAT_RANGES = {
     "tau": "(0, 1]",
     "sleep_chi2_coef": "[0, inf)",
@@ -969,6 +1149,8 @@ def check_args(args: Args) -> None:
             f"--tamer-learning-starts ({args.tamer_learning_starts}) must be below "
             f"--tamer-total-timesteps ({args.tamer_total_timesteps}), or H is never trained"
         )
+    if args.save_buffer and args.sleep_from:
+        raise InputError("--save-buffer saves a run's own day; a --sleep-from run has none (it sleeps on another's)")
     distortions = {"teacher_noise": 0.0, "teacher_sparsity": 1.0, "teacher_delay": 0, "credit_window": 1}
     changed = [f"--{k.replace('_', '-')}" for k, v in distortions.items() if getattr(args, k) != v]
     if args.teacher == "human" and changed:
@@ -1244,11 +1426,15 @@ if __name__ == "__main__":
         if args.evaluate:
             print(json.dumps(evaluate_saved(args.evaluate, args.success_max_steps), indent=2))
             sys.exit(0)
-        oracle_q = load_oracle(args.oracle_path, args.env_id) if args.oracle_path else None
+        oracle_q = day = None
+        if args.sleep_from:  # a saved day: no oracle, no forward phase; its day flags replace these
+            day = load_day(args.sleep_from, args)
+        elif args.oracle_path:
+            oracle_q = load_oracle(args.oracle_path, args.env_id)
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
     stop = StopSignals()
-    summary = main(args, stop, oracle_q)
+    summary = main(args, stop, oracle_q, day)
     gc.freeze()  # the interpreter's last collections over torch's objects take seconds on a busy machine; skip them
     sys.exit(stop.exit_code(summary.get("status", "interrupted")))

@@ -14,6 +14,8 @@ teacher, the buffer, the day, the night, main. Everything else comes after main.
 import atexit
 import collections
 import contextlib
+import copy
+import dataclasses
 import gc
 import json
 import math
@@ -159,6 +161,40 @@ class Args:
     """weight of the chi-squared regulariser, 1 / (4 * 0.5) as IQ-Learn; 0 turns it off"""
     sleep_init_actor_from_tamer: bool = True
     """start the INFORM actor from the TAMER actor (consolidation); False starts it from scratch"""
+    sleep_actor_states: Literal["replay", "replay+expert", "expert"] = "replay"
+    """the states of each batch the INFORM actor is trained on: the replay rows, both halves, or the expert rows"""
+    sleep_policy_frequency: int = 1
+    """the INFORM actor is updated this many times every this many gradient steps (CleanRL's delayed policy update;
+    the authors' sleep: 2)"""
+    sleep_loss_rows: Literal["all", "expert"] = "all"
+    """the rows of Eq. 2's value and chi-squared terms: the whole batch (the paper), or the expert rows only
+    (IQ-Learn's offline recipe, its `value_expert` loss)"""
+    sleep_twin_critics: bool = False
+    """two soft Q networks, each trained on Eq. 2, their minimum in V(s) and in the actor's objective"""
+    sleep_bc_coef: float = 0.0
+    """a behaviour-cloning term on the INFORM actor, TD3+BC style: the Q objective divided by mean |Q|, plus this
+    weight times the squared error of the mean action on the expert rows; 0 turns it off"""
+    sleep_control: Literal["none", "bc", "sham"] = "none"
+    """a control in place of the INFORM actor's update, same steps: bc = behaviour cloning on the success set (the
+    mean action's squared error on the expert rows); sham = TAMER's own update (H on the feedback, the actor on H),
+    no consolidation. The soft Q network sleeps as usual"""
+    sleep_protocol: Literal["ours", "authors"] = "ours"
+    """authors: the authors' sleep in one flag: the actor from scratch, on replay + expert states, 2 updates every 2nd
+    step, 100k gradient steps (their test loads the 100k-step checkpoint); it sets those flags"""
+    sleep_seed: int | None = None
+    """None: the sleep goes on with the random streams where the day left them; an integer re-seeds them before the
+    sleep (several sleeps on one day)"""
+    sleep_holdout_fraction: float = 0.0
+    """hold this fraction of the day's episodes out of the sleep (split by episode, fixed by the seed) and log the
+    offline criterion on them every --sleep-eval-frequency steps; the checkpoint it picks is kept and tested as
+    `inform_selected`. 0: no hold-out (the default)"""
+
+    # Saved days: one forward phase, many nights
+    save_buffer: bool = False
+    """write the day (memories, episode table, teacher, TAMER, random states) to runs/{run}/day.pt for --sleep-from"""
+    sleep_from: str | None = None
+    """run only the night and the final tests on the day saved in this run directory (by --save-buffer); the day's
+    flags (env, seed, teacher, TAMER) replace this run's"""
 
     # Evaluation
     eval_episodes: int = 20
@@ -264,6 +300,14 @@ class Actor(nn.Module):
         mean_action = torch.tanh(mean) * self.action_scale + self.action_bias
         return y_t * self.action_scale + self.action_bias, log_prob.sum(-1), mean_action
 
+    def log_prob(self, obs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        """log pi(a|s) of given actions [B] (the offline criterion's expert log-likelihood)."""
+        mean, log_std = self(obs)
+        y = ((action - self.action_bias) / self.action_scale).clamp(-1 + 1e-6, 1 - 1e-6)
+        z = (torch.atanh(y) - mean) / log_std.exp()
+        log_prob = -0.5 * z.pow(2) - log_std - 0.5 * math.log(2 * math.pi)
+        return (log_prob - torch.log(self.action_scale * (1 - y.pow(2)) + 1e-6)).sum(-1)
+
 
 def soft_update(target: nn.Module, source: nn.Module, tau: float) -> None:
     with torch.no_grad():
@@ -355,17 +399,22 @@ def soft_value(q_net: QEnsemble, actor: Actor, obs: torch.Tensor, temperature: f
     return q_net(obs, action).min(0).values - temperature * log_prob
 
 
-# ALGO LOGIC: the sleep loss. The maze script's signature and return, plus the actor that V(s) needs here.
-def iq_loss(q_net, target_net, obs, actions, next_obs, terminated, is_expert, gamma, temperature, chi2_coef, actor):
+# ALGO LOGIC: the sleep loss. The maze script's signature and return, plus the actor that V(s) needs here, and the
+# rows of the value and chi-squared terms (IQ-Learn's offline recipe takes the expert rows only).
+def iq_loss(
+    q_net, target_net, obs, actions, next_obs, terminated, is_expert, gamma, temperature, chi2_coef, actor, rows=None
+):
     # Eq. 2 (to minimise): y = (1 - done) gamma V_target(s');
     # L = -E_success[Q(s,a) - y] + E_all[V(s) - y] + chi2 * E_all[(Q(s,a) - y)^2]
-    q_sa = q_net(obs, actions).min(0).values
+    # each of the n soft Q networks (twins: n = 2) is trained on it; V(s) takes their minimum
+    rows = slice(None) if rows is None else rows
+    q_sa = q_net(obs, actions)
     with torch.no_grad():
         y = (1.0 - terminated) * gamma * soft_value(target_net, actor, next_obs, temperature)
     v_s = soft_value(q_net, actor, obs, temperature)
-    expert_term = -(q_sa - y)[is_expert].mean()
-    value_term = (v_s - y).mean()
-    chi2_term = chi2_coef * (q_sa - y).pow(2).mean()
+    expert_term = -(q_sa - y)[:, is_expert].mean(-1).sum()
+    value_term = (v_s - y)[rows].mean()
+    chi2_term = chi2_coef * (q_sa - y)[:, rows].pow(2).mean(-1).sum()
     return expert_term + value_term + chi2_term, (expert_term, value_term, chi2_term)
 
 
@@ -544,12 +593,17 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer
         "feedback/positive_rate": teacher.positives / buffer.size,
         "sleep/success_episodes": int(successes),
         "sleep/episodes": len(buffer.episodes),
+        "losses/tamer_entropy_coef": log_ent_coef.exp().item(),
     }
     return h_net, tamer_actor, stats
 
 
-def sleep_phase(args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator, writer, device):
-    """The night: offline IQ-Learn (Eq. 2) on the buffer, the successful trajectories as the expert set."""
+def sleep_phase(
+    args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator, writer, device, h_net=None, ent_coef=1.0
+):
+    """The night: offline IQ-Learn (Eq. 2) on the buffer, the successful trajectories as the expert set. TAMER's H and
+    entropy coefficient at the day's end are needed only by the sham control. Returns the soft Q, the INFORM actor,
+    the stats and, with a hold-out, the networks the offline criterion picked (else None)."""
     expert_idx, fallback_episodes = buffer.expert_indices()
     if fallback_episodes:
         print(
@@ -557,49 +611,99 @@ def sleep_phase(args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator,
             "the goal as the expert set",
             flush=True,
         )
-    print(f"[sleep] {expert_idx.numel()} expert transitions, {buffer.size} in the buffer", flush=True)
+    replay_idx = torch.arange(buffer.size, device=device)
+    held = held_out(args, buffer, device)  # --sleep-holdout-fraction: episodes the sleep never sees
+    if held is not None:
+        keep = torch.ones(buffer.size, dtype=torch.bool, device=device)
+        keep[held] = False
+        replay_idx = replay_idx[keep]
+        expert_idx = expert_idx[keep[expert_idx]]
+    print(f"[sleep] {expert_idx.numel()} expert transitions, {replay_idx.numel()} in the buffer", flush=True)
     obs_dim = buffer.obs.shape[1]
     act_dim = buffer.actions.shape[1]
-    q_net = QEnsemble(obs_dim, act_dim, args.hidden_size, n=1).to(device)
-    q_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=1).to(device)
+    n_critics = 2 if args.sleep_twin_critics else 1
+    q_net = QEnsemble(obs_dim, act_dim, args.hidden_size, n=n_critics).to(device)
+    q_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=n_critics).to(device)
     q_target.load_state_dict(q_net.state_dict())
     low = tamer_actor.action_bias - tamer_actor.action_scale
     high = tamer_actor.action_bias + tamer_actor.action_scale
     inform_actor = Actor(obs_dim, act_dim, args.hidden_size, low, high).to(device)
-    if args.sleep_init_actor_from_tamer:
+    if args.sleep_init_actor_from_tamer or args.sleep_control == "sham":
         inform_actor.load_state_dict(tamer_actor.state_dict())
     amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
     q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_q_lr, foreach=True)
     inform_optimizer = torch.optim.Adam(inform_actor.parameters(), lr=args.sleep_policy_lr, foreach=True)
+    if args.sleep_control == "sham":  # TAMER goes on learning from its memories: H and the actor, TAMER's rates
+        sham_h = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
+        sham_h.load_state_dict(h_net.state_dict())
+        sham_h_optimizer = torch.optim.Adam(sham_h.parameters(), lr=args.tamer_h_lr, foreach=True)
+        inform_optimizer = torch.optim.Adam(inform_actor.parameters(), lr=args.tamer_policy_lr, foreach=True)
+        log_ent_coef = torch.full((1,), math.log(ent_coef), device=device, requires_grad=True)
+        ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.tamer_h_lr, foreach=True)
     batch_size = args.sleep_batch_size
     gamma = args.sleep_gamma
     temperature = args.sleep_temperature
     chi2 = args.sleep_chi2_coef
     is_expert = torch.arange(2 * batch_size, device=device) >= batch_size  # the batch: replay rows, then expert rows
+    loss_rows = is_expert if args.sleep_loss_rows == "expert" else None
+    actor_rows = {"replay": ~is_expert, "expert": is_expert, "replay+expert": slice(None)}[args.sleep_actor_states]
     names = ("losses/iq_loss", "losses/iq_expert_term", "losses/iq_value_term", "losses/iq_chi2_term")
     names += ("losses/inform_actor_loss",)
     stats = {"sleep/expert_transitions": int(expert_idx.numel()), "sleep/expert_fallback": int(fallback_episodes > 0)}
     losses = {}
+    criterion = OfflineCriterion(args, buffer, held, writer) if held is not None else None
+    pi_loss = torch.zeros((), device=device)
     progress = Progress("sleep", args.sleep_gradient_steps, evaluator=evaluator)
     for step in range(1, args.sleep_gradient_steps + 1):
         # ALGO LOGIC: the sleep update: Q by IQ-Learn (Eq. 2), the INFORM actor on Q, the target Q follows softly
-        replay = torch.randint(0, buffer.size, (batch_size,), device=device)
+        replay = replay_idx[torch.randint(0, replay_idx.numel(), (batch_size,), device=device)]
         expert = expert_idx[torch.randint(0, expert_idx.numel(), (batch_size,), device=device)]
-        obs, actions, next_obs, _, terminated = buffer.batch(torch.cat([replay, expert]))
+        obs, actions, next_obs, feedback, terminated = buffer.batch(torch.cat([replay, expert]))
         with amp:
             loss, terms = iq_loss(
-                q_net, q_target, obs, actions, next_obs, terminated, is_expert, gamma, temperature, chi2, inform_actor
+                q_net,
+                q_target,
+                obs,
+                actions,
+                next_obs,
+                terminated,
+                is_expert,
+                gamma,
+                temperature,
+                chi2,
+                inform_actor,
+                loss_rows,
             )
         q_optimizer.zero_grad(set_to_none=True)
         loss.backward()
         q_optimizer.step()
-        q_net.requires_grad_(False)  # the actor's gradient flows through Q, but none is kept on it
-        with amp:
-            pi_loss, _ = actor_loss(q_net, inform_actor, obs[:batch_size], temperature)
-        inform_optimizer.zero_grad(set_to_none=True)
-        pi_loss.backward()
-        q_net.requires_grad_(True)
-        inform_optimizer.step()
+        for _ in range(args.sleep_policy_frequency if step % args.sleep_policy_frequency == 0 else 0):
+            if args.sleep_control == "sham":  # control: TAMER's own update (Eq. 1, then its actor on H), no Q
+                with amp:
+                    pi_loss = tamer_loss(sham_h, obs[~is_expert], actions[~is_expert], feedback[~is_expert])
+                sham_h_optimizer.zero_grad(set_to_none=True)
+                pi_loss.backward()
+                sham_h_optimizer.step()
+                update_actor(
+                    sham_h, inform_actor, obs[~is_expert], log_ent_coef, inform_optimizer, ent_coef_optimizer, args.bf16
+                )
+                continue
+            q_net.requires_grad_(False)  # the actor's gradient flows through Q, but none is kept on it
+            with amp:
+                if args.sleep_control == "bc":  # control: behaviour cloning on the success set, no Q
+                    pi_loss = (inform_actor.get_action(obs[is_expert])[2] - actions[is_expert]).pow(2).mean()
+                else:
+                    pi_loss, _ = actor_loss(q_net, inform_actor, obs[actor_rows], temperature)
+                if args.sleep_bc_coef > 0:  # TD3+BC: the Q objective made scale-free, plus cloning the experts
+                    pi_loss = (
+                        pi_loss / q_net(obs, actions).abs().mean().detach()
+                        + args.sleep_bc_coef
+                        * (inform_actor.get_action(obs[is_expert])[2] - actions[is_expert]).pow(2).mean()
+                    )
+            inform_optimizer.zero_grad(set_to_none=True)
+            pi_loss.backward()
+            q_net.requires_grad_(True)
+            inform_optimizer.step()
         soft_update(q_target, q_net, args.tau)
 
         # TRY NOT TO MODIFY: logging (one host sync per 100 steps to catch divergence) and periodic evaluation
@@ -622,16 +726,25 @@ def sleep_phase(args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator,
         if step % args.sleep_eval_frequency == 0 or last_step:
             metrics = evaluator("inform", inform_actor, step, args.periodic_eval_episodes)
             report["eval return"] = metrics["eval/inform_return"]
+            if criterion is not None:  # no environment: the held-out episodes only
+                report["criterion"] = criterion(step, q_net, q_target, inform_actor)
         progress(step, **report)
-    return q_net, inform_actor, {**stats, **losses}
+    selected = None
+    if criterion is not None:
+        stats.update(criterion.stats())
+        selected = criterion.selected
+    return q_net, inform_actor, {**stats, **losses}, selected
 
 
-def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals") -> dict:
+def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals", day: dict | None = None) -> dict:
     run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
     run_start = time.time()
     run_dir = writer = env = evaluator = None
     summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
+    oracle_ckpt = day["oracle"] if day is not None else oracle_ckpt  # --sleep-from: the saved day's teacher
     summary["oracle_path"] = oracle_ckpt["path"] if oracle_ckpt is not None else None
+    summary["sleep_from"] = os.path.abspath(args.sleep_from) if day is not None else None
+    summary["sleep_variant"] = sleep_variant(args)
     status = "completed"
     phase = "startup"
     try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
@@ -679,18 +792,31 @@ def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals") -> dict:
         phase = "tamer"
         t0 = time.time() - evaluator.seconds  # the phase's clock stops during its evaluations
         buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, act_dim, device)
-        h_net, tamer_actor, stats = forward_phase(args, env, oracle_actor, oracle_qf, buffer, evaluator, writer, device)
-        summary.update(stats)
+        if day is None:
+            h_net, tamer_actor, stats = forward_phase(
+                args, env, oracle_actor, oracle_qf, buffer, evaluator, writer, device
+            )
+        else:  # --sleep-from: the saved day's memories and TAMER, and the random streams where the day left them
+            h_net, tamer_actor, stats = restore_day(day, buffer, evaluator, device)
         summary["time/tamer_s"] = time.time() - evaluator.seconds - t0
-        summary["sps/tamer"] = summary["feedback/steps"] / max(summary["time/tamer_s"], 1e-9)
+        summary["sps/tamer"] = stats["feedback/steps"] / max(summary["time/tamer_s"], 1e-9)
+        summary.update(stats)  # a saved day's stats bring the day's own time
         if args.save_model:
             save_actor(f"{run_dir}/tamer_actor.pt", tamer_actor, env_id=args.env_id)
             save_critic(f"{run_dir}/tamer_h.pt", h_net, obs_dim, act_dim, env_id=args.env_id)
+        if args.save_buffer:
+            day_networks = (oracle_ckpt, oracle_actor, oracle_qf, h_net, tamer_actor)
+            day_stats = {**stats, "time/tamer_s": summary["time/tamer_s"], "sps/tamer": summary["sps/tamer"]}
+            save_day(f"{run_dir}/day.pt", args, buffer, day_networks, day_stats, evaluator)
 
         # ---- sleep phase ("night"): offline IQ-Learn on the buffer, no environment steps
         phase = "sleep"
         t0 = time.time() - evaluator.seconds
-        q_net, inform_actor, stats = sleep_phase(args, buffer, tamer_actor, evaluator, writer, device)
+        if args.sleep_seed is not None:  # another night on the same day
+            torch.manual_seed(args.sleep_seed)
+        q_net, inform_actor, stats, selected = sleep_phase(
+            args, buffer, tamer_actor, evaluator, writer, device, h_net, stats["losses/tamer_entropy_coef"]
+        )
         summary.update(stats)
         summary["time/sleep_s"] = time.time() - evaluator.seconds - t0
         summary["sps/sleep"] = args.sleep_gradient_steps / max(summary["time/sleep_s"], 1e-9)
@@ -698,10 +824,14 @@ def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals") -> dict:
             save_actor(f"{run_dir}/inform_actor.pt", inform_actor, env_id=args.env_id)
             extra = {"gamma": args.sleep_gamma, "temperature": args.sleep_temperature}
             save_critic(f"{run_dir}/inform_critic.pt", q_net, obs_dim, act_dim, env_id=args.env_id, **extra)
+            if selected is not None:  # the checkpoint the offline criterion picked, beside the last one
+                save_actor(f"{run_dir}/inform_selected_actor.pt", selected["actor"], env_id=args.env_id)
 
         # ---- the recovered reward (Eq. 3), then the final evaluation and the obstacle robustness test
         phase = "eval"
         policies = {"oracle": oracle_actor, "tamer": tamer_actor, "inform": inform_actor}
+        if selected is not None:
+            policies["inform_selected"] = selected["actor"]
         summary.update(final_evaluation(args, buffer, q_net, policies, evaluator, writer, run_dir))
     except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
         status = "interrupted"
@@ -820,6 +950,102 @@ def recovered_reward_stats(args: Args, buffer: ReplayBuffer, q_net: QEnsemble, i
         "sleep/recovered_reward_success_mean": float(r_all[succ].mean()) if succ.any() else float("nan"),
         "sleep/recovered_reward_failure_mean": float(r_all[~succ].mean()) if (~succ).any() else float("nan"),
     }
+
+
+def held_out(args: Args, buffer: ReplayBuffer, device) -> torch.Tensor | None:
+    """The transitions of --sleep-holdout-fraction of the day's episodes, drawn by the seed (None: no hold-out)."""
+    if args.sleep_holdout_fraction == 0:
+        return None
+    n = len(buffer.episodes)
+    k = min(n - 1, max(1, round(args.sleep_holdout_fraction * n)))
+    chosen = torch.randperm(n, generator=torch.Generator().manual_seed(args.seed + 15)).tolist()[:k]
+    return torch.cat([torch.arange(*buffer.episodes[i][:2], device=device) for i in sorted(chosen)])
+
+
+def auc(scores: torch.Tensor, positive: torch.Tensor) -> float:
+    """The probability that a positive scores above a negative, ties counted half (Mann-Whitney U); NaN without both."""
+    from scipy.stats import rankdata
+
+    n_pos = int(positive.sum())
+    n_neg = positive.numel() - n_pos
+    if n_pos == 0 or n_neg == 0:
+        return float("nan")
+    ranks = rankdata(scores.float().cpu().numpy())
+    return float((ranks[positive.cpu().numpy()].sum() - n_pos * (n_pos + 1) / 2) / (n_pos * n_neg))
+
+
+class OfflineCriterion:
+    """Choosing the sleep's checkpoint without the environment: on the held-out episodes, every evaluation of the sleep
+    logs the expert log-likelihood (mean log pi(a|s) of the held-out success transitions), the IQ-Learn terms, the drift
+    of Q(s, a~pi) and the AUC with which the recovered reward (Eq. 3) separates success from failure transitions. The
+    criterion, fixed before any test return was seen: the highest expert log-likelihood picks the checkpoint."""
+
+    def __init__(self, args: Args, buffer: ReplayBuffer, held: torch.Tensor, writer):
+        self.args = args
+        self.writer = writer
+        self.batch = buffer.batch(held)
+        self.success = buffer.success[held]
+        self.episodes = sum(int(held.eq(start).any()) for start, _, _ in buffer.episodes)
+        self.best = -math.inf
+        self.selected = None  # {"step", "actor", "q_net"} of the best checkpoint so far
+        self.last = {}
+        self.q_pi_previous = None
+
+    @torch.no_grad()
+    def __call__(self, step: int, q_net: QEnsemble, q_target: QEnsemble, actor: Actor) -> float:
+        args = self.args
+        obs, actions, next_obs, _, terminated = self.batch
+        cuda = obs.device.type == "cuda"
+        with torch.random.fork_rng(devices=[torch.cuda.current_device()] if cuda else []):  # the sleep's RNG untouched
+            expert = self.success.nonzero().squeeze(-1)
+            loglik = actor.log_prob(obs[expert], actions[expert]).mean().item() if expert.numel() else float("nan")
+            rows = self.success if args.sleep_loss_rows == "expert" else None
+            loss, terms = iq_loss(
+                q_net,
+                q_target,
+                obs,
+                actions,
+                next_obs,
+                terminated,
+                self.success,
+                args.sleep_gamma,
+                args.sleep_temperature,
+                args.sleep_chi2_coef,
+                actor,
+                rows,
+            )
+            q_pi = q_net(obs, actor.get_action(obs)[0]).min(0).values.mean().item()
+            v_next = soft_value(q_net, actor, next_obs, args.sleep_temperature)
+            reward = recover_reward(q_net(obs, actions).min(0).values, v_next, terminated, args.sleep_gamma)
+        values = {
+            "holdout/expert_loglik": loglik,
+            "holdout/iq_loss": loss.item(),
+            "holdout/iq_expert_term": terms[0].item(),
+            "holdout/iq_value_term": terms[1].item(),
+            "holdout/iq_chi2_term": terms[2].item(),
+            "holdout/q_pi": q_pi,
+            "holdout/reward_auc": auc(reward, self.success),
+        }
+        if self.q_pi_previous is not None:  # per 1,000 gradient steps
+            values["holdout/q_pi_drift"] = (q_pi - self.q_pi_previous[1]) * 1000 / (step - self.q_pi_previous[0])
+        self.q_pi_previous = (step, q_pi)
+        for tag, value in values.items():
+            self.writer.add_scalar(tag, value, step)
+        self.last = values
+        if math.isfinite(loglik) and loglik > self.best:
+            self.best = loglik
+            self.selected = {"step": step, "actor": copy.deepcopy(actor), "q_net": copy.deepcopy(q_net)}
+        return loglik
+
+    def stats(self) -> dict:
+        return {
+            **self.last,
+            "holdout/episodes": self.episodes,
+            "holdout/transitions": int(self.success.numel()),
+            "holdout/success_transitions": int(self.success.sum()),
+            "holdout/selected_step": self.selected["step"] if self.selected else None,
+            "holdout/selected_expert_loglik": self.best if self.selected else None,
+        }
 
 
 def obstacle_test(args: Args, policies: dict, generator: torch.Generator) -> tuple[dict, dict, dict]:
@@ -1248,38 +1474,161 @@ def save_critic(path: str, q_net: QEnsemble, obs_dim: int, act_dim: int, **extra
 
 
 def save_oracle(path: str, args: Args, actor: Actor, qf: QEnsemble, action_space: gym.spaces.Box) -> None:
+    save_atomic(oracle_checkpoint(args, actor, qf, action_space.low, action_space.high), path)
+
+
+def oracle_checkpoint(args: Args, actor: Actor, qf: QEnsemble, action_low, action_high) -> dict:
     """oracle_train.py's format, so --oracle-path loads either."""
     obs_dim = actor.fc1.in_features
     act_dim = actor.fc_mean.out_features
-    save_atomic(
-        {
-            "algorithm": "sac",
-            "env_id": args.env_id,
-            "obs_shape": [obs_dim],
-            "act_shape": [act_dim],
-            "kwargs": {"obs_dim": obs_dim, "act_dim": act_dim, "hidden": args.hidden_size},
-            "action_low": torch.as_tensor(action_space.low),
-            "action_high": torch.as_tensor(action_space.high),
-            "actor_state_dict": state_dict_cpu(actor),
-            "qf_state_dict": state_dict_cpu(qf),
-            "training_steps": args.oracle_total_timesteps,
-            "training_seed": args.seed,
-            "random_starts": args.oracle_random_starts,
-        },
-        path,
+    return {
+        "algorithm": "sac",
+        "env_id": args.env_id,
+        "obs_shape": [obs_dim],
+        "act_shape": [act_dim],
+        "kwargs": {"obs_dim": obs_dim, "act_dim": act_dim, "hidden": args.hidden_size},
+        "action_low": torch.as_tensor(action_low),
+        "action_high": torch.as_tensor(action_high),
+        "actor_state_dict": state_dict_cpu(actor),
+        "qf_state_dict": state_dict_cpu(qf),
+        "training_steps": args.oracle_total_timesteps,
+        "training_seed": args.seed,
+        "random_starts": args.oracle_random_starts,
+    }
+
+
+# saved days (--save-buffer, --sleep-from): a day is deterministic, so it is saved once and slept on many times
+DAY_FORMAT = "inform-day-1"
+DAY_FIELDS = ("env_id", "seed", "random_starts", "success_distance", "train_oracle", "hidden_size", "eval_frequency")
+DAY_FIELDS += ("credit_window", "budget_ends_forward_phase")
+DAY_PREFIXES = ("oracle_", "tamer_", "feedback_", "teacher_")
+DAY_TENSORS = ("obs", "actions", "next_obs", "feedback", "terminated", "success")
+
+
+def day_fields(args: Args) -> dict:
+    """The flags that shape the day: the env, the seed, the teacher and TAMER."""
+    return {
+        f.name: getattr(args, f.name) for f in fields(args) if f.name in DAY_FIELDS or f.name.startswith(DAY_PREFIXES)
+    }
+
+
+def save_day(path: str, args: Args, buffer: ReplayBuffer, networks: tuple, stats: dict, evaluator) -> None:
+    """The day as plain tensors and values (torch.load(weights_only=True) reads it): the memories, the episode table,
+    the teacher, TAMER's H and actor, the day's stats and the random states the night goes on from."""
+    oracle_ckpt, oracle_actor, oracle_qf, h_net, tamer_actor = networks
+    if oracle_ckpt is None:  # trained here: the same format as oracle_train.py's
+        low = tamer_actor.action_bias - tamer_actor.action_scale
+        high = tamer_actor.action_bias + tamer_actor.action_scale
+        oracle_ckpt = oracle_checkpoint(args, oracle_actor, oracle_qf, low.cpu(), high.cpu())
+    n = buffer.size
+    day = {key: getattr(buffer, key)[:n].cpu().clone() for key in DAY_TENSORS}
+    starts, ends, distances = zip(*buffer.episodes, strict=True)
+    day.update(
+        format=DAY_FORMAT,
+        script=os.path.basename(__file__),
+        env_id=args.env_id,
+        seed=args.seed,
+        day_args=day_fields(args),
+        day_stats=stats,
+        episode_start=torch.tensor(starts, dtype=torch.int64),
+        episode_end=torch.tensor(ends, dtype=torch.int64),
+        episode_final_distance=torch.tensor(distances, dtype=torch.float64),
+        episode_success=torch.tensor([d < args.success_distance for d in distances]),
+        oracle={k: v for k, v in oracle_ckpt.items() if k != "path"},
+        oracle_path=oracle_ckpt.get("path"),
+        tamer_h={"state_dict": state_dict_cpu(h_net), "n": h_net.n},
+        tamer_actor={"state_dict": state_dict_cpu(tamer_actor)},
+        torch_rng=torch.get_rng_state(),
+        cuda_rng=torch.cuda.get_rng_state() if buffer.obs.is_cuda else None,
+        evaluator_rng=evaluator.generator.get_state(),
     )
+    save_atomic(day, path)
+
+
+def load_day(run_dir: str) -> dict:
+    """--sleep-from: RUN_DIR/day.pt, read with weights_only=True and checked; InputError otherwise."""
+    path = os.path.join(run_dir, "day.pt")
+    if not os.path.isfile(path):
+        raise InputError(f"--sleep-from {run_dir}: no day.pt there (make one with --save-buffer)")
+    try:
+        day = torch.load(path, weights_only=True, map_location="cpu")
+    except Exception as e:
+        raise InputError(f"--sleep-from {path}: not a readable weights-only day ({type(e).__name__})") from None
+    if not isinstance(day, dict) or day.get("format") != DAY_FORMAT or day.get("script") != os.path.basename(__file__):
+        raise InputError(f"--sleep-from {path}: not a day saved by this script's --save-buffer ({DAY_FORMAT})")
+    if day["env_id"] == "Pusher-v4" and mujoco_major() >= 3:
+        raise InputError(f"--sleep-from {path}: the day is on Pusher-v4, which needs mujoco<3 (a separate venv)")
+    day["oracle"]["path"] = day["oracle_path"] or f"the oracle saved in {path}"
+    return day
+
+
+def restore_day(day: dict, buffer: ReplayBuffer, evaluator, device) -> tuple:
+    """The saved day back in place of the forward phase: the buffer, TAMER's H and actor, the day's stats, and last
+    the random states (building networks draws from them)."""
+    n = day["obs"].shape[0]
+    for key in DAY_TENSORS:
+        getattr(buffer, key)[:n] = day[key].to(device)
+    buffer.size = n
+    table = (day["episode_start"], day["episode_end"], day["episode_final_distance"])
+    buffer.episodes = list(zip(*(column.tolist() for column in table), strict=True))
+    obs_dim = buffer.obs.shape[1]
+    act_dim = buffer.actions.shape[1]
+    o = day["oracle"]
+    hidden = day["day_args"]["hidden_size"]
+    h_net = QEnsemble(obs_dim, act_dim, hidden, day["tamer_h"]["n"])
+    h_net.load_state_dict(day["tamer_h"]["state_dict"])
+    tamer_actor = Actor(obs_dim, act_dim, hidden, o["action_low"], o["action_high"])
+    tamer_actor.load_state_dict(day["tamer_actor"]["state_dict"])
+    torch.set_rng_state(day["torch_rng"])
+    if day["cuda_rng"] is not None and device.type == "cuda":
+        torch.cuda.set_rng_state(day["cuda_rng"])
+    evaluator.generator.set_state(day["evaluator_rng"])
+    print(f"[day] {n} transitions, {len(buffer.episodes)} episodes from the saved day", flush=True)
+    return h_net.to(device), tamer_actor.to(device), dict(day["day_stats"])
+
+
+def sleep_variant(args: Args) -> str:
+    """The sleep's settings in one line, for summary.json and the study's tables."""
+    start = "tamer" if args.sleep_init_actor_from_tamer else "scratch"
+    parts = [f"protocol={args.sleep_protocol}", f"control={args.sleep_control}", f"actor_start={start}"]
+    parts += [f"actor_states={args.sleep_actor_states}", f"policy_frequency={args.sleep_policy_frequency}"]
+    parts += [f"loss_rows={args.sleep_loss_rows}", f"twin_critics={args.sleep_twin_critics}"]
+    parts += [f"bc_coef={args.sleep_bc_coef}", f"temperature={args.sleep_temperature}"]
+    parts += [f"steps={args.sleep_gradient_steps}", f"sleep_seed={args.sleep_seed}"]
+    return " ".join(parts)
+
+
+def apply_sleep_protocol(args: Args) -> Args:
+    """--sleep-protocol authors: the authors' sleep (a fresh actor on replay + expert states, two updates every second
+    step, tested at 100k gradient steps; their lr 5e-6, temperature 0.01, one critic and chi2 0.5 are our defaults)."""
+    if args.sleep_protocol != "authors":
+        return args
+    authors = {
+        "sleep_init_actor_from_tamer": False,
+        "sleep_actor_states": "replay+expert",
+        "sleep_policy_frequency": 2,
+        "sleep_gradient_steps": 100000,
+    }
+    print(f"[sleep] --sleep-protocol authors sets {' '.join(f'{k}={v}' for k, v in authors.items())}", flush=True)
+    return dataclasses.replace(args, **authors)
 
 
 class InputError(Exception):
     """Bad input from the user: a flag value, a file. Reported as one line, before anything is written."""
 
 
-NON_NEGATIVE_INTS = ("seed", "teacher_delay")  # every other integer flag (--feedback-budget too) must be >= 1
+NON_NEGATIVE_INTS = (
+    "seed",
+    "teacher_delay",
+    "sleep_seed",
+)  # every other integer flag (--feedback-budget too) must be >= 1
 
 
 FLOAT_RANGES = {
     "tau": "(0, 1]",
     "sleep_chi2_coef": "[0, inf)",
+    "sleep_bc_coef": "[0, inf)",
+    "sleep_holdout_fraction": "[0, 1]",
     **dict.fromkeys(
         (
             "feedback_alpha_start",
@@ -1328,6 +1677,10 @@ def check_args(args: Args) -> None:
         )
     if args.oracle_path is not None and args.train_oracle:
         raise InputError("--oracle-path and --train-oracle exclude each other; pass one of them")
+    if args.sleep_from is not None and args.save_buffer:
+        raise InputError("--save-buffer and --sleep-from exclude each other: a night on a saved day saves no new day")
+    if args.sleep_holdout_fraction >= 1:
+        raise InputError(f"--sleep-holdout-fraction must be below 1, got {args.sleep_holdout_fraction}")
 
 
 def mujoco_major() -> int:
@@ -1610,18 +1963,28 @@ def record_videos(args: Args, policies: dict, boxes: np.ndarray, reset_seed: int
 
 if __name__ == "__main__":
     args = tyro.cli(Args)  # a malformed flag: tyro's own message, exit 2
+    day = None
     try:
+        args = apply_sleep_protocol(args)
+        if args.sleep_from is not None:  # the day's flags replace this run's: its numbers are the day's
+            day = load_day(args.sleep_from)
+            args = dataclasses.replace(args, **day["day_args"])
+            print(
+                f"[day] sleeping on the day saved in {args.sleep_from} ({args.env_id}, seed {args.seed}, "
+                f"{day['obs'].shape[0]} steps); its day flags replace this run's",
+                flush=True,
+            )
         check_args(args)
         if args.capture_video:
             check_video(args.env_id)
         if args.evaluate is not None:  # writes nothing: a stop meanwhile ends it with one line (see the top)
             print(json.dumps(evaluate_saved(args), indent=2))
             sys.exit(0)
-        oracle_ckpt = load_oracle(args)
+        oracle_ckpt = load_oracle(args) if day is None else None
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
     stop = StopSignals()
-    summary = main(args, oracle_ckpt, stop)
+    summary = main(args, oracle_ckpt, stop, day)
     gc.freeze()  # the interpreter's last collections over torch's objects take seconds on a busy machine; skip them
     sys.exit(stop.exit_code(summary["status"]))

@@ -66,6 +66,9 @@ SUCCESS_DISTANCE = 0.08
 # evaluation uses the same block every time, so its numbers compare across steps and choose best.pt; the final
 # evaluation of the written oracle uses another block, so the choice is not judged on the starts it was chosen on.
 SELECTION_EVAL_SEED = 1_000_000
+# the expert bar (docs/protocol.md): over 100 random starts, success >= 0.95 and final distance <= 0.06
+EXPERT_SUCCESS_RATE = 0.95
+EXPERT_FINAL_DISTANCE = 0.06
 FINAL_EVAL_SEED = 20_000
 TRAINING_STATE_KEYS = (
     "actor",
@@ -99,7 +102,10 @@ class Args:
     save_model: bool = True
     """whether to write the oracle checkpoint to `output_path`"""
     num_threads: int = 1
-    """number of torch CPU threads (1 keeps a second core free)"""
+    """number of torch CPU threads (1 keeps a second core free; more is faster and changes the numbers)"""
+    bf16: bool = False
+    """opt-in speed: the SAC updates' forward passes in bfloat16 (CPU autocast); the numbers change, a teacher need
+    only be good (recorded in the checkpoint's args)"""
     capture_video: bool = False
     """film the written Pusher oracle's first three held-out evaluation episodes into runs/{run}/videos/oracle.mp4
     (headless MuJoCo: MUJOCO_GL, egl when unset and there is no display)"""
@@ -143,6 +149,9 @@ class Args:
     """log losses and SPS every this many steps"""
     checkpoint_frequency: int = 10000
     """write the resumable training state every this many steps"""
+    stop_at_expert: bool = False
+    """end training at the first periodic evaluation that meets the expert bar (success rate >= 0.95 and final
+    distance <= 0.06 over its episodes); the held-out final evaluation then judges the written oracle"""
     snapshot_frequency: int = 50000
     """keep a copy of the oracle checkpoint (oracle_step{N}.pt in the run dir) every this many steps"""
     resume: str | None = None
@@ -389,6 +398,8 @@ def oracle_checkpoint(actor, qf, args: Args, obs_dim, act_dim, action_low, actio
         "training_steps": int(step),
         "training_seed": args.seed,
         "random_starts": True,
+        "bf16": bool(args.bf16),  # the opt-in speed flags it was trained with (they change the numbers)
+        "num_threads": int(args.num_threads),
         "evaluation": {k: float(v) for k, v in evaluation.items()},
     }
 
@@ -454,6 +465,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     qf = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
     qf_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
     qf_target.load_state_dict(qf.state_dict())
+    amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
     q_optimizer = torch.optim.Adam(qf.parameters(), lr=args.q_lr)
     actor_optimizer = torch.optim.Adam(actor.parameters(), lr=args.policy_lr)
     target_entropy = -float(act_dim)
@@ -546,6 +558,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     step_last = start_step
     qf_loss = actor_loss = ent_coef_loss = torch.zeros((), device=device)
     last_eval = {}
+    expert_reached = False
     report_every = max(1, (args.total_timesteps - start_step) // 20)
     for global_step in range(start_step, args.total_timesteps):
         if global_step < args.learning_starts:
@@ -584,18 +597,20 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
             b_rew = buf_rew[idx]
             b_term = buf_term[idx]
             ent_coef = log_ent_coef.detach().exp()
-            with torch.no_grad():
+            with amp, torch.no_grad():
                 next_act, next_logp, _ = actor.get_action(b_next)
                 min_q_next = qf_target(b_next, next_act).min(0).values - ent_coef * next_logp
                 target_q = b_rew + (1.0 - b_term) * args.gamma * min_q_next
-            qf_loss = (qf(b_obs, b_act) - target_q.unsqueeze(0)).pow(2).mean(-1).sum()  # summed over the twins
+            with amp:
+                qf_loss = (qf(b_obs, b_act) - target_q.unsqueeze(0)).pow(2).mean(-1).sum()  # summed over the twins
             q_optimizer.zero_grad(set_to_none=True)
             qf_loss.backward()
             q_optimizer.step()
 
             if global_step % args.policy_frequency == 0:
-                pi, logp, _ = actor.get_action(b_obs)
-                actor_loss = (ent_coef * logp - qf(b_obs, pi).min(0).values).mean()
+                with amp:
+                    pi, logp, _ = actor.get_action(b_obs)
+                    actor_loss = (ent_coef * logp - qf(b_obs, pi).min(0).values).mean()
                 actor_optimizer.zero_grad(set_to_none=True)
                 actor_loss.backward()
                 actor_optimizer.step()
@@ -627,7 +642,15 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
                 save_oracle(step, {**last_eval, "reset_seed": SELECTION_EVAL_SEED}, best_path)
             writer.add_scalar("eval/best_success_rate", best_key[0], step)
             writer.add_scalar("eval/best_final_distance", -best_key[1], step)
-        if step % report_every == 0 or step == args.total_timesteps:
+            with open(os.path.join(run_dir, "eval_curve.csv"), "a") as f:  # the selection curve, one row per evaluation
+                if f.tell() == 0:
+                    f.write("step,success_rate,final_distance,return\n")
+                f.write(f"{step},{last_eval['success_rate']},{last_eval['final_distance']},{last_eval['return']}\n")
+            expert_reached = args.stop_at_expert and (
+                last_eval["success_rate"] >= EXPERT_SUCCESS_RATE
+                and last_eval["final_distance"] <= EXPERT_FINAL_DISTANCE
+            )
+        if step % report_every == 0 or step % args.eval_frequency == 0 or step == args.total_timesteps:
             sps = (step - start_step) / max(time.time() - t0, 1e-9)
             eta = (args.total_timesteps - step) / max(sps, 1e-9)
             ev = ""
@@ -647,6 +670,13 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
             if step % args.snapshot_frequency == 0:  # kept, so the teacher can be chosen by a longer evaluation later
                 save_oracle(step, last_eval or {}, os.path.join(run_dir, f"oracle_step{step:07d}.pt"))
         t_last, step_last = (time.time(), step) if step % args.log_frequency == 0 else (t_last, step_last)
+        if expert_reached:
+            print(
+                f"[oracle] step {step}: the evaluation meets the expert bar (--stop-at-expert), training ends",
+                flush=True,
+            )
+            save_training_state(step)
+            break
 
     train_time = time.time() - t0
     env.close()
