@@ -746,6 +746,7 @@ def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals", day: dict | 
     summary["sleep_from"] = os.path.abspath(args.sleep_from) if day is not None else None
     summary["sleep_variant"] = sleep_variant(args)
     status = "completed"
+    failure = None
     phase = "startup"
     try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
         with stop.held():  # a stop waits until the directory exists and is known, so the summary can go there
@@ -839,7 +840,14 @@ def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals", day: dict | 
     except Diverged as e:
         status = "diverged"
         summary["error"] = str(e)
-    return end_run(args, summary, status, phase, run_dir, run_start, evaluator, (env, writer), stop)
+    except Exception as e:  # a bug: the summary records it, then its traceback
+        status = "failed"
+        summary["error"] = f"{type(e).__name__}: {(str(e).strip() or '-').splitlines()[0]}"
+        failure = e
+    summary = end_run(args, summary, status, phase, run_dir, run_start, evaluator, (env, writer), stop)
+    if failure is not None:
+        raise failure
+    return summary
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -1594,7 +1602,8 @@ def sleep_variant(args: Args) -> str:
     parts += [f"actor_states={args.sleep_actor_states}", f"policy_frequency={args.sleep_policy_frequency}"]
     parts += [f"loss_rows={args.sleep_loss_rows}", f"twin_critics={args.sleep_twin_critics}"]
     parts += [f"bc_coef={args.sleep_bc_coef}", f"temperature={args.sleep_temperature}"]
-    parts += [f"steps={args.sleep_gradient_steps}", f"sleep_seed={args.sleep_seed}"]
+    parts += [f"steps={args.sleep_gradient_steps}", f"seed={args.sleep_seed}"]
+    parts += [f"holdout_fraction={args.sleep_holdout_fraction}"]
     return " ".join(parts)
 
 

@@ -299,3 +299,38 @@ def test_the_hang_is_an_interrupt_between_the_queue_put_and_its_notify(tmp_path)
     started = time.monotonic()
     writer.close()
     assert time.monotonic() - started > flush_secs - 1.0  # it waited for the thread's own flush time
+
+
+@pytest.mark.parametrize("script", ["pusher", "maze"])
+def test_an_error_after_the_run_directory_exists_still_leaves_a_summary(tmp_path, monkeypatch, script):
+    """A bug in the final evaluation: summary.json says failed with the error's line, then the error goes on up (a bug
+    deserves its traceback). In-process, with the final evaluation replaced by one that raises."""
+    sys.path.insert(0, REPO)
+    import inform_dqn_gridworld as maze
+    import inform_sac_pusher as pusher
+
+    module = {"pusher": pusher, "maze": maze}[script]
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("a bug in the final evaluation\nsecond line")
+
+    monkeypatch.setattr(module, "final_evaluation", broken)
+    monkeypatch.chdir(tmp_path)
+    handlers = {sig: signal.getsignal(sig) for sig in SIGNALS}
+    try:
+        if script == "pusher":
+            flags = dict(zip(PUSHER_TINY[::2], PUSHER_TINY[1::2], strict=True))
+            args = pusher.Args(**{k[2:].replace("-", "_"): int(v) for k, v in flags.items()}, save_model=False)
+            with pytest.raises(RuntimeError, match="a bug in the final evaluation"):
+                pusher.main(args, pusher.load_oracle(args), pusher.StopSignals())
+        else:
+            args = maze.Args(tamer_total_timesteps=2000, tamer_learning_starts=500, sleep_gradient_steps=200)
+            with pytest.raises(RuntimeError, match="a bug in the final evaluation"):
+                maze.main(args, maze.StopSignals())
+    finally:
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
+    summary = summary_of(tmp_path)
+    assert summary["status"] == "failed" and summary["phase"] == "eval"
+    assert summary["error"] == "RuntimeError: a bug in the final evaluation"
+    assert summary["feedback/steps"] > 0  # what finished before the error is in it

@@ -1,0 +1,194 @@
+"""The sleep study: does the night consolidate, and when? Many nights on saved days (inform_sac_pusher.py
+--save-buffer, then --sleep-from), each variant of the sleep and both controls, then one table.
+
+Each night runs `inform_sac_pusher.py --sleep-from DAY` with the variant's flags, the common flags (by default a 15%
+hold-out, so every night logs the offline criterion) and a sleep seed; then its INFORM actor (and the one the
+offline criterion picked) is tested on 50 random starts with `--evaluate`. What a night leaves is copied to
+results/{campaign}/{day}/{variant}__sleep{seed}/ (summary.json, obstacle_distances.npz, random_starts.json), and a
+night already there is not run again: the study resumes. --table prints the verdict table from results/ alone.
+
+    python inform_sac_pusher.py --env-id Pusher-v4 --seed 1 --save-buffer          # a day: runs/<day>/day.pt
+    python -m inform_utils.sleep_study --days runs/<day> --campaign sleep_study    # the nights on it
+    python -m inform_utils.sleep_study --table --campaign sleep_study               # the table
+"""
+
+import glob
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+
+import tyro
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SCRIPT = os.path.join(REPO, "inform_sac_pusher.py")
+# the variants of the sleep (docs/protocol.md, "Saved days and the sleep's variants"), in the order they run: the
+# default and the controls first
+VARIANTS = {
+    "default": [],
+    "sham": ["--sleep-control", "sham"],
+    "bc": ["--sleep-control", "bc"],
+    "scratch": ["--no-sleep-init-actor-from-tamer"],
+    "replay+expert_states": ["--sleep-actor-states", "replay+expert"],
+    "expert_states": ["--sleep-actor-states", "expert"],
+    "policy_frequency2": ["--sleep-policy-frequency", "2"],
+    "expert_rows": ["--sleep-loss-rows", "expert"],
+    "twin_critics": ["--sleep-twin-critics"],
+    "td3bc2.5": ["--sleep-bc-coef", "2.5"],
+    "temperature0.1": ["--sleep-temperature", "0.1"],
+    "iqlearn_offline": ["--sleep-loss-rows", "expert", "--sleep-actor-states", "expert", "--sleep-policy-lr", "3e-5"],
+    "authors": ["--sleep-protocol", "authors"],  # last: 100k gradient steps, 20 times the others
+}
+TWO_SEEDS = ("default", "sham", "bc", "authors")  # the rest get one sleep seed
+COLUMNS = (
+    ("fixed-start return", "eval/{p}_return"),
+    ("authors' test distance", "eval/authors_test/{p}_final_distance"),
+    ("random-start success", "random_starts/{p}_success_rate"),
+    ("obstacle distance", "eval/obstacle/{p}_final_distance"),
+)
+
+
+@dataclass
+class Args:
+    days: list[str] = field(default_factory=list)
+    """run directories holding a day.pt (made with --save-buffer)"""
+    campaign: str = "sleep_study"
+    """results/{campaign}/ receives the nights"""
+    variants: list[str] = field(default_factory=lambda: list(VARIANTS))
+    """the variants to run, in this order (names of VARIANTS)"""
+    sleep_seeds: list[int] = field(default_factory=lambda: [1, 2])
+    """the sleep seeds of the variants in TWO_SEEDS; the others use the first"""
+    common: list[str] = field(default_factory=lambda: ["--sleep-holdout-fraction", "0.15"])
+    """flags every night gets"""
+    random_start_episodes: int = 50
+    """episodes of the random-start test of each night's policies"""
+    table: bool = False
+    """print the table from results/{campaign} and run nothing"""
+
+
+def night_dir(args: Args, day_name: str, variant: str, seed: int) -> str:
+    return os.path.join(REPO, "results", args.campaign, day_name, f"{variant}__sleep{seed}")
+
+
+def completed(path: str) -> bool:
+    try:
+        with open(os.path.join(path, "summary.json")) as f:
+            return json.load(f).get("status") == "completed" and os.path.isfile(
+                os.path.join(path, "random_starts.json")
+            )
+    except (OSError, ValueError):
+        return False
+
+
+def random_starts(run_dir: str, seed: int, env_id: str, episodes: int) -> dict:
+    """--evaluate of each saved policy on random starts (deterministic actions; the obstacle part is cut short)."""
+    out = {}
+    for name in ("tamer", "inform", "inform_selected"):
+        path = os.path.join(run_dir, f"{name}_actor.pt")
+        if not os.path.isfile(path):
+            continue
+        cmd = [sys.executable, SCRIPT, "--env-id", env_id, "--seed", str(seed), "--evaluate", path, "--random-starts"]
+        cmd += ["--eval-episodes", str(episodes), "--obstacle-episodes", "1"]
+        proc = subprocess.run(cmd, capture_output=True, text=True, check=True)
+        metrics = json.loads(proc.stdout[proc.stdout.index("{") :])
+        for key in ("return", "final_distance", "success_rate"):
+            out[f"random_starts/{name}_{key}"] = metrics[f"eval/policy_{key}"]
+    return out
+
+
+def run_night(args: Args, day: str, variant: str, seed: int) -> None:
+    day_name = os.path.basename(os.path.normpath(day))
+    dest = night_dir(args, day_name, variant, seed)
+    if completed(dest):
+        return
+    cmd = [sys.executable, SCRIPT, "--sleep-from", day, "--exp-name", f"night_{variant}", "--sleep-seed", str(seed)]
+    cmd += [*args.common, *VARIANTS[variant]]
+    t0 = time.time()
+    print(f"[study] {day_name} {variant} sleep seed {seed}: {' '.join(cmd[1:])}", flush=True)
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO)
+    line = next((x for x in proc.stdout.splitlines() if x.startswith("run directory:")), None)
+    if proc.returncode != 0 or line is None:
+        print(f"[study] failed ({proc.returncode}): {proc.stderr.strip()[-500:]}", flush=True)
+        return
+    run_dir = os.path.join(REPO, line.split(": ", 1)[1])
+    with open(os.path.join(run_dir, "summary.json")) as f:
+        summary = json.load(f)
+    extra = random_starts(run_dir, summary["seed"], summary["args"]["env_id"], args.random_start_episodes)
+    os.makedirs(dest, exist_ok=True)
+    for name in ("summary.json", "obstacle_distances.npz"):
+        shutil.copy(os.path.join(run_dir, name), dest)
+    with open(os.path.join(dest, "random_starts.json"), "w") as f:
+        json.dump(extra, f, indent=1)
+    print(f"[study] done in {time.time() - t0:.0f}s: {dest}", flush=True)
+
+
+def load(args: Args) -> list[dict]:
+    rows = []
+    for path in sorted(glob.glob(os.path.join(REPO, "results", args.campaign, "*", "*__sleep*"))):
+        if not completed(path):
+            continue
+        with open(os.path.join(path, "summary.json")) as f:
+            summary = json.load(f)
+        with open(os.path.join(path, "random_starts.json")) as f:
+            summary.update(json.load(f))
+        variant, seed = os.path.basename(path).rsplit("__sleep", 1)
+        rows.append({"day": os.path.basename(os.path.dirname(path)), "variant": variant, "seed": int(seed), **summary})
+    return rows
+
+
+def mean_sd(values: list[float]) -> str:
+    values = [v for v in values if v is not None]
+    if not values:
+        return "-"
+    sd = statistics.stdev(values) if len(values) > 1 else 0.0
+    return f"{statistics.mean(values):.3f} ± {sd:.3f}"
+
+
+def table(args: Args) -> str:
+    rows = load(args)
+    if not rows:
+        return f"no completed nights under results/{args.campaign}"
+    days = sorted({r["day"] for r in rows})
+    lines = [f"{len(rows)} nights on {len(days)} day(s): {', '.join(days)}", ""]
+    head = ["policy", "nights"] + [name for name, _ in COLUMNS] + ["seed spread (return)"]
+    lines += ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
+    first = [r for r in rows if r["variant"] == "default"] or rows
+    by_day = {}
+    for r in first:  # TAMER and the oracle: one row per day (every night of a day has the same)
+        by_day.setdefault(r["day"], r)
+    for p in ("oracle", "tamer"):
+        cells = [mean_sd([r.get(key.format(p=p)) for r in by_day.values()]) for _, key in COLUMNS]
+        lines.append(f"| {p} | {len(by_day)} days | " + " | ".join(cells) + " | - |")
+    for variant in [v for v in VARIANTS if any(r["variant"] == v for r in rows)]:
+        for p in ("inform", "inform_selected"):
+            mine = [r for r in rows if r["variant"] == variant]
+            cells = [mean_sd([r.get(key.format(p=p)) for r in mine]) for _, key in COLUMNS]
+            spreads = []
+            for day in days:
+                values = [r.get(f"eval/{p}_return") for r in mine if r["day"] == day]
+                if len(values) > 1 and None not in values:
+                    spreads.append(max(values) - min(values))
+            spread = f"{statistics.mean(spreads):.3f}" if spreads else "-"
+            name = variant if p == "inform" else f"{variant}, offline pick"
+            lines.append(f"| {name} | {len(mine)} | " + " | ".join(cells) + f" | {spread} |")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    args = tyro.cli(Args)
+    unknown = [v for v in args.variants if v not in VARIANTS]
+    if unknown:
+        sys.exit(f"error: unknown variant(s) {', '.join(unknown)}; choose from {', '.join(VARIANTS)}")
+    if not args.table:
+        for day in args.days:
+            if not os.path.isfile(os.path.join(day, "day.pt")):
+                sys.exit(f"error: {day} holds no day.pt; make one with inform_sac_pusher.py --save-buffer")
+        for variant in args.variants:
+            for seed in args.sleep_seeds[: 2 if variant in TWO_SEEDS else 1]:
+                for day in args.days:
+                    run_night(args, day, variant, seed)
+    print(table(args))

@@ -1,0 +1,185 @@
+"""Saved days and the sleep's variants in inform_sac_pusher.py: --save-buffer writes the day, --sleep-from sleeps on it
+again (bit for bit the original night with the same flags), the variants and controls run and name themselves, the
+offline criterion picks a checkpoint on held-out episodes. Tiny budgets; one day is shared by the module."""
+
+import json
+import math
+import os
+import subprocess
+import sys
+
+import pytest
+import torch
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, REPO)
+
+import inform_sac_pusher as isp  # noqa: E402
+
+SCRIPT = os.path.join(REPO, "inform_sac_pusher.py")
+# every episode counts as a success (--success-distance 1), so the tiny day has an expert set and held-out successes
+DAY = [
+    "--tamer-total-timesteps", "600",
+    "--tamer-learning-starts", "300",
+    "--tamer-batch-size", "64",
+    "--hidden-size", "64",
+    "--eval-frequency", "600",
+    "--success-distance", "1.0",
+]  # fmt: skip
+NIGHT = [
+    "--sleep-gradient-steps", "100",
+    "--sleep-batch-size", "64",
+    "--sleep-eval-frequency", "50",
+    "--eval-episodes", "1",
+    "--periodic-eval-episodes", "1",
+    "--obstacle-episodes", "2",
+    "--authors-test-episodes", "2",
+    "--log-frequency", "50",
+]  # fmt: skip
+COMPARED = ("eval/", "losses/", "sleep/", "feedback/", "holdout/")
+
+
+def run(cwd, *flags):
+    return subprocess.run([sys.executable, SCRIPT, *flags], cwd=cwd, capture_output=True, text=True, timeout=300)
+
+
+def summary_of(proc, cwd) -> tuple[str, dict]:
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    line = next(line for line in proc.stdout.splitlines() if line.startswith("run directory:"))
+    run_dir = os.path.join(cwd, line.split(": ", 1)[1])
+    with open(os.path.join(run_dir, "summary.json")) as f:
+        return run_dir, json.load(f)
+
+
+@pytest.fixture(scope="module")
+def day(tmp_path_factory):
+    """One tiny run that saves its day: (cwd, its run directory, its summary)."""
+    cwd = tmp_path_factory.mktemp("days")
+    run_dir, summary = summary_of(run(cwd, *DAY, *NIGHT, "--save-buffer"), cwd)
+    return cwd, run_dir, summary
+
+
+def night(day, *flags):
+    cwd, run_dir, _ = day
+    return summary_of(run(cwd, *NIGHT, "--sleep-from", run_dir, *flags), cwd)[1]
+
+
+def test_a_night_on_a_saved_day_gives_the_runs_own_numbers(day):
+    _, run_dir, original = day
+    again = night(day)
+    keys = [k for k in original if k.startswith(COMPARED)]
+    assert len(keys) > 40
+    assert {k: again[k] for k in keys} == {k: original[k] for k in keys}
+    assert again["sleep_from"] == os.path.abspath(run_dir) and original["sleep_from"] is None
+    assert again["sps/tamer"] == original["sps/tamer"]  # the day's own time, not the restore's
+    assert again["args"]["tamer_total_timesteps"] == 600  # the day's flags, though this command did not pass them
+
+
+def test_the_day_file_is_plain_tensors_and_its_table_adds_up(day):
+    _, run_dir, summary = day
+    saved = torch.load(os.path.join(run_dir, "day.pt"), weights_only=True)
+    n = saved["obs"].shape[0]
+    assert n == summary["feedback/steps"] == 600
+    for key in ("actions", "next_obs", "feedback", "terminated", "success"):
+        assert saved[key].shape[0] == n, key
+    assert saved["feedback"].sum().item() == summary["feedback/positive"]
+    starts, ends = saved["episode_start"], saved["episode_end"]
+    assert starts[0] == 0 and ends[-1] == n and torch.equal(starts[1:], ends[:-1])  # episodes tile the buffer
+    assert len(starts) == summary["sleep/episodes"]
+    assert torch.equal(saved["episode_success"], saved["episode_final_distance"] < 1.0)
+    assert saved["day_args"]["seed"] == 1 and saved["format"] == isp.DAY_FORMAT
+
+
+@pytest.mark.parametrize(
+    "flags",
+    [
+        ["--sleep-control", "sham"],
+        ["--sleep-control", "bc"],
+        [
+            "--sleep-twin-critics", "--sleep-loss-rows", "expert", "--sleep-actor-states", "replay+expert",
+            "--sleep-bc-coef", "2.5", "--sleep-policy-frequency", "2", "--no-sleep-init-actor-from-tamer",
+            "--sleep-holdout-fraction", "0.34", "--sleep-temperature", "0.1",
+        ],
+    ],
+    ids=["sham", "bc", "variants+holdout"],
+)  # fmt: skip
+def test_the_variants_and_controls_run_on_a_day_and_name_themselves(day, flags):
+    summary = night(day, *flags)
+    variant = summary["sleep_variant"]
+    for flag, value in zip(flags, flags[1:] + [""], strict=True):
+        if flag.startswith("--sleep-") and not value.startswith("--"):
+            name = flag.removeprefix("--sleep-").replace("-", "_")
+            assert f"{name}={value}" in variant, (name, variant)
+    assert math.isfinite(summary["eval/inform_return"]) and math.isfinite(summary["losses/iq_loss"])
+    if "--sleep-holdout-fraction" in flags:
+        assert "twin_critics=True" in variant and "actor_start=scratch" in variant
+        assert summary["holdout/episodes"] == 2 and summary["holdout/transitions"] == 200  # 0.34 of 6 episodes
+        assert summary["holdout/selected_step"] in (50, 100)
+        assert math.isfinite(summary["eval/inform_selected_return"])
+        assert summary["sleep/expert_transitions"] == 400  # the held-out episodes never reach the sleep
+
+
+def test_another_sleep_seed_gives_another_night_on_the_same_day(day):
+    _, _, original = day
+    other = night(day, "--sleep-seed", "7")
+    assert other["losses/iq_loss"] != original["losses/iq_loss"]
+    assert other["feedback/positive"] == original["feedback/positive"]
+
+
+def test_sleep_from_refuses_what_is_not_a_day(tmp_path):
+    (tmp_path / "empty").mkdir()
+    proc = run(tmp_path, "--sleep-from", str(tmp_path / "empty"))
+    assert proc.returncode == 2 and proc.stderr.strip().count("\n") == 0 and "no day.pt" in proc.stderr
+    (tmp_path / "empty" / "day.pt").write_bytes(b"not a checkpoint")
+    proc = run(tmp_path, "--sleep-from", str(tmp_path / "empty"))
+    assert proc.returncode == 2 and "not a readable weights-only day" in proc.stderr
+    proc = run(tmp_path, "--sleep-from", str(tmp_path / "empty"), "--save-buffer")
+    assert proc.returncode == 2
+    assert not (tmp_path / "runs").exists()
+
+
+def test_the_authors_protocol_is_one_flag():
+    args = isp.apply_sleep_protocol(isp.Args(sleep_protocol="authors"))
+    assert not args.sleep_init_actor_from_tamer and args.sleep_actor_states == "replay+expert"
+    assert args.sleep_policy_frequency == 2 and args.sleep_gradient_steps == 100000
+    assert (args.sleep_policy_lr, args.sleep_temperature, args.sleep_twin_critics) == (5e-6, 0.01, False)
+    assert isp.apply_sleep_protocol(isp.Args()) == isp.Args()
+
+
+def test_auc_by_hand():
+    scores = torch.tensor([0.1, 0.4, 0.5, 0.8])
+    positive = torch.tensor([False, True, False, True])
+    assert isp.auc(scores, positive) == 0.75  # 0.4 beats 0.1 but not 0.5, 0.8 beats both: 3 of 4 pairs
+    assert isp.auc(torch.tensor([1.0, 1.0]), torch.tensor([True, False])) == 0.5  # a tie counts half
+    assert math.isnan(isp.auc(scores, torch.ones(4, dtype=torch.bool)))
+
+
+def test_log_prob_of_given_actions_matches_the_sampled_ones():
+    torch.manual_seed(0)
+    actor = isp.Actor(5, 3, 16, -2 * torch.ones(3), 2 * torch.ones(3))
+    obs = torch.randn(8, 5)
+    with torch.no_grad():
+        action, log_prob, _ = actor.get_action(obs)
+        assert torch.allclose(actor.log_prob(obs, action), log_prob, atol=1e-3)
+
+
+def test_iq_loss_on_expert_rows_only_by_hand():
+    """With Q = 0 everywhere the TD error is -y = -gamma V_target(s'); rows=expert keeps the value and chi2 terms to
+    the expert rows."""
+    q_net = isp.QEnsemble(2, 1, 4, n=2)
+    target = isp.QEnsemble(2, 1, 4, n=2)
+    for net in (q_net, target):
+        for p in net.parameters():
+            torch.nn.init.zeros_(p)
+    with torch.no_grad():
+        target.fc3.bias.fill_(1.0)  # V_target(s') = 1 - temp * log pi: gamma, temp = 0 makes y = gamma = 0.5
+    actor = isp.Actor(2, 1, 4)
+    obs = torch.randn(4, 2)
+    is_expert = torch.tensor([False, False, True, True])
+    terminated = torch.tensor([0.0, 0.0, 0.0, 1.0])  # y = 0.5, 0.5, 0.5, 0
+    args = (q_net, target, obs, torch.zeros(4, 1), obs, terminated, is_expert, 0.5, 0.0, 0.5, actor)
+    _, (expert, value, chi2) = isp.iq_loss(*args)
+    _, (expert_e, value_e, chi2_e) = isp.iq_loss(*args, is_expert)
+    assert expert.item() == expert_e.item() == pytest.approx(2 * 0.25)  # -(0 - y) over expert rows, twice (twins)
+    assert value.item() == pytest.approx(-(0.5 * 3) / 4) and value_e.item() == pytest.approx(-0.25)
+    assert chi2.item() == pytest.approx(2 * 0.5 * 0.75 / 4) and chi2_e.item() == pytest.approx(2 * 0.5 * 0.25 / 2)
