@@ -559,6 +559,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     qf_loss = actor_loss = ent_coef_loss = torch.zeros((), device=device)
     last_eval = {}
     expert_reached = False
+    trained = start_step  # env steps trained so far (fewer than --total-timesteps after --stop-at-expert)
     report_every = max(1, (args.total_timesteps - start_step) // 20)
     for global_step in range(start_step, args.total_timesteps):
         if global_step < args.learning_starts:
@@ -670,6 +671,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
             if step % args.snapshot_frequency == 0:  # kept, so the teacher can be chosen by a longer evaluation later
                 save_oracle(step, last_eval or {}, os.path.join(run_dir, f"oracle_step{step:07d}.pt"))
         t_last, step_last = (time.time(), step) if step % args.log_frequency == 0 else (t_last, step_last)
+        trained = step
         if expert_reached:
             print(
                 f"[oracle] step {step}: the evaluation meets the expert bar (--stop-at-expert), training ends",
@@ -700,7 +702,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
         ckpt = oracle_checkpoint(actor, qf, args, obs_dim, act_dim, low, high, steps, final_eval)
         ckpt["train_time_s_this_session"] = float(train_time)
         ckpt["selection_evaluation"] = best["evaluation"]
-        ckpt["total_timesteps"] = max(start_step, args.total_timesteps)
+        ckpt["total_timesteps"] = trained
         os.makedirs(os.path.dirname(os.path.abspath(args.output_path)), exist_ok=True)
         atomic_save(ckpt, args.output_path)
         with open(os.path.join(run_dir, "oracle_eval.json"), "w") as f:

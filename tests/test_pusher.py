@@ -649,6 +649,28 @@ def test_oracle_train_pusher_smoke_and_resume(tmp_path):
     assert torch.load(tmp_path / "oracle.pt", weights_only=True)["total_timesteps"] == 600
 
 
+def test_oracle_train_bf16_curve_and_stop_at_expert(tmp_path, monkeypatch):
+    """--bf16 is recorded in the checkpoint; every evaluation is a row of eval_curve.csv; --stop-at-expert ends the
+    training at the first evaluation that meets the bar (here a bar every policy meets, patched in-process)."""
+    import oracle_train
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(oracle_train, "EXPERT_SUCCESS_RATE", 0.0)
+    monkeypatch.setattr(oracle_train, "EXPERT_FINAL_DISTANCE", 10.0)
+    args = oracle_train.Args(
+        env_id="Pusher-v5", total_timesteps=600, learning_starts=200, batch_size=64, hidden_size=32,
+        eval_frequency=300, eval_episodes=1, final_eval_episodes=1, checkpoint_frequency=300, log_frequency=100,
+        output_path="oracle.pt", bf16=True, stop_at_expert=True,
+    )  # fmt: skip
+    oracle_train.train_sac(args)
+    ckpt = torch.load(tmp_path / "oracle.pt", weights_only=True)
+    assert ckpt["bf16"] is True and ckpt["num_threads"] == 1
+    assert ckpt["training_steps"] == ckpt["total_timesteps"] == 300  # stopped at the first evaluation, not at 600
+    (curve,) = glob.glob(str(tmp_path / "runs" / "*" / "eval_curve.csv"))
+    rows = open(curve).read().splitlines()
+    assert rows[0] == "step,success_rate,final_distance,return" and [r.split(",")[0] for r in rows[1:]] == ["300"]
+
+
 @pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
 def test_oracle_train_signal_keeps_the_last_training_state(tmp_path, sig):
     flags = ["--env-id", "Pusher-v5", "--learning-starts", "100", "--batch-size", "32", "--hidden-size", "32"]
