@@ -60,7 +60,8 @@ def check(args: Args) -> dict:
     fixed = {seed: final_distance(actor, env, seed)[0] for seed in args.fixed_seeds}
     env.close()
     success = float((distances < SUCCESS_DISTANCE).mean())
-    quantiles = dict(zip(("p10", "p25", "p50", "p75", "p90"), np.quantile(distances, [0.1, 0.25, 0.5, 0.75, 0.9])))
+    levels = {"p10": 0.1, "p25": 0.25, "p50": 0.5, "p75": 0.75, "p90": 0.9}
+    quantiles = {name: np.quantile(distances, q) for name, q in levels.items()}
     return {
         "checkpoint": args.checkpoint,
         "env_id": ckpt["env_id"],
