@@ -149,14 +149,16 @@ class Args:
     tau: float = 1.0
     """soft-update rate of the sleep's target Q network per step (1 copies it every step, as the authors did)"""
     sleep_seed: int | None = None
-    """None: the sleep goes on with the random streams where the day left them; an integer re-seeds them right
-    before the sleep (several different nights on one day)"""
+    """None: the sleep goes on with the random streams where the day left them; an integer re-seeds them before the
+    sleep (several sleeps on one day)"""
+
+    # Saved days: one forward phase, many nights
     save_buffer: bool = False
-    """write the day as it ended (memories, episode table, oracle, TAMER's H, day stats, random states) to
-    runs/{run}/day.pt, for --sleep-from"""
+    """write the day (memories, episode table, oracle, TAMER's H, random states) to runs/{run}/day.pt for
+    --sleep-from"""
     sleep_from: str | None = None
-    """run only the night and the final tests on the day saved in this run directory (by --save-buffer), into a new
-    run directory; the day's flags (env, seed, oracle, teacher, TAMER) replace this run's"""
+    """run only the night and the final tests on the day saved in this run directory (by --save-buffer); the day's
+    flags (env, seed, teacher, TAMER) replace this run's"""
 
     # Evaluation
     eval_frequency: int = 500
@@ -279,7 +281,8 @@ def iq_loss(q_net, target_net, obs, actions, next_obs, terminated, is_expert, ga
     expert_term = -(q_sa - y)[is_expert].mean()
     value_term = (v_s - y).mean()
     chi2_term = chi2_coef * (q_sa - y).pow(2).mean()
-    return expert_term + value_term + chi2_term, (expert_term, value_term, chi2_term)
+    terms = {"iq_expert_term": expert_term, "iq_value_term": value_term, "iq_chi2_term": chi2_term}
+    return sum(terms.values()), terms  # the total and its named terms: the sleep logs whatever terms come back
 
 
 def recover_reward(q_sa, v_next, terminated, gamma):
@@ -467,7 +470,6 @@ def sleep_phase(args: Args, buffer: ReplayBuffer, n_actions: int, evaluator, wri
     temperature = args.sleep_temperature
     chi2 = args.sleep_chi2_coef
     is_expert = torch.arange(2 * batch_size, device=device) >= batch_size  # the batch: replay rows, then expert rows
-    names = ("losses/iq_loss", "losses/iq_expert_term", "losses/iq_value_term", "losses/iq_chi2_term")
     losses = {}
     progress = Progress("sleep", args.sleep_gradient_steps, evaluator=evaluator)
     for step in range(1, args.sleep_gradient_steps + 1):
@@ -485,14 +487,15 @@ def sleep_phase(args: Args, buffer: ReplayBuffer, n_actions: int, evaluator, wri
         last_step = step == args.sleep_gradient_steps
         log_now = step % args.log_frequency == 0 or last_step
         if log_now or step % 100 == 0:
-            values = torch.stack([loss, *terms]).tolist()
+            tags = {"iq_loss": loss, **terms}
+            values = torch.stack(list(tags.values())).tolist()
             if not all(map(math.isfinite, values)):
                 last = ", ".join(f"{k.split('/')[1]} {v:.4g}" for k, v in losses.items())
                 raise Diverged(
                     f"the sleep loss diverged (NaN or inf) by gradient step {step}; last finite losses: "
                     f"{last or 'none yet'}; try a lower --sleep-q-lr"
                 )
-            losses = dict(zip(names, values, strict=True))
+            losses = {f"losses/{tag}": value for tag, value in zip(tags, values, strict=True)}
         if log_now:
             for tag, value in losses.items():
                 writer.add_scalar(tag, value, step)
@@ -514,6 +517,7 @@ def main(args: Args, stop: "StopSignals", oracle_q: np.ndarray | None = None, da
     summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
     summary["sleep_from"] = os.path.abspath(args.sleep_from) if args.sleep_from else None  # a saved day's run
     status = "completed"
+    failure = None
     phase = "startup"
     try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
         with stop.held():  # a stop waits until the directory exists and is known, so the summary can go there
@@ -594,7 +598,14 @@ def main(args: Args, stop: "StopSignals", oracle_q: np.ndarray | None = None, da
     except Diverged as e:
         status = "diverged"
         summary["error"] = str(e)
-    return end_run(args, summary, status, phase, run_dir, run_start, evaluator, (env, writer), stop)
+    except Exception as e:  # a bug: the summary records it, then its traceback
+        status = "failed"
+        summary["error"] = f"{type(e).__name__}: {(str(e).strip() or '-').splitlines()[0]}"
+        failure = e
+    summary = end_run(args, summary, status, phase, run_dir, run_start, evaluator, (env, writer), stop)
+    if failure is not None:
+        raise failure
+    return summary
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -964,9 +975,10 @@ def save_day(path: str, args: Args, buffer: ReplayBuffer, h_net: QNetwork, q_sta
     last row, ended False, is the episode cut off by the end of the phase), the oracle's Q table, TAMER's H, the
     day's stats and flags, and the random states that the sleep goes on from. Written to a temporary name, renamed."""
     n = buffer.size
-    rows = [(start, end, True) for start, end in buffer.episodes]
-    if (rows[-1][1] if rows else 0) < n:
-        rows.append((rows[-1][1] if rows else 0, n, False))
+    rows = [(start, end, True) for start, end in buffer.episodes]  # (start, end, ended)
+    last_end = rows[-1][1] if rows else 0
+    if last_end < n:
+        rows.append((last_end, n, False))
     start = torch.tensor([row[0] for row in rows], dtype=torch.int64)
     end = torch.tensor([row[1] for row in rows], dtype=torch.int64)
     np_state = np.random.get_state()
@@ -984,7 +996,7 @@ def save_day(path: str, args: Args, buffer: ReplayBuffer, h_net: QNetwork, q_sta
         "episode_success": buffer.success[:n].cpu()[start],
         "episode_ended": torch.tensor([row[2] for row in rows], dtype=torch.bool),
         "h_net": {"state_dict": {k: v.cpu() for k, v in h_net.state_dict().items()}, "kwargs": network_kwargs(h_net)},
-        "q_star": torch.as_tensor(q_star),
+        "q_star": torch.tensor(q_star),
         "rng": {  # the sleep and the final tests draw from torch's only; numpy's and python's are kept all the same
             "torch": torch.get_rng_state(),
             "torch_cuda": torch.cuda.get_rng_state_all() if buffer.obs.is_cuda else None,
@@ -1008,13 +1020,13 @@ def load_day(run_dir: str, args: Args) -> dict:
     day = read_checkpoint(path)
     if day.get("format") != DAY_FORMAT:
         raise InputError(f"{path}: not a saved day of this script (format {day.get('format')!r}, not {DAY_FORMAT!r})")
+    if day.get("env_id") not in MAZE_IDS:
+        raise InputError(f"{path}: a day on {day.get('env_id')!r}, not on a maze ({', '.join(MAZE_IDS)})")
     missing = [key for key in ("day_args", *DAY_TENSORS, *EPISODE_TABLE, "h_net", "q_star", "rng", "day_stats")
                if key not in day]  # fmt: skip
     missing += [f"day_args.{name}" for name in DAY_ARGS if name not in day.get("day_args", {})]
     if missing:
         raise InputError(f"{path}: an incomplete saved day, no {', '.join(missing)}")
-    if day["day_args"]["env_id"] not in MAZE_IDS:
-        raise InputError(f"{path}: a day on {day['day_args']['env_id']!r}, not on a maze ({', '.join(MAZE_IDS)})")
     n = day["obs"].shape[0] if isinstance(day["obs"], torch.Tensor) else -1
     episodes = day["episode_start"].shape[0] if isinstance(day["episode_start"], torch.Tensor) else -1
     shapes = {name: (n,) for name in DAY_TENSORS} | {name: (episodes,) for name in EPISODE_TABLE}
@@ -1024,6 +1036,11 @@ def load_day(run_dir: str, args: Args) -> dict:
         found = tuple(day[name].shape) if isinstance(day[name], torch.Tensor) else type(day[name]).__name__
         if found != shape:
             raise InputError(f"{path}: {name} has shape {found}, expected {shape}")
+    stats = day["day_stats"]
+    if not isinstance(stats, dict) or stats.get("feedback/steps") != n:
+        raise InputError(f"{path}: its day_stats do not describe its {n} transitions (no feedback/steps = {n})")
+    if not all(v is None or isinstance(v, bool | int | float | str) for v in stats.values()):
+        raise InputError(f"{path}: its day_stats hold more than plain numbers")
     try:
         QNetwork(**day["h_net"]["kwargs"]).load_state_dict(day["h_net"]["state_dict"])
         if day["h_net"]["kwargs"]["obs_dim"] != gridworld_env.N_CELLS:
@@ -1037,7 +1054,7 @@ def load_day(run_dir: str, args: Args) -> dict:
         setattr(args, name, day["day_args"][name])
     try:
         check_args(args)
-    except InputError as e:
+    except (InputError, TypeError) as e:  # TypeError: a flag of the wrong type
         raise InputError(f"{path}: its day flags are not valid: {e}") from None
     print(
         f"[day] sleeping on {run_dir}'s day ({args.env_id}, seed {args.seed}, {n} steps); "

@@ -415,7 +415,8 @@ def iq_loss(
     expert_term = -(q_sa - y)[:, is_expert].mean(-1).sum()
     value_term = (v_s - y)[rows].mean()
     chi2_term = chi2_coef * (q_sa - y)[:, rows].pow(2).mean(-1).sum()
-    return expert_term + value_term + chi2_term, (expert_term, value_term, chi2_term)
+    terms = {"iq_expert_term": expert_term, "iq_value_term": value_term, "iq_chi2_term": chi2_term}
+    return sum(terms.values()), terms  # the total and its named terms: the sleep logs whatever terms come back
 
 
 def recover_reward(q_sa: torch.Tensor, v_next: torch.Tensor, terminated: torch.Tensor, gamma: float) -> torch.Tensor:
@@ -647,8 +648,6 @@ def sleep_phase(
     is_expert = torch.arange(2 * batch_size, device=device) >= batch_size  # the batch: replay rows, then expert rows
     loss_rows = is_expert if args.sleep_loss_rows == "expert" else None
     actor_rows = {"replay": ~is_expert, "expert": is_expert, "replay+expert": slice(None)}[args.sleep_actor_states]
-    names = ("losses/iq_loss", "losses/iq_expert_term", "losses/iq_value_term", "losses/iq_chi2_term")
-    names += ("losses/inform_actor_loss",)
     stats = {"sleep/expert_transitions": int(expert_idx.numel()), "sleep/expert_fallback": int(fallback_episodes > 0)}
     losses = {}
     criterion = OfflineCriterion(args, buffer, held, writer) if held is not None else None
@@ -710,14 +709,15 @@ def sleep_phase(
         last_step = step == args.sleep_gradient_steps
         log_now = step % args.log_frequency == 0 or last_step
         if log_now or step % 100 == 0:
-            values = torch.stack([loss, *terms, pi_loss]).tolist()
+            tags = {"iq_loss": loss, **terms, "inform_actor_loss": pi_loss}
+            values = torch.stack(list(tags.values())).tolist()
             if not all(map(math.isfinite, values)):
                 last = ", ".join(f"{k.split('/')[1]} {v:.4g}" for k, v in losses.items())
                 raise Diverged(
                     f"the sleep loss diverged (NaN or inf) by gradient step {step}; last finite losses: "
                     f"{last or 'none yet'}; try a lower --sleep-q-lr or --sleep-policy-lr"
                 )
-            losses = dict(zip(names, values, strict=True))
+            losses = {f"losses/{tag}": value for tag, value in zip(tags, values, strict=True)}
         if log_now:
             for tag, value in losses.items():
                 writer.add_scalar(tag, value, step)
@@ -1028,9 +1028,7 @@ class OfflineCriterion:
         values = {
             "holdout/expert_loglik": loglik,
             "holdout/iq_loss": loss.item(),
-            "holdout/iq_expert_term": terms[0].item(),
-            "holdout/iq_value_term": terms[1].item(),
-            "holdout/iq_chi2_term": terms[2].item(),
+            **{f"holdout/{name}": term.item() for name, term in terms.items()},
             "holdout/q_pi": q_pi,
             "holdout/reward_auc": auc(reward, self.success),
         }

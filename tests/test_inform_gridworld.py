@@ -79,12 +79,11 @@ def test_iq_loss_eq2_by_hand():
     actions, terminated = torch.tensor([0, 1]), torch.tensor([0.0, 1.0])
     is_expert = torch.tensor([True, False])
     gamma, temp, chi2 = 0.5, 1.0, 0.5
-    loss, (expert_term, value_term, chi2_term) = inform.iq_loss(
-        q_net, target, obs, actions, next_obs, terminated, is_expert, gamma, temp, chi2
-    )
+    loss, terms = inform.iq_loss(q_net, target, obs, actions, next_obs, terminated, is_expert, gamma, temp, chi2)
     v0, v1 = math.log(math.e + 1.0), math.log(1.0 + math.e**2)  # temp * logsumexp(Q / temp)
     y = [gamma * v1, 0.0]  # V_target of s' (not of s); nothing after a terminal transition
     td = [1.0 - y[0], 2.0 - y[1]]
+    expert_term, value_term, chi2_term = terms["iq_expert_term"], terms["iq_value_term"], terms["iq_chi2_term"]
     assert expert_term.item() == pytest.approx(-td[0], rel=1e-5)
     assert value_term.item() == pytest.approx(((v0 - y[0]) + (v1 - y[1])) / 2, rel=1e-5)
     assert chi2_term.item() == pytest.approx(chi2 * (td[0] ** 2 + td[1] ** 2) / 2, rel=1e-5)
@@ -95,11 +94,11 @@ def test_iq_loss_uses_target_network_on_next_state_without_gradient():
     q_net = TableQ([[1.0, 0.0], [0.0, 2.0]])
     target = TableQ([[5.0, 5.0], [-3.0, 7.0]])
     obs, next_obs = one_hot([0], 2), one_hot([1], 2)
-    loss, (expert_term, _, _) = inform.iq_loss(
+    loss, terms = inform.iq_loss(
         q_net, target, obs, torch.tensor([0]), next_obs, torch.tensor([0.0]), torch.tensor([True]), 0.9, 1.0, 0.0
     )
     y = 0.9 * math.log(math.exp(-3.0) + math.exp(7.0))
-    assert expert_term.item() == pytest.approx(-(1.0 - y), rel=1e-5)
+    assert terms["iq_expert_term"].item() == pytest.approx(-(1.0 - y), rel=1e-5)
     loss.backward()
     assert target.table.grad is None
 
@@ -107,7 +106,7 @@ def test_iq_loss_uses_target_network_on_next_state_without_gradient():
 def test_chi2_flag_turns_the_regulariser_off():
     q_net = TableQ([[1.0, 0.0], [0.0, 2.0]])
     args = (q_net, q_net, one_hot([0, 1], 2), torch.tensor([0, 1]), one_hot([1, 0], 2), torch.tensor([0.0, 1.0]))
-    _, (_, _, chi2_term) = inform.iq_loss(*args, torch.tensor([True, False]), 0.5, 1.0, 0.0)
+    chi2_term = inform.iq_loss(*args, torch.tensor([True, False]), 0.5, 1.0, 0.0)[1]["iq_chi2_term"]
     assert chi2_term.item() == 0.0
 
 

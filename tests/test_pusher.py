@@ -97,19 +97,16 @@ def test_iq_loss_eq2_hand_computed_with_terminal():
     next_obs = torch.tensor([[2.0], [3.0], [4.0], [5.0]])
     terminated = torch.tensor([0.0, 1.0, 0.0, 0.0])  # the second transition ends the episode: y = 0
     is_expert = torch.tensor([False, False, True, True])
-    loss, (expert, value, chi2) = isp.iq_loss(
-        StubQ(), StubQ(), obs, act, next_obs, terminated, is_expert, 0.9, 0.1, 0.5, StubActor()
-    )
+    loss, terms = isp.iq_loss(StubQ(), StubQ(), obs, act, next_obs, terminated, is_expert, 0.9, 0.1, 0.5, StubActor())
     # Q(s,a) = [1.5, 2, 4, 4]; V(x) = x + 0.1; y = (1 - done) 0.9 V(s') = [1.89, 0, 3.69, 4.59]
     # Q - y = [-0.39, 2, 0.31, -0.59]; V(s) - y = [-0.79, 2.1, -0.59, -0.49]
+    expert, value, chi2 = terms["iq_expert_term"], terms["iq_value_term"], terms["iq_chi2_term"]
     assert expert.item() == pytest.approx(-(0.31 - 0.59) / 2, abs=1e-5)
     assert value.item() == pytest.approx((-0.79 + 2.1 - 0.59 - 0.49) / 4, abs=1e-5)
     assert chi2.item() == pytest.approx(0.5 * (0.39**2 + 2**2 + 0.31**2 + 0.59**2) / 4, abs=1e-5)
     assert loss.item() == pytest.approx(0.14 + 0.0575 + 0.5745375, abs=1e-5)
-    _, (_, _, chi2_off) = isp.iq_loss(
-        StubQ(), StubQ(), obs, act, next_obs, terminated, is_expert, 0.9, 0.1, 0.0, StubActor()
-    )
-    assert chi2_off.item() == 0.0
+    _, terms = isp.iq_loss(StubQ(), StubQ(), obs, act, next_obs, terminated, is_expert, 0.9, 0.1, 0.0, StubActor())
+    assert terms["iq_chi2_term"].item() == 0.0
 
 
 def test_recover_reward_eq3_with_terminal():

@@ -324,7 +324,9 @@ def test_an_error_after_the_run_directory_exists_still_leaves_a_summary(tmp_path
             with pytest.raises(RuntimeError, match="a bug in the final evaluation"):
                 pusher.main(args, pusher.load_oracle(args), pusher.StopSignals())
         else:
-            args = maze.Args(tamer_total_timesteps=2000, tamer_learning_starts=500, sleep_gradient_steps=200)
+            args = maze.fill_teacher_defaults(
+                maze.Args(tamer_total_timesteps=2000, tamer_learning_starts=500, sleep_gradient_steps=200)
+            )
             with pytest.raises(RuntimeError, match="a bug in the final evaluation"):
                 maze.main(args, maze.StopSignals())
     finally:

@@ -178,8 +178,8 @@ def test_iq_loss_on_expert_rows_only_by_hand():
     is_expert = torch.tensor([False, False, True, True])
     terminated = torch.tensor([0.0, 0.0, 0.0, 1.0])  # y = 0.5, 0.5, 0.5, 0
     args = (q_net, target, obs, torch.zeros(4, 1), obs, terminated, is_expert, 0.5, 0.0, 0.5, actor)
-    _, (expert, value, chi2) = isp.iq_loss(*args)
-    _, (expert_e, value_e, chi2_e) = isp.iq_loss(*args, is_expert)
+    expert, value, chi2 = isp.iq_loss(*args)[1].values()
+    expert_e, value_e, chi2_e = isp.iq_loss(*args, is_expert)[1].values()
     assert expert.item() == expert_e.item() == pytest.approx(2 * 0.25)  # -(0 - y) over expert rows, twice (twins)
     assert value.item() == pytest.approx(-(0.5 * 3) / 4) and value_e.item() == pytest.approx(-0.25)
     assert chi2.item() == pytest.approx(2 * 0.5 * 0.75 / 4) and chi2_e.item() == pytest.approx(2 * 0.5 * 0.25 / 2)
