@@ -214,7 +214,8 @@ class Teacher:
     """A simulated person between Eq. 4 and the learner: noisy, sparse, late and limited (paper Sec. VII's future work).
 
     Each call hands over the perfect teacher's answer h* (0 or 1) about the transition at buffer index `step` and
-    returns the buffer indices that receive h = 1 now. In order: the judgement is flipped with probability
+    returns the labels that arrive now, {buffer index: h} (h = 1 here; a graded or negative teacher returns other
+    values, and the forward phase writes whatever it gets). In order: the judgement is flipped with probability
     `noise`; a +1 is then clicked only with probability `sparsity`; a click about step t arrives at step t + `delay`
     and labels that later transition and the `credit_window` - 1 before it (Deep TAMER's remedy; a window of
     delay + 1 covers the step it was about). The teacher leaves after `budget` delivered +1 signals (None: never).
@@ -244,19 +245,19 @@ class Teacher:
         """The budget is spent: no more feedback from now on."""
         return self.budget is not None and self.positives >= self.budget
 
-    def __call__(self, step: int, h_star: float) -> list[int]:
+    def __call__(self, step: int, h_star: float) -> dict[int, float]:
         self.perfect_positives += int(h_star > 0)
         flip, click = self.rng.random(2)  # always two draws: the stream does not depend on the answers
         h = 1.0 - h_star if flip < self.noise else h_star
         h = h if click < self.sparsity else 0.0
         self.in_flight.append(h)
         if len(self.in_flight) <= self.delay:
-            return []
+            return {}
         h = self.in_flight.popleft()
         if h <= 0 or self.gone:
-            return []
+            return {}
         self.positives += 1
-        return list(range(max(0, step - self.credit_window + 1), step + 1))
+        return dict.fromkeys(range(max(0, step - self.credit_window + 1), step + 1), 1.0)
 
 
 def tamer_loss(h_net, obs, actions, feedback):
@@ -379,8 +380,8 @@ def forward_phase(args: Args, env, q_star: np.ndarray, buffer: ReplayBuffer, eva
             h_star = human(cell, action, explore, step + 1, teacher.positives, h_star, successes)
             if h_star is None:  # q or the end of the input: stop teaching, the sleep starts
                 break
-        labelled = teacher(step, h_star)  # the transitions that this step's arriving signal labels
-        buffer.feedback[labelled] = 1.0
+        labels = teacher(step, h_star)  # {transition: h} that this step's arriving signal labels
+        buffer.feedback[list(labels)] = torch.tensor(list(labels.values()), device=device)
 
         next_obs, _, terminated, truncated, _ = env.step(action)
         buffer.add(obs, action, next_obs, terminated)

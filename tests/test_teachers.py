@@ -26,7 +26,9 @@ TINY = ["--tamer-total-timesteps", "1000", "--tamer-learning-starts", "200", "--
 
 def feed(teacher, answers):
     """Hand the teacher one perfect answer per step; the list of buffer indices labelled +1 at each step."""
-    return [teacher(step, float(h)) for step, h in enumerate(answers)]
+    labels = [teacher(step, float(h)) for step, h in enumerate(answers)]
+    assert all(h == 1.0 for step_labels in labels for h in step_labels.values())  # the simulated teacher gives +1
+    return [list(step_labels) for step_labels in labels]
 
 
 def within_5_sigma(count, n, p):
