@@ -1,11 +1,12 @@
 """The sleep study: does the night consolidate, and when? Many nights on saved days (inform_sac_pusher.py
 --save-buffer, then --sleep-from), each variant of the sleep and both controls, then one table.
 
-Each night runs `inform_sac_pusher.py --sleep-from DAY` with the variant's flags, the common flags (by default a 15%
-hold-out, so every night logs the offline criterion) and a sleep seed; then its INFORM actor (and the one the
-offline criterion picked) is tested on 50 random starts with `--evaluate`. What a night leaves is copied to
-results/{campaign}/{day}/{variant}__sleep{seed}/ (summary.json, obstacle_distances.npz, random_starts.json), and a
-night already there is not run again: the study resumes. --table prints the verdict table from results/ alone.
+Each night runs `inform_sac_pusher.py --sleep-from DAY` with the variant's flags, a 15% hold-out (so every night
+logs the offline criterion on the same held-out episodes), any flags given after `--`, and a sleep seed; then its
+INFORM actor (and the one the offline criterion picked) is tested on 50 random starts with `--evaluate`. What a
+night leaves is copied to {results_dir}/{campaign}/{day}/{variant}__sleep{seed}/ (summary.json,
+obstacle_distances.npz, random_starts.json), and a night already there is not run again: the study resumes.
+--table prints the table from the results alone.
 
     python inform_sac_pusher.py --env-id Pusher-v4 --seed 1 --save-buffer          # a day: runs/<day>/day.pt
     python -m inform_utils.sleep_study --days runs/<day> --campaign sleep_study    # the nights on it
@@ -43,6 +44,7 @@ VARIANTS = {
     "iqlearn_offline": ["--sleep-loss-rows", "expert", "--sleep-actor-states", "expert", "--sleep-policy-lr", "3e-5"],
     "authors": ["--sleep-protocol", "authors"],  # last: 100k gradient steps, 20 times the others
 }
+COMMON = ["--sleep-holdout-fraction", "0.15"]  # every night logs the offline criterion on the same held-out episodes
 TWO_SEEDS = ("default", "sham", "bc", "authors")  # the rest get one sleep seed
 COLUMNS = (
     ("fixed-start return", "eval/{p}_return"),
@@ -57,13 +59,13 @@ class Args:
     days: list[str] = field(default_factory=list)
     """run directories holding a day.pt (made with --save-buffer)"""
     campaign: str = "sleep_study"
-    """results/{campaign}/ receives the nights"""
+    """{results_dir}/{campaign}/ receives the nights"""
+    results_dir: str = "results"
+    """where campaigns are kept (relative to the working directory, where runs/ goes too)"""
     variants: list[str] = field(default_factory=lambda: list(VARIANTS))
     """the variants to run, in this order (names of VARIANTS)"""
     sleep_seeds: list[int] = field(default_factory=lambda: [1, 2])
     """the sleep seeds of the variants in TWO_SEEDS; the others use the first"""
-    common: list[str] = field(default_factory=lambda: ["--sleep-holdout-fraction", "0.15"])
-    """flags every night gets"""
     random_start_episodes: int = 50
     """episodes of the random-start test of each night's policies"""
     table: bool = False
@@ -71,7 +73,7 @@ class Args:
 
 
 def night_dir(args: Args, day_name: str, variant: str, seed: int) -> str:
-    return os.path.join(REPO, "results", args.campaign, day_name, f"{variant}__sleep{seed}")
+    return os.path.join(args.results_dir, args.campaign, day_name, f"{variant}__sleep{seed}")
 
 
 def completed(path: str) -> bool:
@@ -100,21 +102,21 @@ def random_starts(run_dir: str, seed: int, env_id: str, episodes: int) -> dict:
     return out
 
 
-def run_night(args: Args, day: str, variant: str, seed: int) -> None:
+def run_night(args: Args, day: str, variant: str, seed: int, extra: list[str]) -> None:
     day_name = os.path.basename(os.path.normpath(day))
     dest = night_dir(args, day_name, variant, seed)
     if completed(dest):
         return
     cmd = [sys.executable, SCRIPT, "--sleep-from", day, "--exp-name", f"night_{variant}", "--sleep-seed", str(seed)]
-    cmd += [*args.common, *VARIANTS[variant]]
+    cmd += [*COMMON, *extra, *VARIANTS[variant]]
     t0 = time.time()
     print(f"[study] {day_name} {variant} sleep seed {seed}: {' '.join(cmd[1:])}", flush=True)
-    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO)
+    proc = subprocess.run(cmd, capture_output=True, text=True)
     line = next((x for x in proc.stdout.splitlines() if x.startswith("run directory:")), None)
     if proc.returncode != 0 or line is None:
         print(f"[study] failed ({proc.returncode}): {proc.stderr.strip()[-500:]}", flush=True)
         return
-    run_dir = os.path.join(REPO, line.split(": ", 1)[1])
+    run_dir = line.split(": ", 1)[1]
     with open(os.path.join(run_dir, "summary.json")) as f:
         summary = json.load(f)
     extra = random_starts(run_dir, summary["seed"], summary["args"]["env_id"], args.random_start_episodes)
@@ -128,7 +130,7 @@ def run_night(args: Args, day: str, variant: str, seed: int) -> None:
 
 def load(args: Args) -> list[dict]:
     rows = []
-    for path in sorted(glob.glob(os.path.join(REPO, "results", args.campaign, "*", "*__sleep*"))):
+    for path in sorted(glob.glob(os.path.join(args.results_dir, args.campaign, "*", "*__sleep*"))):
         if not completed(path):
             continue
         with open(os.path.join(path, "summary.json")) as f:
@@ -151,7 +153,7 @@ def mean_sd(values: list[float]) -> str:
 def table(args: Args) -> str:
     rows = load(args)
     if not rows:
-        return f"no completed nights under results/{args.campaign}"
+        return f"no completed nights under {args.results_dir}/{args.campaign}"
     days = sorted({r["day"] for r in rows})
     lines = [f"{len(rows)} nights on {len(days)} day(s): {', '.join(days)}", ""]
     head = ["policy", "nights"] + [name for name, _ in COLUMNS] + ["seed spread (return)"]
@@ -179,7 +181,9 @@ def table(args: Args) -> str:
 
 
 if __name__ == "__main__":
-    args = tyro.cli(Args)
+    argv = sys.argv[1:]
+    extra = argv[argv.index("--") + 1 :] if "--" in argv else []  # flags after -- go to every night
+    args = tyro.cli(Args, args=argv[: argv.index("--")] if "--" in argv else argv)
     unknown = [v for v in args.variants if v not in VARIANTS]
     if unknown:
         sys.exit(f"error: unknown variant(s) {', '.join(unknown)}; choose from {', '.join(VARIANTS)}")
@@ -190,5 +194,5 @@ if __name__ == "__main__":
         for variant in args.variants:
             for seed in args.sleep_seeds[: 2 if variant in TWO_SEEDS else 1]:
                 for day in args.days:
-                    run_night(args, day, variant, seed)
+                    run_night(args, day, variant, seed, extra)
     print(table(args))

@@ -126,6 +126,24 @@ def test_another_sleep_seed_gives_another_night_on_the_same_day(day):
     assert other["feedback/positive"] == original["feedback/positive"]
 
 
+def test_the_sleep_study_runs_a_night_tests_it_on_random_starts_and_tabulates_it(day):
+    cwd, run_dir, _ = day
+    cmd = [sys.executable, "-m", "inform_utils.sleep_study", "--days", run_dir, "--campaign", "c", "--variants"]
+    cmd += ["default", "--sleep-seeds", "3", "--random-start-episodes", "2", "--", *NIGHT]
+    env = {**os.environ, "PYTHONPATH": REPO}
+    proc = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    night_dir = cwd / "results" / "c" / os.path.basename(run_dir) / "default__sleep3"
+    summary = json.loads((night_dir / "summary.json").read_text())
+    assert summary["args"]["sleep_seed"] == 3 and summary["args"]["sleep_holdout_fraction"] == 0.15
+    random_starts = json.loads((night_dir / "random_starts.json").read_text())
+    assert 0 <= random_starts["random_starts/inform_success_rate"] <= 1
+    assert "random_starts/tamer_return" in random_starts
+    assert "| default | 1 |" in proc.stdout and "| tamer | 1 days |" in proc.stdout
+    again = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=300)  # resumes: nothing runs
+    assert again.returncode == 0 and "[study]" not in again.stdout
+
+
 def test_sleep_from_refuses_what_is_not_a_day(tmp_path):
     (tmp_path / "empty").mkdir()
     proc = run(tmp_path, "--sleep-from", str(tmp_path / "empty"))
