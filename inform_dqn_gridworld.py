@@ -14,6 +14,7 @@ main.
 import collections
 import contextlib
 import gc
+import importlib.util
 import json
 import math
 import os
@@ -81,6 +82,13 @@ class Args:
     runs/{run}/videos/"""
     save_model: bool = True
     """whether to save the H and Q networks and the recovered reward table into the run directory"""
+    track: bool = False
+    """if toggled, mirror the TensorBoard events to Weights & Biases (CleanRL's --track; needs `pip install wandb`,
+    and WANDB_MODE=offline keeps the run on this machine)"""
+    wandb_project_name: str = "inform"
+    """the Weights & Biases project"""
+    wandb_entity: str | None = None
+    """the Weights & Biases team or user (None: your default)"""
     env_id: str = "KnoxStoneMaze-v0"
     """the maze to train on (one of the ids gridworld_env registers)"""
 
@@ -534,6 +542,18 @@ def main(args: Args, stop: "StopSignals", oracle_q: np.ndarray | None = None, da
         torch.set_num_threads(args.num_threads)
         device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
 
+        if args.track:  # Weights & Biases mirrors the TensorBoard events (CleanRL's --track); before the writer
+            import wandb
+
+            wandb.init(
+                project=args.wandb_project_name,
+                entity=args.wandb_entity,
+                sync_tensorboard=True,
+                config=vars(args),
+                name=os.path.basename(run_dir),
+                dir=run_dir,
+                save_code=True,
+            )
         writer = HeldWriter(run_dir, stop)
         writer.add_text(
             "hyperparameters",
@@ -1140,6 +1160,8 @@ FLOAT_RANGES = {
 
 def check_args(args: Args) -> None:
     """What tyro cannot know: ranges, the env id, flags that exclude each other. Raises InputError."""
+    if args.track and importlib.util.find_spec("wandb") is None:
+        raise InputError("--track needs Weights & Biases: `pip install wandb`, or run without --track")
     fill_teacher_defaults(args)
     for f in fields(args):
         value = getattr(args, f.name)

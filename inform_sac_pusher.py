@@ -17,6 +17,7 @@ import contextlib
 import copy
 import dataclasses
 import gc
+import importlib.util
 import json
 import math
 import os
@@ -77,6 +78,13 @@ class Args:
     """opt-in speed: the training updates' forward passes in bfloat16 (CPU autocast); the numbers change"""
     save_model: bool = True
     """whether to save the oracle (when trained here), TAMER and INFORM networks into the run directory"""
+    track: bool = False
+    """if toggled, mirror the TensorBoard events to Weights & Biases (CleanRL's --track; needs `pip install wandb`,
+    and WANDB_MODE=offline keeps the run on this machine)"""
+    wandb_project_name: str = "inform"
+    """the Weights & Biases project"""
+    wandb_entity: str | None = None
+    """the Weights & Biases team or user (None: your default)"""
     env_id: str = "Pusher-v5"
     """Pusher-v5 (current MuJoCo) or Pusher-v4 (the paper's; needs mujoco<3)"""
     random_starts: bool = False
@@ -763,6 +771,18 @@ def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals", day: dict | 
         torch.set_num_threads(args.num_threads)
         device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
 
+        if args.track:  # Weights & Biases mirrors the TensorBoard events (CleanRL's --track); before the writer
+            import wandb
+
+            wandb.init(
+                project=args.wandb_project_name,
+                entity=args.wandb_entity,
+                sync_tensorboard=True,
+                config=vars(args),
+                name=os.path.basename(run_dir),
+                dir=run_dir,
+                save_code=True,
+            )
         writer = HeldWriter(run_dir, stop)
         writer.add_text(
             "hyperparameters",
@@ -1653,6 +1673,8 @@ FLOAT_RANGES = {
 
 def check_args(args: Args) -> None:
     """What tyro cannot know: the env id, ranges, flags that exclude each other. Raises InputError."""
+    if args.track and importlib.util.find_spec("wandb") is None:
+        raise InputError("--track needs Weights & Biases: `pip install wandb`, or run without --track")
     if args.env_id not in ENV_IDS:
         raise InputError(f"unknown --env-id {args.env_id!r}; this script trains on one of {', '.join(ENV_IDS)}")
     if args.env_id == "Pusher-v4" and mujoco_major() >= 3:

@@ -30,6 +30,7 @@ Examples:
     python oracle_train.py --env-id KnoxStoneMaze-v0 --method dqn --maze-dqn-timesteps 20000
 """
 
+import importlib.util
 import json
 import math
 import os
@@ -101,6 +102,13 @@ class Args:
     """if toggled, cuda will be used when available"""
     save_model: bool = True
     """whether to write the oracle checkpoint to `output_path`"""
+    track: bool = False
+    """if toggled, mirror the TensorBoard events to Weights & Biases (CleanRL's --track; needs `pip install wandb`,
+    and WANDB_MODE=offline keeps the run on this machine)"""
+    wandb_project_name: str = "inform"
+    """the Weights & Biases project"""
+    wandb_entity: str | None = None
+    """the Weights & Biases team or user (None: your default)"""
     num_threads: int = 1
     """number of torch CPU threads (1 keeps a second core free; more is faster and changes the numbers)"""
     bf16: bool = False
@@ -199,6 +207,10 @@ class InputError(Exception):
 
 def check_args(args: Args) -> None:
     """What tyro cannot know: the env id, the method, ranges, files. Raises InputError."""
+    if args.track and importlib.util.find_spec("wandb") is None:
+        raise InputError("--track needs Weights & Biases: `pip install wandb`, or run without --track")
+    if args.track and args.env_id not in PUSHER_IDS:
+        raise InputError("--track mirrors TensorBoard events, which only the Pusher (SAC) training writes")
     if args.env_id not in SUPPORTED_ENV_IDS:
         raise InputError(f"unknown --env-id {args.env_id!r}; supported: {', '.join(SUPPORTED_ENV_IDS)}")
     methods = METHODS["pusher" if args.env_id in PUSHER_IDS else "maze"]
@@ -516,6 +528,18 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
         print(f"resumed from {args.resume} at step {start_step}", flush=True)
     else:
         run_dir = new_run_dir(args)
+    if args.track:  # Weights & Biases mirrors the TensorBoard events (CleanRL's --track); before the writer
+        import wandb
+
+        wandb.init(
+            project=args.wandb_project_name,
+            entity=args.wandb_entity,
+            sync_tensorboard=True,
+            config=vars(args),
+            name=os.path.basename(run_dir),
+            dir=run_dir,
+            save_code=True,
+        )
     writer = SummaryWriter(run_dir)
     if args.resume is None:
         writer.add_text(
