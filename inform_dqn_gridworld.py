@@ -278,7 +278,8 @@ def soft_value(q, temperature: float):
     return temperature * torch.logsumexp(q / temperature, dim=1)
 
 
-# ALGO LOGIC: the sleep loss. The Pusher script's signature and return, without the actor that V(s) needs there.
+# ALGO LOGIC: the sleep loss. The Pusher script's signature and return, without the actor that V(s) needs there and
+# its choice of rows (--sleep-loss-rows, a variant the maze does not have yet).
 def iq_loss(q_net, target_net, obs, actions, next_obs, terminated, is_expert, gamma, temperature, chi2_coef):
     # Eq. 2 (to minimise): y = (1 - done) gamma V_target(s');
     # L = -E_success[Q(s,a) - y] + E_all[V(s) - y] + chi2 * E_all[(Q(s,a) - y)^2]
@@ -630,8 +631,8 @@ def main(args: Args, stop: "StopSignals", oracle_q: np.ndarray | None = None, da
 
 
 # ---------------------------------------------------------------------------------------------------------------------
-# TRY NOT TO MODIFY: everything else, below main. Evaluation, progress lines, the person at the terminal, the reward
-# figure, checkpoints, input checks, signals and the run's end, --evaluate, videos
+# ALGO LOGIC, below main: the evaluation protocol and the rest of the research code. The greedy tests (S, the wall
+# maze, the start set, all cells), the person at the terminal (a teacher), the drawings of paths and of the reward
 
 
 def final_evaluation(args: Args, env, policies: dict, h_net, q_net, evaluator, run_dir: str, forward_steps: int):
@@ -706,46 +707,6 @@ class Evaluator:
     def close(self):
         for env in self.envs.values():
             env.close()
-
-
-class Progress:
-    """One line per ~5% of a phase: steps, SPS and ETA, plus whatever the phase reports. The clock stops while the
-    `evaluator` runs. The first line comes early (`warmup` + 500 steps), and the ETA counts only the steps after
-    `warmup` (random-action steps before learning starts are much faster than the rest)."""
-
-    def __init__(self, phase: str, total: int, warmup: int = 0, evaluator=None):
-        self.phase = phase
-        self.total = total
-        self.every = max(total // 20, 1)
-        self.warmup = min(warmup, total)
-        self.early = min(warmup + 500, total)
-        self.evaluator = evaluator
-        self.start = self.clock()
-        self.warm_start = None
-
-    def clock(self) -> float:
-        """Seconds, without those spent in evaluations."""
-        return time.time() - (self.evaluator.seconds if self.evaluator is not None else 0.0)
-
-    def sps(self, step: int) -> float:
-        return step / max(self.clock() - self.start, 1e-9)
-
-    def __call__(self, step: int, **info):
-        if step == self.warmup:
-            self.warm_start = self.clock()
-        if step % self.every == 0 or step == self.total or step == self.early:
-            sps = self.sps(step)
-            rate = sps
-            if self.warm_start is not None and step > self.warmup:
-                rate = (step - self.warmup) / max(self.clock() - self.warm_start, 1e-9)
-            eta = (self.total - step) / max(rate, 1e-9)
-            info = {k: v for k, v in info.items() if v is not None and v == v}  # not measured yet: not shown (nan)
-            extra = "".join(f" | {k} {v:.4g}" if isinstance(v, float) else f" | {k} {v}" for k, v in info.items())
-            print(
-                f"[{self.phase}] {step}/{self.total} {100 * step // self.total}% | {sps:,.0f} SPS | "
-                f"ETA {int(eta // 60)}m{int(eta % 60):02d}s{extra}",
-                flush=True,
-            )
 
 
 class HumanTeacher:
@@ -886,6 +847,51 @@ def reward_figure(table: np.ndarray, title: str):
     ax.set_title(title)
     fig.colorbar(matplotlib.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.8, label="r(s, a, s')")
     return fig
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# TRY NOT TO MODIFY: plumbing. Progress lines, checkpoints, saved days, input checks, signals and the run's end,
+# --evaluate, videos
+
+
+class Progress:
+    """One line per ~5% of a phase: steps, SPS and ETA, plus whatever the phase reports. The clock stops while the
+    `evaluator` runs. The first line comes early (`warmup` + 500 steps), and the ETA counts only the steps after
+    `warmup` (random-action steps before learning starts are much faster than the rest)."""
+
+    def __init__(self, phase: str, total: int, warmup: int = 0, evaluator=None):
+        self.phase = phase
+        self.total = total
+        self.every = max(total // 20, 1)
+        self.warmup = min(warmup, total)
+        self.early = min(warmup + 500, total)
+        self.evaluator = evaluator
+        self.start = self.clock()
+        self.warm_start = None
+
+    def clock(self) -> float:
+        """Seconds, without those spent in evaluations."""
+        return time.time() - (self.evaluator.seconds if self.evaluator is not None else 0.0)
+
+    def sps(self, step: int) -> float:
+        return step / max(self.clock() - self.start, 1e-9)
+
+    def __call__(self, step: int, **info):
+        if step == self.warmup:
+            self.warm_start = self.clock()
+        if step % self.every == 0 or step == self.total or step == self.early:
+            sps = self.sps(step)
+            rate = sps
+            if self.warm_start is not None and step > self.warmup:
+                rate = (step - self.warmup) / max(self.clock() - self.warm_start, 1e-9)
+            eta = (self.total - step) / max(rate, 1e-9)
+            info = {k: v for k, v in info.items() if v is not None and v == v}  # not measured yet: not shown (nan)
+            extra = "".join(f" | {k} {v:.4g}" if isinstance(v, float) else f" | {k} {v}" for k, v in info.items())
+            print(
+                f"[{self.phase}] {step}/{self.total} {100 * step // self.total}% | {sps:,.0f} SPS | "
+                f"ETA {int(eta // 60)}m{int(eta % 60):02d}s{extra}",
+                flush=True,
+            )
 
 
 def read_checkpoint(path: str) -> dict:

@@ -872,9 +872,9 @@ def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals", day: dict | 
 
 
 # ---------------------------------------------------------------------------------------------------------------------
-# TRY NOT TO MODIFY: everything else, below main. Evaluation and the tests (obstacle, authors'), progress lines, the
-# oracle's own training, the obstacle model, the reward wrapper, checkpoints, input checks, signals and the run's end,
-# --evaluate, videos
+# ALGO LOGIC, below main: the evaluation protocol and the rest of the research code. The tests (deterministic and
+# sampled, the authors', the obstacle), the offline checkpoint choice, the oracle's own SAC, the obstacle model, the
+# recovered reward (Eq. 3) as an object and a Gymnasium wrapper
 
 
 @torch.no_grad()
@@ -1119,46 +1119,6 @@ def authors_test(args: Args, policies: dict, generator: torch.Generator) -> dict
     return results
 
 
-class Progress:
-    """One line per ~5% of a phase: steps, SPS and ETA, plus whatever the phase reports. The clock stops while the
-    `evaluator` runs. The first line comes early (`warmup` + 500 steps), and the ETA counts only the steps after
-    `warmup` (random-action steps before learning starts are much faster than the rest)."""
-
-    def __init__(self, phase: str, total: int, warmup: int = 0, evaluator=None):
-        self.phase = phase
-        self.total = total
-        self.every = max(total // 20, 1)
-        self.warmup = min(warmup, total)
-        self.early = min(warmup + 500, total)
-        self.evaluator = evaluator
-        self.start = self.clock()
-        self.warm_start = None
-
-    def clock(self) -> float:
-        """Seconds, without those spent in evaluations."""
-        return time.time() - (self.evaluator.seconds if self.evaluator is not None else 0.0)
-
-    def sps(self, step: int) -> float:
-        return step / max(self.clock() - self.start, 1e-9)
-
-    def __call__(self, step: int, **info):
-        if step == self.warmup:
-            self.warm_start = self.clock()
-        if step % self.every == 0 or step == self.total or step == self.early:
-            sps = self.sps(step)
-            rate = sps
-            if self.warm_start is not None and step > self.warmup:
-                rate = (step - self.warmup) / max(self.clock() - self.warm_start, 1e-9)
-            eta = (self.total - step) / max(rate, 1e-9)
-            info = {k: v for k, v in info.items() if v is not None and v == v}  # not measured yet: not shown (nan)
-            extra = "".join(f" | {k} {v:.4g}" if isinstance(v, float) else f" | {k} {v}" for k, v in info.items())
-            print(
-                f"[{self.phase}] {step}/{self.total} {100 * step // self.total}% | {sps:,.0f} SPS | "
-                f"ETA {int(eta // 60)}m{int(eta % 60):02d}s{extra}",
-                flush=True,
-            )
-
-
 # the oracle: SAC on the environment reward (oracle_train.py runs the same SAC; a test keeps the two identical)
 def train_oracle(args: Args, writer: SummaryWriter, device: torch.device):
     """SAC on the environment reward (CleanRL's, with the twin critics as one module): the simulated teacher."""
@@ -1375,6 +1335,51 @@ class RecoveredRewardWrapper(gym.Wrapper):
         new_reward = float(self.reward_fn(self._obs, action, next_obs, terminated)[0])
         self._obs = next_obs
         return next_obs, new_reward, terminated, truncated, {**info, "env_reward": reward}
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# TRY NOT TO MODIFY: plumbing. Progress lines, checkpoints, saved days, input checks, signals and the run's end,
+# --evaluate, videos
+
+
+class Progress:
+    """One line per ~5% of a phase: steps, SPS and ETA, plus whatever the phase reports. The clock stops while the
+    `evaluator` runs. The first line comes early (`warmup` + 500 steps), and the ETA counts only the steps after
+    `warmup` (random-action steps before learning starts are much faster than the rest)."""
+
+    def __init__(self, phase: str, total: int, warmup: int = 0, evaluator=None):
+        self.phase = phase
+        self.total = total
+        self.every = max(total // 20, 1)
+        self.warmup = min(warmup, total)
+        self.early = min(warmup + 500, total)
+        self.evaluator = evaluator
+        self.start = self.clock()
+        self.warm_start = None
+
+    def clock(self) -> float:
+        """Seconds, without those spent in evaluations."""
+        return time.time() - (self.evaluator.seconds if self.evaluator is not None else 0.0)
+
+    def sps(self, step: int) -> float:
+        return step / max(self.clock() - self.start, 1e-9)
+
+    def __call__(self, step: int, **info):
+        if step == self.warmup:
+            self.warm_start = self.clock()
+        if step % self.every == 0 or step == self.total or step == self.early:
+            sps = self.sps(step)
+            rate = sps
+            if self.warm_start is not None and step > self.warmup:
+                rate = (step - self.warmup) / max(self.clock() - self.warm_start, 1e-9)
+            eta = (self.total - step) / max(rate, 1e-9)
+            info = {k: v for k, v in info.items() if v is not None and v == v}  # not measured yet: not shown (nan)
+            extra = "".join(f" | {k} {v:.4g}" if isinstance(v, float) else f" | {k} {v}" for k, v in info.items())
+            print(
+                f"[{self.phase}] {step}/{self.total} {100 * step // self.total}% | {sps:,.0f} SPS | "
+                f"ETA {int(eta // 60)}m{int(eta % 60):02d}s{extra}",
+                flush=True,
+            )
 
 
 def env_shapes(env_id: str) -> tuple[int, int]:
