@@ -520,7 +520,7 @@ def sleep_phase(args: Args, buffer: ReplayBuffer, n_actions: int, evaluator, wri
     return q_net, {**stats, **losses}
 
 
-def main(args: Args, stop: "StopSignals", oracle_q: np.ndarray | None = None, day: dict | None = None) -> dict:
+def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict | None = None) -> dict:
     run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
     run_start = time.time()
     run_dir = writer = env = evaluator = None
@@ -562,7 +562,7 @@ def main(args: Args, stop: "StopSignals", oracle_q: np.ndarray | None = None, da
         )
         env = gym.make(args.env_id)
         env.action_space.seed(args.seed)
-        evaluator = Evaluator(writer, args.success_max_steps)
+        evaluator = Evaluator(args, writer)
         obs_dim = env.observation_space.shape[0]
         n_actions = int(env.action_space.n)
 
@@ -612,7 +612,7 @@ def main(args: Args, stop: "StopSignals", oracle_q: np.ndarray | None = None, da
             if args.save_model:
                 extra = {"env_id": args.env_id, "gamma": args.sleep_gamma, "temperature": args.sleep_temperature}
                 save_network(f"{run_dir}/inform_q.pt", q_net, **extra)
-                torch.save({"reward": reward, **extra}, f"{run_dir}/recovered_reward.pt")
+                save_atomic({"reward": reward, **extra}, f"{run_dir}/recovered_reward.pt")
         final_evaluation(args, env, policies, h_net, q_net, evaluator, run_dir, summary["feedback/steps"])
     except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
         status = "interrupted"
@@ -649,7 +649,7 @@ def final_evaluation(args: Args, env, policies: dict, h_net, q_net, evaluator, r
             print("\nINFORM (after the sleep), greedy from S:\n" + draw_greedy_path(policies["inform"], variant))
 
 
-def evaluate(env: gym.Env, policy: np.ndarray, start_cells, success_max_steps: int):
+def evaluate(policy: np.ndarray, env: gym.Env, start_cells, success_max_steps: int):
     """Run the greedy table policy once from each start cell; mean episode length and success rate."""
     lengths = []
     successes = []
@@ -668,9 +668,9 @@ def evaluate(env: gym.Env, policy: np.ndarray, start_cells, success_max_steps: i
 class Evaluator:
     """Greedy evaluation on the plain maze, the wall maze, the start set and all 29 starts; logs eval/ tags."""
 
-    def __init__(self, writer: SummaryWriter | None, success_max_steps: int):
+    def __init__(self, args: Args, writer: SummaryWriter | None):
         self.writer = writer
-        self.success_max_steps = success_max_steps
+        self.success_max_steps = args.success_max_steps
         self.envs = {
             name: gym.make(env_id)
             for name, env_id in [
@@ -684,12 +684,12 @@ class Evaluator:
 
     def __call__(self, name: str, policy: np.ndarray, step: int) -> dict:
         t0 = time.time()
-        length, _ = evaluate(self.envs["plain"], policy, [gridworld_env.START], self.success_max_steps)
-        wall_length, _ = evaluate(self.envs["wall"], policy, [gridworld_env.START], self.success_max_steps)
+        length, _ = evaluate(policy, self.envs["plain"], [gridworld_env.START], self.success_max_steps)
+        wall_length, _ = evaluate(policy, self.envs["wall"], [gridworld_env.START], self.success_max_steps)
         set_length, set_success = evaluate(
-            self.envs["start_set"], policy, gridworld_env.START_SET, self.success_max_steps
+            policy, self.envs["start_set"], gridworld_env.START_SET, self.success_max_steps
         )
-        _, all_success = evaluate(self.envs["plain"], policy, ALL_STARTS, self.success_max_steps)
+        _, all_success = evaluate(policy, self.envs["plain"], ALL_STARTS, self.success_max_steps)
         metrics = {
             f"eval/{name}_episode_length": length,
             f"eval/wall/{name}_episode_length": wall_length,
@@ -951,9 +951,15 @@ def load_q_network(path: str) -> QNetwork:
     return net
 
 
+def save_atomic(obj: dict, path: str) -> None:
+    """torch.save to a temporary file, then rename: an interrupted save never leaves a half-written checkpoint."""
+    torch.save(obj, path + ".tmp")
+    os.replace(path + ".tmp", path)
+
+
 def save_network(path: str, net: nn.Module, **extra) -> None:
     """A state_dict plus what rebuilds the network; torch.load(path, weights_only=True) reads it."""
-    torch.save({"state_dict": net.state_dict(), "kwargs": network_kwargs(net), **extra}, path)
+    save_atomic({"state_dict": net.state_dict(), "kwargs": network_kwargs(net), **extra}, path)
 
 
 def network_kwargs(net: nn.Module) -> dict:
@@ -1032,8 +1038,7 @@ def save_day(path: str, args: Args, buffer: ReplayBuffer, h_net: QNetwork, q_sta
         },
         "day_stats": day_stats,
     }
-    torch.save(day, path + ".tmp")
-    os.replace(path + ".tmp", path)
+    save_atomic(day, path)
 
 
 def load_day(run_dir: str, args: Args) -> dict:
@@ -1348,10 +1353,10 @@ def print_results(summary: dict, run_dir: str) -> None:
     say(f"{summary['status']} in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json")
 
 
-def evaluate_saved(path: str, success_max_steps: int) -> dict:
-    """Re-evaluate a saved tamer_h.pt or inform_q.pt: its greedy policy on the plain and wall mazes, the start set."""
-    evaluator = Evaluator(None, success_max_steps)
-    metrics = evaluator("policy", greedy_actions(load_q_network(path), torch.device("cpu")), 0)
+def evaluate_saved(args: Args) -> dict:
+    """--evaluate: a saved tamer_h.pt or inform_q.pt, its greedy policy on the plain and wall mazes, the start set."""
+    evaluator = Evaluator(args, writer=None)
+    metrics = evaluator("policy", greedy_actions(load_q_network(args.evaluate), torch.device("cpu")), 0)
     evaluator.close()
     return metrics
 
@@ -1470,7 +1475,7 @@ if __name__ == "__main__":
             )
         check_args(args)
         if args.evaluate:
-            print(json.dumps(evaluate_saved(args.evaluate, args.success_max_steps), indent=2))
+            print(json.dumps(evaluate_saved(args), indent=2))
             sys.exit(0)
         oracle_q = day = None
         if args.sleep_from:  # a saved day: no oracle, no forward phase; its day flags replace these
@@ -1481,6 +1486,6 @@ if __name__ == "__main__":
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
     stop = StopSignals()
-    summary = main(args, stop, oracle_q, day)
+    summary = main(args, oracle_q, stop, day)
     gc.freeze()  # the interpreter's last collections over torch's objects take seconds on a busy machine; skip them
     sys.exit(stop.exit_code(summary.get("status", "interrupted")))

@@ -82,7 +82,7 @@ def traced_run(delay: int, window: int, seed: int, total: int):
         try:
             for name, cls in patched.items():
                 setattr(inform, name, cls)
-            summary = inform.main(args, inform.StopSignals())
+            summary = inform.main(args, None, inform.StopSignals())
         finally:
             os.chdir(cwd)
             for name, cls in originals.items():

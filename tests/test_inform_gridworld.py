@@ -156,9 +156,9 @@ def test_greedy_actions_and_evaluate():
     q = g.optimal_q("plain")
     policy = inform.greedy_actions(TableQ(q), torch.device("cpu"))
     assert np.array_equal(policy, q.argmax(1))
-    length, success = inform.evaluate(gym.make("KnoxStoneMaze-v0"), policy, [g.START], 30)
+    length, success = inform.evaluate(policy, gym.make("KnoxStoneMaze-v0"), [g.START], 30)
     assert (length, success) == (19, 1.0)
-    length, success = inform.evaluate(gym.make("KnoxStoneMazeWall-v0"), policy, [g.START], 30)
+    length, success = inform.evaluate(policy, gym.make("KnoxStoneMazeWall-v0"), [g.START], 30)
     assert (length, success) == (200, 0.0)
 
 

@@ -328,7 +328,7 @@ def test_an_error_after_the_run_directory_exists_still_leaves_a_summary(tmp_path
                 maze.Args(tamer_total_timesteps=2000, tamer_learning_starts=500, sleep_gradient_steps=200)
             )
             with pytest.raises(RuntimeError, match="a bug in the final evaluation"):
-                maze.main(args, maze.StopSignals())
+                maze.main(args, None, maze.StopSignals())
     finally:
         for sig, handler in handlers.items():
             signal.signal(sig, handler)

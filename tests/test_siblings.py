@@ -25,6 +25,7 @@ SHARED = (
     "say",
     "make_run_dir",
     "write_json_atomic",
+    "save_atomic",
     "end_run",
 )
 # the same concept, the same flag (each script has more of its own)
@@ -125,3 +126,14 @@ def test_linear_schedule_by_hand():
     n = 200_000
     for step in (0, 1, 12_345, n - 1):
         assert pusher.linear_schedule(0.99, 0.992, n - 1, step) == 0.99 + (0.992 - 0.99) * step / max(n - 1, 1)
+
+
+def test_the_siblings_are_called_alike():
+    params = {script: list(inspect.signature(script.main).parameters) for script in (pusher, maze)}
+    assert params[pusher][0::2] == params[maze][0::2] == ["args", "stop"]  # main(args, oracle, stop, day)
+    assert params[pusher][1].startswith("oracle") and params[maze][1].startswith("oracle")
+    assert params[pusher][3] == params[maze][3] == "day"
+    for script in (pusher, maze):
+        assert list(inspect.signature(script.Evaluator).parameters) == ["args", "writer"], script.__name__
+        assert list(inspect.signature(script.evaluate).parameters)[1] == "env", script.__name__  # (policy, env, ...)
+        assert list(inspect.signature(script.evaluate_saved).parameters) == ["args"], script.__name__

@@ -204,7 +204,7 @@ def test_human_teacher_may_have_a_budget():
 
 
 def test_all_starts_success_by_hand():
-    evaluator = inform.Evaluator(None, 30)
+    evaluator = inform.Evaluator(inform.Args(success_max_steps=30), None)
     q_star = inform.gridworld_env.optimal_q("plain")
     assert evaluator("oracle", q_star.argmax(1), 0)["eval/all_starts/oracle_success_rate"] == 1.0
     # always "up": only the cells of column 5 below G get there (10, 13, 18, 23, 29)
