@@ -1054,8 +1054,8 @@ def load_day(run_dir: str, args: Args) -> dict:
         raise InputError(f"{path}: not a saved day of this script (format {day.get('format')!r}, not {DAY_FORMAT!r})")
     if day.get("env_id") not in MAZE_IDS:
         raise InputError(f"{path}: a day on {day.get('env_id')!r}, not on a maze ({', '.join(MAZE_IDS)})")
-    missing = [key for key in ("day_args", *DAY_TENSORS, *EPISODE_TABLE, "h_net", "q_star", "rng", "day_stats")
-               if key not in day]  # fmt: skip
+    required = ("day_args", *DAY_TENSORS, *EPISODE_TABLE, "h_net", "q_star", "rng", "day_stats")
+    missing = [key for key in required if key not in day]
     missing += [f"day_args.{name}" for name in DAY_ARGS if name not in day.get("day_args", {})]
     if missing:
         raise InputError(f"{path}: an incomplete saved day, no {', '.join(missing)}")

@@ -652,10 +652,10 @@ def sleep_phase(
         ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.tamer_h_lr, foreach=True)
     batch_size = args.sleep_batch_size
     gamma = args.sleep_gamma
-    temperature = args.sleep_temperature
+    temp = args.sleep_temperature
     chi2 = args.sleep_chi2_coef
     is_expert = torch.arange(2 * batch_size, device=device) >= batch_size  # the batch: replay rows, then expert rows
-    loss_rows = is_expert if args.sleep_loss_rows == "expert" else None
+    rows = is_expert if args.sleep_loss_rows == "expert" else None  # of the value and chi2 terms
     actor_rows = {"replay": ~is_expert, "expert": is_expert, "replay+expert": slice(None)}[args.sleep_actor_states]
     stats = {"sleep/expert_transitions": int(expert_idx.numel()), "sleep/expert_fallback": int(fallback_episodes > 0)}
     losses = {}
@@ -669,18 +669,7 @@ def sleep_phase(
         obs, actions, next_obs, feedback, terminated = buffer.batch(torch.cat([replay, expert]))
         with amp:
             loss, terms = iq_loss(
-                q_net,
-                q_target,
-                obs,
-                actions,
-                next_obs,
-                terminated,
-                is_expert,
-                gamma,
-                temperature,
-                chi2,
-                inform_actor,
-                loss_rows,
+                q_net, q_target, obs, actions, next_obs, terminated, is_expert, gamma, temp, chi2, inform_actor, rows
             )
         q_optimizer.zero_grad(set_to_none=True)
         loss.backward()
@@ -701,7 +690,7 @@ def sleep_phase(
                 if args.sleep_control == "bc":  # control: behaviour cloning on the success set, no Q
                     pi_loss = (inform_actor.get_action(obs[is_expert])[2] - actions[is_expert]).pow(2).mean()
                 else:
-                    pi_loss, _ = actor_loss(q_net, inform_actor, obs[actor_rows], temperature)
+                    pi_loss, _ = actor_loss(q_net, inform_actor, obs[actor_rows], temp)
                 if args.sleep_bc_coef > 0:  # TD3+BC: the Q objective made scale-free, plus cloning the experts
                     pi_loss = (
                         pi_loss / q_net(obs, actions).abs().mean().detach()
@@ -1029,23 +1018,15 @@ class OfflineCriterion:
             expert = self.success.nonzero().squeeze(-1)
             loglik = actor.log_prob(obs[expert], actions[expert]).mean().item() if expert.numel() else float("nan")
             rows = self.success if args.sleep_loss_rows == "expert" else None
+            gamma = args.sleep_gamma
+            temp = args.sleep_temperature
+            chi2 = args.sleep_chi2_coef
             loss, terms = iq_loss(
-                q_net,
-                q_target,
-                obs,
-                actions,
-                next_obs,
-                terminated,
-                self.success,
-                args.sleep_gamma,
-                args.sleep_temperature,
-                args.sleep_chi2_coef,
-                actor,
-                rows,
+                q_net, q_target, obs, actions, next_obs, terminated, self.success, gamma, temp, chi2, actor, rows
             )
             q_pi = q_net(obs, actor.get_action(obs)[0]).min(0).values.mean().item()
-            v_next = soft_value(q_net, actor, next_obs, args.sleep_temperature)
-            reward = recover_reward(q_net(obs, actions).min(0).values, v_next, terminated, args.sleep_gamma)
+            v_next = soft_value(q_net, actor, next_obs, temp)
+            reward = recover_reward(q_net(obs, actions).min(0).values, v_next, terminated, gamma)
         values = {
             "holdout/expert_loglik": loglik,
             "holdout/iq_loss": loss.item(),
