@@ -6,6 +6,9 @@ and the expert) on the 30-cell maze; what the paper leaves open is in docs/proto
 `main`: Args, the network, Eq. 1-4 and the teacher, the buffer, the day, the night, main. Everything else comes after
 main.
 
+Imported by inform_utils/, the only names other code may use (a test holds it to them): Args, main, check_args,
+StopSignals, Teacher, ReplayBuffer, greedy_actions, greedy_episode, load_q_network, maze_frames, InputError.
+
     python inform_dqn_gridworld.py --seed 1
     python inform_dqn_gridworld.py --teacher-noise 0.2 --teacher-delay 1 --credit-window 2   # a human-like teacher
     python inform_dqn_gridworld.py --teacher human   # teach it yourself (docs/teachers.md)

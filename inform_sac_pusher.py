@@ -7,6 +7,9 @@ the paper leaves open is in docs/protocol.md. Every episode starts from the run'
 a SAC agent trained here (--train-oracle). Read top to bottom down to `main`: Args, the networks, Eq. 1-4 and the
 teacher, the buffer, the day, the night, main. Everything else comes after main.
 
+Imported by inform_utils/, the only names other code may use (a test holds it to them): Args, main, evaluate,
+read_checkpoint, actor_from_checkpoint, check_video, video_env, mujoco_major, InputError.
+
     python inform_sac_pusher.py --seed 1                            # Pusher-v5, the authors' budget
     python inform_sac_pusher.py --env-id Pusher-v4 --seed 1         # the paper's Pusher (needs mujoco==2.3.7)
 """

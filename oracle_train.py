@@ -23,6 +23,8 @@ learned teacher. Every maze checkpoint holds the 30 x 4 `q_table` (for the DQN: 
 and action shapes, the training steps and the greedy episode length; the DQN's also holds its state_dict
 and the arguments to rebuild it (`MazeQNetwork(**ckpt["kwargs"])`).
 
+Imported by inform_utils/, the only names other code may use (a test holds it to them): Actor.
+
 Examples:
     python oracle_train.py --env-id Pusher-v5 --seed 1 --total-timesteps 200000 \
         --output-path oracles/Pusher-v5__sac_oracle.pt
