@@ -23,6 +23,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 
+import numpy as np
 import tyro
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -46,12 +47,13 @@ VARIANTS = {
 }
 COMMON = ["--sleep-holdout-fraction", "0.15"]  # every night logs the offline criterion on the same held-out episodes
 TWO_SEEDS = ("default", "sham", "bc", "authors")  # the rest get one sleep seed
-COLUMNS = (
-    ("fixed-start return", "eval/{p}_return"),
-    ("authors' test distance", "eval/authors_test/{p}_final_distance"),
-    ("random-start success", "random_starts/{p}_success_rate"),
-    ("obstacle distance", "eval/obstacle/{p}_final_distance"),
+COLUMNS = (  # (name, summary key, +1 if higher is better)
+    ("fixed-start return", "eval/{p}_return", 1),
+    ("authors' test distance", "eval/authors_test/{p}_final_distance", -1),
+    ("random-start success", "random_starts/{p}_success_rate", 1),
+    ("obstacle distance", "eval/obstacle/{p}_final_distance", -1),
 )
+CONTROLS = ("sham", "bc")
 
 
 @dataclass
@@ -138,7 +140,8 @@ def load(args: Args) -> list[dict]:
         with open(os.path.join(path, "random_starts.json")) as f:
             summary.update(json.load(f))
         variant, seed = os.path.basename(path).rsplit("__sleep", 1)
-        rows.append({"day": os.path.basename(os.path.dirname(path)), "variant": variant, "seed": int(seed), **summary})
+        day = os.path.basename(os.path.dirname(path))
+        rows.append({"day": day, "dir": os.path.basename(path), "variant": variant, "seed": int(seed), **summary})
     return rows
 
 
@@ -150,33 +153,71 @@ def mean_sd(values: list[float]) -> str:
     return f"{statistics.mean(values):.3f} ± {sd:.3f}"
 
 
+def mean(rows: list[dict], key: str) -> float | None:
+    values = [r[key] for r in rows if r.get(key) is not None]
+    return statistics.mean(values) if values else None
+
+
+def seed_spread(rows: list[dict], key: str) -> float | None:
+    """The mean over days of the range between the default's sleep seeds: how much a night differs by chance."""
+    spreads = []
+    for day in {r["day"] for r in rows}:
+        values = [r[key] for r in rows if r["day"] == day and r["variant"] == "default" and r.get(key) is not None]
+        if len(values) > 1:
+            spreads.append(max(values) - min(values))
+    return statistics.mean(spreads) if spreads else None
+
+
+def obstacle_p(args: Args, nights: list[dict], policy: str) -> str:
+    """Welch's t-test of the policy's obstacle final distances against TAMER's, episodes pooled over the nights."""
+    from scipy.stats import ttest_ind
+
+    mine, tamer = [], []
+    for r in nights:
+        with np.load(os.path.join(args.results_dir, args.campaign, r["day"], r["dir"], "obstacle_distances.npz")) as d:
+            mine.extend(d[policy])
+            tamer.extend(d["tamer"])
+    p = ttest_ind(mine, tamer, equal_var=False).pvalue
+    return f"{'closer' if np.mean(mine) < np.mean(tamer) else 'farther'}, p = {p:.2g}"
+
+
 def table(args: Args) -> str:
+    """Each variant's INFORM (and the checkpoint the offline criterion picked) against TAMER and the controls: mean +-
+    sd over days and sleep seeds; 'beats both controls on' lists the measures where the variant's mean is better than
+    each control's by more than the default's spread between sleep seeds."""
     rows = load(args)
     if not rows:
         return f"no completed nights under {args.results_dir}/{args.campaign}"
     days = sorted({r["day"] for r in rows})
-    lines = [f"{len(rows)} nights on {len(days)} day(s): {', '.join(days)}", ""]
-    head = ["policy", "nights"] + [name for name, _ in COLUMNS] + ["seed spread (return)"]
-    lines += ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
-    first = [r for r in rows if r["variant"] == "default"] or rows
+    spread = {name: seed_spread(rows, key.format(p="inform")) for name, key, _ in COLUMNS}
+    lines = [f"{len(rows)} nights on {len(days)} day(s): {', '.join(days)}"]
+    lines += ["spread between the default's sleep seeds: " + ", ".join(f"{k} {v:.3g}" for k, v in spread.items() if v)]
+    head = ["policy", "nights", *(name for name, _, _ in COLUMNS), "obstacle vs TAMER", "beats both controls on"]
+    lines += ["", "| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
     by_day = {}
-    for r in first:  # TAMER and the oracle: one row per day (every night of a day has the same)
+    for r in rows:  # TAMER and the oracle: one row per day (every night of a day has the same)
         by_day.setdefault(r["day"], r)
     for p in ("oracle", "tamer"):
-        cells = [mean_sd([r.get(key.format(p=p)) for r in by_day.values()]) for _, key in COLUMNS]
-        lines.append(f"| {p} | {len(by_day)} days | " + " | ".join(cells) + " | - |")
+        cells = [mean_sd([r.get(key.format(p=p)) for r in by_day.values()]) for _, key, _ in COLUMNS]
+        lines.append(f"| {p} | {len(by_day)} days | " + " | ".join(cells) + " | - | - |")
     for variant in [v for v in VARIANTS if any(r["variant"] == v for r in rows)]:
+        mine = [r for r in rows if r["variant"] == variant]
         for p in ("inform", "inform_selected"):
-            mine = [r for r in rows if r["variant"] == variant]
-            cells = [mean_sd([r.get(key.format(p=p)) for r in mine]) for _, key in COLUMNS]
-            spreads = []
-            for day in days:
-                values = [r.get(f"eval/{p}_return") for r in mine if r["day"] == day]
-                if len(values) > 1 and None not in values:
-                    spreads.append(max(values) - min(values))
-            spread = f"{statistics.mean(spreads):.3f}" if spreads else "-"
+            cells = [mean_sd([r.get(key.format(p=p)) for r in mine]) for _, key, _ in COLUMNS]
+            beats = "-"
+            controls = {c: [r for r in rows if r["variant"] == c] for c in CONTROLS}
+            if variant not in CONTROLS and all(controls.values()):
+                wins = []
+                for name, key, sign in COLUMNS:
+                    here = mean(mine, key.format(p=p))
+                    there = [mean(nights, key.format(p="inform")) for nights in controls.values()]
+                    if spread[name] is not None and here is not None and None not in there:
+                        if all(sign * (here - t) > spread[name] for t in there):
+                            wins.append(name)
+                beats = ", ".join(wins) or "none"
             name = variant if p == "inform" else f"{variant}, offline pick"
-            lines.append(f"| {name} | {len(mine)} | " + " | ".join(cells) + f" | {spread} |")
+            row = [name, str(len(mine)), *cells, obstacle_p(args, mine, p), beats]
+            lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines)
 
 
