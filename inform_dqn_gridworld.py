@@ -159,6 +159,13 @@ class Args:
     """weight of the chi-squared regulariser, 1 / (4 * 0.5) as IQ-Learn; 0 turns it off"""
     tau: float = 1.0
     """soft-update rate of the sleep's target Q network per step (1 copies it every step, as the authors did)"""
+    sleep_loss_rows: Literal["all", "expert"] = "all"
+    """the rows of Eq. 2's value and chi-squared terms: the whole batch (the paper), or the expert rows only
+    (IQ-Learn's offline recipe, its `value_expert` loss)"""
+    sleep_control: Literal["none", "bc", "sham"] = "none"
+    """a control in place of the sleep, same steps and batches: bc = behaviour cloning on the success set (cross-entropy
+    of Q(s, .) / temperature on the expert rows); sham = TAMER's own update (H from the day's, Eq. 1 on the replay
+    rows), no consolidation"""
     sleep_seed: int | None = None
     """None: the sleep goes on with the random streams where the day left them; an integer re-seeds them before the
     sleep (several sleeps on one day)"""
@@ -281,9 +288,9 @@ def soft_value(q, temperature: float):
     return temperature * torch.logsumexp(q / temperature, dim=1)
 
 
-# ALGO LOGIC: the sleep loss. The Pusher script's signature and return, without the actor that V(s) needs there and
-# its choice of rows (--sleep-loss-rows, a variant the maze does not have yet).
-def iq_loss(q_net, target_net, obs, actions, next_obs, terminated, is_expert, gamma, temperature, chi2_coef):
+# ALGO LOGIC: the sleep loss. The Pusher script's signature and return, without the actor that V(s) needs there; the
+# rows of the value and chi-squared terms (IQ-Learn's offline recipe takes the expert rows only).
+def iq_loss(q_net, target_net, obs, actions, next_obs, terminated, is_expert, gamma, temperature, chi2_coef, rows=None):
     # Eq. 2 (to minimise): y = (1 - done) gamma V_target(s');
     # L = -E_success[Q(s,a) - y] + E_all[V(s) - y] + chi2 * E_all[(Q(s,a) - y)^2]
     q = q_net(obs)
@@ -291,9 +298,10 @@ def iq_loss(q_net, target_net, obs, actions, next_obs, terminated, is_expert, ga
     with torch.no_grad():
         y = (1.0 - terminated) * gamma * soft_value(target_net(next_obs), temperature)  # V_target of s', not of s
     v_s = soft_value(q, temperature)
+    rows = slice(None) if rows is None else rows
     expert_term = -(q_sa - y)[is_expert].mean()
-    value_term = (v_s - y).mean()
-    chi2_term = chi2_coef * (q_sa - y).pow(2).mean()
+    value_term = (v_s - y)[rows].mean()
+    chi2_term = chi2_coef * (q_sa - y)[rows].pow(2).mean()
     terms = {"iq_expert_term": expert_term, "iq_value_term": value_term, "iq_chi2_term": chi2_term}
     return sum(terms.values()), terms  # the total and its named terms: the sleep logs whatever terms come back
 
@@ -458,9 +466,9 @@ def forward_phase(args: Args, env, q_star: np.ndarray, buffer: ReplayBuffer, eva
     return h_net, stats
 
 
-def sleep_phase(args: Args, buffer: ReplayBuffer, n_actions: int, evaluator, writer, device):
+def sleep_phase(args: Args, buffer: ReplayBuffer, n_actions: int, evaluator, writer, device, h_net=None):
     """The night: offline IQ-Learn (Eq. 2) on the buffer, the successful trajectories as the expert set. Without a
-    success there is nothing to consolidate: no INFORM policy (None)."""
+    success there is nothing to consolidate: no INFORM policy (None). TAMER's H is needed by the sham control only."""
     expert_idx = buffer.success[: buffer.size].nonzero().squeeze(1)
     stats = {"sleep/expert_transitions": int(expert_idx.numel()), "sleep/replay_transitions": buffer.size}
     stats["sleep_skipped"] = expert_idx.numel() == 0
@@ -478,19 +486,32 @@ def sleep_phase(args: Args, buffer: ReplayBuffer, n_actions: int, evaluator, wri
     q_target = QNetwork(buffer.obs.shape[1], n_actions).to(device)
     q_target.load_state_dict(q_net.state_dict())
     q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_q_lr, fused=True)
+    if args.sleep_control == "sham":  # TAMER goes on learning from its memories, at its own rate
+        q_net.load_state_dict(h_net.state_dict())
+        q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.tamer_h_lr, fused=True)
     batch_size = args.sleep_batch_size
     gamma = args.sleep_gamma
     temperature = args.sleep_temperature
     chi2 = args.sleep_chi2_coef
     is_expert = torch.arange(2 * batch_size, device=device) >= batch_size  # the batch: replay rows, then expert rows
+    rows = is_expert if args.sleep_loss_rows == "expert" else None  # of the value and chi2 terms
     losses = {}
     progress = Progress("sleep", args.sleep_gradient_steps, evaluator=evaluator)
     for step in range(1, args.sleep_gradient_steps + 1):
         # ALGO LOGIC: the sleep update: Q by IQ-Learn (Eq. 2), the target Q follows softly
         replay = torch.randint(0, buffer.size, (batch_size,), device=device)
         expert = expert_idx[torch.randint(0, expert_idx.numel(), (batch_size,), device=device)]
-        obs, actions, next_obs, _, terminated = buffer.batch(torch.cat([replay, expert]))
-        loss, terms = iq_loss(q_net, q_target, obs, actions, next_obs, terminated, is_expert, gamma, temperature, chi2)
+        obs, actions, next_obs, feedback, terminated = buffer.batch(torch.cat([replay, expert]))
+        if args.sleep_control == "none":
+            loss, terms = iq_loss(
+                q_net, q_target, obs, actions, next_obs, terminated, is_expert, gamma, temperature, chi2, rows
+            )
+        elif args.sleep_control == "bc":  # control: behaviour cloning on the success set, no Eq. 2
+            loss = F.cross_entropy(q_net(obs[is_expert]) / temperature, actions[is_expert])
+            terms = {}
+        else:  # control "sham": TAMER's own update (Eq. 1) on the replay rows, no Eq. 2
+            loss = tamer_loss(q_net, obs[~is_expert], actions[~is_expert], feedback[~is_expert])
+            terms = {}
         q_optimizer.zero_grad()
         loss.backward()
         q_optimizer.step()
@@ -500,7 +521,7 @@ def sleep_phase(args: Args, buffer: ReplayBuffer, n_actions: int, evaluator, wri
         last_step = step == args.sleep_gradient_steps
         log_now = step % args.log_frequency == 0 or last_step
         if log_now or step % 100 == 0:
-            tags = {"iq_loss": loss, **terms}
+            tags = {"iq_loss" if args.sleep_control == "none" else f"{args.sleep_control}_loss": loss, **terms}
             values = torch.stack(list(tags.values())).tolist()
             if not all(map(math.isfinite, values)):
                 last = ", ".join(f"{k.split('/')[1]} {v:.4g}" for k, v in losses.items())
@@ -529,6 +550,10 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
     run_dir = writer = env = evaluator = None
     summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
     summary["sleep_from"] = os.path.abspath(args.sleep_from) if args.sleep_from else None  # a saved day's run
+    summary["sleep_variant"] = (
+        f"control={args.sleep_control} loss_rows={args.sleep_loss_rows} temperature={args.sleep_temperature} "
+        f"steps={args.sleep_gradient_steps} seed={args.sleep_seed}"
+    )
     status = "completed"
     failure = None
     phase = "startup"
@@ -600,7 +625,7 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
             np.random.seed(args.sleep_seed)
             torch.manual_seed(args.sleep_seed)
         t0 = time.time() - evaluator.seconds
-        q_net, stats = sleep_phase(args, buffer, n_actions, evaluator, writer, device)
+        q_net, stats = sleep_phase(args, buffer, n_actions, evaluator, writer, device, h_net)
         summary.update(stats)
         summary["time/sleep_s"] = time.time() - evaluator.seconds - t0
 

@@ -198,3 +198,36 @@ def test_save_buffer_and_sleep_from_exclude_each_other(tmp_path):
     result = run(tmp_path, "--sleep-from", str(tmp_path), "--save-buffer")
     assert result.returncode == 2 and "--save-buffer" in result.stderr and "Traceback" not in result.stderr
     assert not os.path.exists(tmp_path / "runs")
+
+
+@pytest.mark.parametrize(
+    "flags, loss",
+    [(["--sleep-control", "sham"], "losses/sham_loss"), (["--sleep-control", "bc"], "losses/bc_loss"),
+     (["--sleep-loss-rows", "expert"], "losses/iq_loss")],
+    ids=["sham", "bc", "expert-rows"],
+)  # fmt: skip
+def test_the_controls_and_the_expert_rows_sleep_on_a_saved_day(saved_day, tmp_path, flags, loss):
+    day_dir, original = saved_day
+    _, summary = sleep_on(day_dir, tmp_path, *flags)
+    assert f"{flags[0].removeprefix('--sleep-').replace('-', '_')}={flags[1]}" in summary["sleep_variant"]
+    assert loss in summary and summary["eval/inform_episode_length"] >= 1
+    assert summary["feedback/positive"] == original["feedback/positive"]  # the same day
+    if flags[1] != "expert":
+        assert "losses/iq_expert_term" not in summary  # a control has no Eq. 2
+
+
+def test_iq_loss_on_expert_rows_only():
+    q_net = inform.QNetwork(2, 2)
+    obs = torch.eye(2)
+    args = (q_net, q_net, obs, torch.tensor([0, 1]), obs.flip(0), torch.tensor([0.0, 1.0]), torch.tensor([False, True]))
+    _, every = inform.iq_loss(*args, 0.9, 0.5, 0.5)
+    _, expert = inform.iq_loss(*args, 0.9, 0.5, 0.5, torch.tensor([False, True]))
+    assert expert["iq_expert_term"] == every["iq_expert_term"]
+    with torch.no_grad():
+        q = q_net(obs)
+        v = 0.5 * torch.logsumexp(q / 0.5, 1)
+        y = torch.tensor([0.9 * v[1].item(), 0.0])  # the second transition ends the episode
+        td = q[[0, 1], [0, 1]] - y
+    assert expert["iq_value_term"].item() == pytest.approx((v[1] - y[1]).item(), rel=1e-5)
+    assert expert["iq_chi2_term"].item() == pytest.approx(0.5 * td[1].item() ** 2, rel=1e-5)
+    assert every["iq_value_term"].item() == pytest.approx((v - y).mean().item(), rel=1e-5)
