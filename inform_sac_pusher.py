@@ -1006,7 +1006,8 @@ class OfflineCriterion:
         self.writer = writer
         self.batch = buffer.batch(held)
         self.success = buffer.success[held]
-        self.episodes = sum(int(held.eq(start).any()) for start, _, _ in buffer.episodes)
+        starts = torch.tensor([start for start, _, _ in buffer.episodes], device=held.device)
+        self.episodes = int(torch.isin(starts, held).sum())
         self.best = -math.inf
         self.selected = None  # {"step", "actor", "q_net"} of the best checkpoint so far
         self.last = {}
