@@ -645,12 +645,12 @@ def sleep_phase(
         inform_actor.load_state_dict(tamer_actor.state_dict())
     amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
     q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_q_lr, foreach=True)
-    inform_optimizer = torch.optim.Adam(inform_actor.parameters(), lr=args.sleep_policy_lr, foreach=True)
+    policy_lr = args.tamer_policy_lr if args.sleep_control == "sham" else args.sleep_policy_lr
+    inform_optimizer = torch.optim.Adam(inform_actor.parameters(), lr=policy_lr, foreach=True)
     if args.sleep_control == "sham":  # TAMER goes on learning from its memories: H and the actor, TAMER's rates
         sham_h = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
         sham_h.load_state_dict(h_net.state_dict())
         sham_h_optimizer = torch.optim.Adam(sham_h.parameters(), lr=args.tamer_h_lr, foreach=True)
-        inform_optimizer = torch.optim.Adam(inform_actor.parameters(), lr=args.tamer_policy_lr, foreach=True)
         log_ent_coef = torch.full((1,), math.log(ent_coef), device=device, requires_grad=True)
         ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.tamer_h_lr, foreach=True)
     batch_size = args.sleep_batch_size
