@@ -616,7 +616,7 @@ def sleep_phase(
 ):
     """The night: offline IQ-Learn (Eq. 2) on the buffer, the successful trajectories as the expert set. TAMER's H and
     entropy coefficient at the day's end are needed only by the sham control. Returns the soft Q, the INFORM actor,
-    the stats and, with a hold-out, the networks the offline criterion picked (else None)."""
+    the stats and, with a hold-out, the checkpoint the offline criterion picked (else None)."""
     expert_idx, fallback_episodes = buffer.expert_indices()
     if fallback_episodes:
         print(
@@ -1009,7 +1009,7 @@ class OfflineCriterion:
         starts = torch.tensor([start for start, _, _ in buffer.episodes], device=held.device)
         self.episodes = int(torch.isin(starts, held).sum())
         self.best = -math.inf
-        self.selected = None  # {"step", "actor", "q_net"} of the best checkpoint so far
+        self.selected = None  # {"step", "actor"} of the best checkpoint so far
         self.last = {}
         self.q_pi_previous = None
 
@@ -1046,7 +1046,7 @@ class OfflineCriterion:
         self.last = values
         if math.isfinite(loglik) and loglik > self.best:
             self.best = loglik
-            self.selected = {"step": step, "actor": copy.deepcopy(actor), "q_net": copy.deepcopy(q_net)}
+            self.selected = {"step": step, "actor": copy.deepcopy(actor)}
         return loglik
 
     def stats(self) -> dict:

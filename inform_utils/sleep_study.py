@@ -130,9 +130,13 @@ def run_night(args: Args, day: str, variant: str, seed: int, extra: list[str]) -
     print(f"[study] done in {time.time() - t0:.0f}s: {dest}", flush=True)
 
 
+def night_dirs(args: Args) -> list[str]:
+    return sorted(glob.glob(os.path.join(args.results_dir, args.campaign, "*", "*__sleep*")))
+
+
 def load(args: Args) -> list[dict]:
     rows = []
-    for path in sorted(glob.glob(os.path.join(args.results_dir, args.campaign, "*", "*__sleep*"))):
+    for path in night_dirs(args):
         if not completed(path):
             continue
         with open(os.path.join(path, "summary.json")) as f:
@@ -189,6 +193,7 @@ def table(args: Args) -> str:
     if not rows:
         return f"no completed nights under {args.results_dir}/{args.campaign}"
     days = sorted({r["day"] for r in rows})
+    unfinished = [path for path in night_dirs(args) if not completed(path)]
     spread = {name: seed_spread(rows, key.format(p="inform")) for name, key, _ in COLUMNS}
     lines = [f"{len(rows)} nights on {len(days)} day(s): {', '.join(days)}"]
     lines += ["spread between the default's sleep seeds: " + ", ".join(f"{k} {v:.3g}" for k, v in spread.items() if v)]
@@ -218,6 +223,12 @@ def table(args: Args) -> str:
             name = variant if p == "inform" else f"{variant}, offline pick"
             row = [name, str(len(mine)), *cells, obstacle_p(args, mine, p), beats]
             lines.append("| " + " | ".join(row) + " |")
+    for path in unfinished:  # kept for their curves, left out of the table: say so
+        with open(os.path.join(path, "summary.json")) as f:
+            summary = json.load(f)
+        cause = summary.get("signal") or summary.get("error")
+        why = f"{summary.get('status')} in its {summary.get('phase')} phase ({cause})"
+        lines.append(f"\nnot in the table: {os.path.relpath(path, args.results_dir)}, {why}")
     return "\n".join(lines)
 
 
