@@ -7,11 +7,17 @@ the paper leaves open is in docs/protocol.md. Every episode starts from the run'
 a SAC agent trained here (--train-oracle). Read top to bottom down to `main`: Args, the networks, Eq. 1-4 and the
 teacher, the buffer, the day, the night, main. Everything else comes after main.
 
+Other continuous-action tasks run from their id alone (`--env-id Reacher-v5`): an episode succeeds by a final
+distance that the env reports in `info` (--success-info-key, --success-distance) or by its return
+(--success-return). What only Pusher has (the object's path, the obstacle test, the videos' camera) is one block
+below main, skipped elsewhere, and the summary says so.
+
 Imported by inform_utils/, the only names other code may use (a test holds it to them): Args, main, evaluate,
-read_checkpoint, actor_from_checkpoint, check_video, video_env, mujoco_major, InputError.
+read_checkpoint, actor_from_checkpoint, check_video, video_env, mujoco_major, InputError, Outcome, object_xy.
 
     python inform_sac_pusher.py --seed 1                            # Pusher-v5, the authors' budget
     python inform_sac_pusher.py --env-id Pusher-v4 --seed 1         # the paper's Pusher (needs mujoco==2.3.7)
+    python inform_sac_pusher.py --env-id Reacher-v5 --success-distance 0.02 --tamer-total-timesteps 50000
 """
 
 import atexit
@@ -55,7 +61,7 @@ import torch.nn.functional as F  # noqa: E402
 import tyro  # noqa: E402
 from torch.utils.tensorboard import SummaryWriter  # noqa: E402
 
-ENV_IDS = ("Pusher-v5", "Pusher-v4")
+PUSHER_IDS = ("Pusher-v5", "Pusher-v4")  # the paper's task; any other continuous-action env id works too
 POLICIES = ("oracle", "tamer", "inform")
 LOG_STD_MIN = -5.0
 LOG_STD_MAX = 2.0
@@ -89,11 +95,17 @@ class Args:
     wandb_entity: str | None = None
     """the Weights & Biases team or user (None: your default)"""
     env_id: str = "Pusher-v5"
-    """Pusher-v5 (current MuJoCo) or Pusher-v4 (the paper's; needs mujoco<3)"""
+    """Pusher-v5 (current MuJoCo), Pusher-v4 (the paper's; needs mujoco<3), or any continuous-action Gymnasium env
+    (Reacher-v5, ...; the obstacle test is Pusher's and is skipped)"""
     random_starts: bool = False
     """random initial states (the standard task) instead of the paper's fixed start (reset with the run's seed)"""
     success_distance: float = 0.08
-    """an episode is a success if its final object-goal distance |info['reward_dist']| is below this"""
+    """an episode is a success if its final distance |info[success_info_key]| (Pusher: object to goal) is below this"""
+    success_info_key: str = "reward_dist"
+    """the `info` entry whose absolute value at an episode's end is its final distance (Pusher's and Reacher's
+    reward_dist); envs without one need --success-return"""
+    success_return: float | None = None
+    """if set, an episode is a success if its return is at least this (the final distance is then only reported)"""
 
     # Oracle (the simulated teacher): a SAC agent trained on the environment reward
     oracle_path: str | None = None
@@ -229,10 +241,11 @@ class Args:
 
 
 def make_env(env_id: str, seed: int, obstacles=None, **render) -> gym.Env:
-    """Plain Pusher, or with the robustness test's boxes at the xy `obstacles`; `render` (--capture-video:
-    render_mode, width, height) adds the videos' camera. The boxes and the camera are built below main."""
-    if obstacles is None and not render:
-        env = gym.make(env_id)
+    """The env, or Pusher with the robustness test's boxes at the xy `obstacles`; `render` (--capture-video:
+    render_mode, width, height) adds Pusher's videos' camera (other envs film with their own). The boxes and the
+    camera are built below main."""
+    if (obstacles is None and not render) or env_id not in PUSHER_IDS:
+        env = gym.make(env_id, **render)
     else:
         env = pusher_with_boxes(env_id, obstacles, **render)
     env.action_space.seed(seed)
@@ -240,8 +253,27 @@ def make_env(env_id: str, seed: int, obstacles=None, **render) -> gym.Env:
     return env
 
 
-def final_distance(info: dict) -> float:  # the object-goal distance at the end of an episode
-    return abs(float(info["reward_dist"]))
+@dataclass(frozen=True)
+class Outcome:
+    """How an episode is judged, in the day's success tags and in every test: its final distance |info[info_key]| at
+    the end (Pusher: object to goal; NaN if the env reports no such entry), and its success: that distance below
+    `distance`, or, with `min_return`, the episode's return at least that. The shortfall ranks episodes for the
+    fallback expert set (lower is better): the distance, or minus the return."""
+
+    info_key: str = "reward_dist"
+    distance: float = 0.08
+    min_return: float | None = None
+
+    @classmethod
+    def from_args(cls, args: Args) -> "Outcome":
+        return cls(args.success_info_key, args.success_distance, args.success_return)
+
+    def __call__(self, info: dict, ep_return: float) -> tuple[float, bool, float]:
+        """(final distance, success, shortfall) of an episode that ended with `info` after earning `ep_return`."""
+        distance = abs(float(info[self.info_key])) if self.info_key in info else math.nan
+        if self.min_return is None:
+            return distance, bool(distance < self.distance), distance
+        return distance, ep_return >= self.min_return, -ep_return
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -469,7 +501,7 @@ class ReplayBuffer:
         self.feedback = torch.zeros(capacity, device=device)  # h, written by the teacher when a signal arrives
         self.terminated = torch.zeros(capacity, device=device)
         self.success = torch.zeros(capacity, dtype=torch.bool, device=device)
-        self.episodes: list[tuple[int, int, float]] = []  # (first step, end step, final object-goal distance)
+        self.episodes: list[tuple[int, int, float]] = []  # (first step, end step, shortfall: see Outcome)
         self.size = 0  # transitions stored (fewer than the capacity when the teacher's budget ends the day early)
 
     def add(self, obs, action, next_obs, terminated) -> None:
@@ -479,25 +511,30 @@ class ReplayBuffer:
         self.terminated[self.size] = float(terminated)
         self.size += 1
 
-    def tag_episode(self, start: int, distance: float, success_distance: float) -> bool:
-        """Tag the trajectory buffer[start:size], which just ended: a success if the object ended within
-        `success_distance` of the goal."""
-        success = distance < success_distance
+    def tag_episode(self, start: int, shortfall: float, success: bool) -> None:
+        """Tag the trajectory buffer[start:size], which just ended, with its Outcome."""
         self.success[start : self.size] = success
-        self.episodes.append((start, self.size, distance))
-        return success
+        self.episodes.append((start, self.size, shortfall))
+
+    def successes(self) -> int:  # episodes tagged success
+        return sum(bool(self.success[start]) for start, _, _ in self.episodes)
 
     def batch(self, idx: torch.Tensor):
         return self.obs[idx], self.actions[idx], self.next_obs[idx], self.feedback[idx], self.terminated[idx]
 
-    def expert_indices(self, fallback_fraction: float = 0.1) -> tuple[torch.Tensor, int]:
-        """The success set's transitions and 0; with no success, the transitions of the episodes that ended closest
-        to the goal and how many episodes those are."""
-        idx = self.success.nonzero().squeeze(-1)
+    def expert_indices(
+        self, keep: torch.Tensor | None = None, fallback_fraction: float = 0.1
+    ) -> tuple[torch.Tensor, int]:
+        """The success set's transitions and 0; with no success, the transitions of the episodes with the smallest
+        shortfall (ended closest to the goal) and how many episodes those are. Only transitions in `keep` (a mask;
+        None: all) count: a held-out episode is never an expert."""
+        keep = torch.ones(self.size, dtype=torch.bool, device=self.success.device) if keep is None else keep
+        idx = (self.success[: self.size] & keep).nonzero().squeeze(-1)
         if idx.numel() > 0:
             return idx, 0
-        k = max(1, int(len(self.episodes) * fallback_fraction))
-        closest = sorted(self.episodes, key=lambda e: e[2])[:k]
+        episodes = [e for e in self.episodes if keep[e[0]]]
+        k = max(1, int(len(episodes) * fallback_fraction))
+        closest = sorted(episodes, key=lambda e: e[2])[:k]
         return torch.cat([torch.arange(s, e, device=self.success.device) for s, e, _ in closest]), k
 
 
@@ -517,6 +554,7 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer
     log_ent_coef = torch.zeros(1, device=device, requires_grad=True)  # the actor's entropy coefficient, autotuned
     ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.tamer_h_lr, foreach=True)
     teacher = Teacher.from_args(args)
+    outcome = Outcome.from_args(args)
     n = args.tamer_total_timesteps
     print(f"[tamer] {n} env steps, feedback alpha {args.feedback_alpha_start} -> {args.feedback_alpha_end}", flush=True)
     progress = Progress("tamer", n, warmup=args.tamer_learning_starts, evaluator=evaluator)
@@ -551,11 +589,12 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer
         ep_length += 1
         last_step = step == n - 1 or (teacher.gone and args.budget_ends_forward_phase)
         if terminated or truncated or last_step:  # tag the trajectory; a cut-off last one by where it stands
-            distance = final_distance(info)
-            success = buffer.tag_episode(ep_start, distance, args.success_distance)
+            distance, success, shortfall = outcome(info, ep_return)
+            buffer.tag_episode(ep_start, shortfall, success)
             writer.add_scalar("charts/episodic_return", ep_return, step + 1)
             writer.add_scalar("charts/episodic_length", ep_length, step + 1)
-            writer.add_scalar("charts/final_distance", distance, step + 1)
+            if not math.isnan(distance):
+                writer.add_scalar("charts/final_distance", distance, step + 1)
             writer.add_scalar("charts/episode_success", float(success), step + 1)
             last_return = ep_return
             ep_start = step + 1
@@ -593,7 +632,7 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer
         if last_step:
             break
 
-    successes = sum(distance < args.success_distance for *_, distance in buffer.episodes)
+    successes = buffer.successes()
     print(
         f"[tamer] feedback +1 on {teacher.positives}/{buffer.size} steps ({teacher.positives / buffer.size:.1%}); "
         f"{successes}/{len(buffer.episodes)} episodes tagged success",
@@ -617,20 +656,18 @@ def sleep_phase(
     """The night: offline IQ-Learn (Eq. 2) on the buffer, the successful trajectories as the expert set. TAMER's H and
     entropy coefficient at the day's end are needed only by the sham control. Returns the soft Q, the INFORM actor,
     the stats and, with a hold-out, the checkpoint the offline criterion picked (else None)."""
-    expert_idx, fallback_episodes = buffer.expert_indices()
+    held = held_out(args, buffer, device)  # --sleep-holdout-fraction: episodes the sleep never sees
+    keep = torch.ones(buffer.size, dtype=torch.bool, device=device)
+    if held is not None:
+        keep[held] = False
+    replay_idx = keep.nonzero().squeeze(-1)
+    expert_idx, fallback_episodes = buffer.expert_indices(keep)
     if fallback_episodes:
         print(
             f"[sleep] warning: no successful episode; using the {fallback_episodes} episodes that ended closest to "
             "the goal as the expert set",
             flush=True,
         )
-    replay_idx = torch.arange(buffer.size, device=device)
-    held = held_out(args, buffer, device)  # --sleep-holdout-fraction: episodes the sleep never sees
-    if held is not None:
-        keep = torch.ones(buffer.size, dtype=torch.bool, device=device)
-        keep[held] = False
-        replay_idx = replay_idx[keep]
-        expert_idx = expert_idx[keep[expert_idx]]
     print(f"[sleep] {expert_idx.numel()} expert transitions, {replay_idx.numel()} in the buffer", flush=True)
     obs_dim = buffer.obs.shape[1]
     act_dim = buffer.actions.shape[1]
@@ -865,40 +902,44 @@ def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals", day: dict | 
 
 # ---------------------------------------------------------------------------------------------------------------------
 # ALGO LOGIC, below main: the evaluation protocol and the rest of the research code. The tests (deterministic and
-# sampled, the authors', the obstacle), the offline checkpoint choice, the oracle's own SAC, the obstacle model, the
-# recovered reward (Eq. 3) as an object and a Gymnasium wrapper
+# sampled, the authors'), the offline checkpoint choice, the oracle's own SAC, the recovered reward (Eq. 3) as an
+# object and a Gymnasium wrapper; then Pusher's own pieces (the obstacle test and its model)
 
 
 @torch.no_grad()
-def evaluate(actor: Actor, env: gym.Env, episodes: int, reset_seed, deterministic: bool, generator, success_dist):
-    """Run `episodes` episodes; reset_seed(ep) gives each episode's reset seed. Returns means and per-episode data."""
+def evaluate(actor: Actor, env: gym.Env, episodes: int, reset_seed, deterministic: bool, generator, outcome: Outcome):
+    """Run `episodes` episodes; reset_seed(ep) gives each episode's reset seed. Returns means and per-episode data,
+    each episode's observations included."""
     returns = []
     distances = []
-    paths = []
+    successes = []
+    trajectories = []
     for ep in range(episodes):
         obs, _ = env.reset(seed=reset_seed(ep))
         done = False
         ep_return = 0.0
         info = {}
-        path = [obs[17:19]]
+        trajectory = [obs]
         while not done:
             sampled, _, mean = actor.get_action(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0), generator)
             obs, reward, terminated, truncated, info = env.step((mean if deterministic else sampled)[0].numpy())
             ep_return = ep_return + float(reward)
             done = terminated or truncated
-            path.append(obs[17:19])
+            trajectory.append(obs)
+        distance, success, _ = outcome(info, ep_return)
         returns.append(ep_return)
-        distances.append(final_distance(info))
-        paths.append(np.array(path))  # the object's xy at every step
+        distances.append(distance)
+        successes.append(success)
+        trajectories.append(np.array(trajectory))
     distances = np.asarray(distances)
     return {
         "return": float(np.mean(returns)),
         "final_distance": float(distances.mean()),
         "final_distance_std": float(distances.std()),
-        "success_rate": float((distances < success_dist).mean()),
+        "success_rate": float(np.mean(successes)),
         "distances": distances,
         "returns": np.asarray(returns),
-        "paths": paths,
+        "trajectories": trajectories,
     }
 
 
@@ -912,7 +953,7 @@ class Evaluator:
         self.writer = writer
         self.seed = args.seed
         self.random_starts = args.random_starts
-        self.success_distance = args.success_distance
+        self.outcome = Outcome.from_args(args)
         self.seconds = 0.0  # spent evaluating
         self.final = {}  # the latest value of each tag
 
@@ -923,9 +964,7 @@ class Evaluator:
         t = time.time()
         results = {}
         for deterministic, suffix in ((True, ""), (False, "_sampled")):
-            res = evaluate(
-                actor, self.env, episodes, self.reset_seed, deterministic, self.generator, self.success_distance
-            )
+            res = evaluate(actor, self.env, episodes, self.reset_seed, deterministic, self.generator, self.outcome)
             results.update({f"eval/{name}_{k}{suffix}": res[k] for k in ("return", "final_distance", "success_rate")})
         if self.writer is not None:
             for tag, value in results.items():
@@ -939,25 +978,32 @@ class Evaluator:
 
 
 def final_evaluation(args: Args, buffer, q_net, policies: dict, evaluator, writer, run_dir: str) -> dict:
-    """After the sleep: Eq. 3 on the buffer, each policy's final evaluation, the obstacle test and the authors' test
-    (all logged at the run's last step), the obstacle files and, with --capture-video, the videos."""
+    """After the sleep: Eq. 3 on the buffer, each policy's final evaluation, the obstacle test (Pusher only) and the
+    authors' test (all logged at the run's last step), the obstacle files and, with --capture-video, the videos."""
     results = recovered_reward_stats(args, buffer, q_net, policies["inform"])
     end_step = args.tamer_total_timesteps + args.sleep_gradient_steps
     print("[eval] final evaluation", flush=True)
     for name, actor in policies.items():
         evaluator(name, actor, end_step, args.eval_episodes)
     t = time.time()
-    obstacle, distances, paths = obstacle_test(args, policies, evaluator.generator)
-    results.update(obstacle)
-    np.savez(f"{run_dir}/obstacle_distances.npz", **distances)
-    np.savez(f"{run_dir}/obstacle_paths.npz", **paths)
-    results.update(authors_test(args, policies, evaluator.generator))
+    boxes = None
+    skipped = obstacle_skipped(args)
+    if skipped:
+        results["obstacle/skipped"] = skipped
+    else:
+        obstacle, distances, paths = obstacle_test(args, policies, evaluator.generator)
+        results.update(obstacle)
+        np.savez(f"{run_dir}/obstacle_distances.npz", **distances)
+        np.savez(f"{run_dir}/obstacle_paths.npz", **paths)
+        boxes = paths["boxes"]
+    if args.authors_test_episodes > 0:
+        results.update(authors_test(args, policies, evaluator.generator))
     for tag, value in results.items():
         if tag.startswith(("eval/obstacle/", "eval/authors_test/", "obstacle/min")):
             writer.add_scalar(tag, value, end_step)
     evaluator.seconds += time.time() - t
     if args.capture_video:  # after every number is in: filming changes none of them
-        record_videos(args, policies, paths["boxes"], evaluator.reset_seed(0), run_dir)
+        record_videos(args, policies, boxes, evaluator.reset_seed(0), run_dir)
     return results
 
 
@@ -1060,44 +1106,13 @@ class OfflineCriterion:
         }
 
 
-def obstacle_test(args: Args, policies: dict, generator: torch.Generator) -> tuple[dict, dict, dict]:
-    """The robustness test: each policy on the obstacle variant, every episode from the run's initial state, sampled
-    actions. Returns the metrics, the final distances, and the object's xy path of one deterministic episode per
-    policy with and without the boxes (Fig. 5a)."""
-    start, goal = start_and_goal(args.env_id, args.seed)
-    boxes = obstacle_positions(args.obstacle_layout, start, goal)
-    results = {
-        "obstacle/box_positions": boxes.round(4).tolist(),
-        "obstacle/min_box_distance_to_path": min(distance_to_segment(b, start, goal) for b in boxes),
-    }
-    distances = {}
-    paths = {"boxes": boxes, "start": start, "goal": goal}
-    env = make_env(args.env_id, args.seed, obstacles=boxes)
-    plain = make_env(args.env_id, args.seed)
-    at_start = lambda episode: args.seed  # noqa: E731
-    for name, actor in policies.items():
-        res = evaluate(actor, env, args.obstacle_episodes, at_start, False, generator, args.success_distance)
-        det = evaluate(actor, env, 1, at_start, True, generator, args.success_distance)
-        det_plain = evaluate(actor, plain, 1, at_start, True, torch.Generator(), args.success_distance)
-        paths[f"{name}_obstacle"] = det["paths"][0]
-        paths[f"{name}_plain"] = det_plain["paths"][0]
-        distances[name] = res["distances"]
-        for key in ("final_distance", "final_distance_std", "success_rate", "return"):
-            results[f"eval/obstacle/{name}_{key}"] = res[key]
-        results[f"eval/obstacle/{name}_final_distance_deterministic"] = det["final_distance"]
-    env.close()
-    plain.close()
-    return results, distances, paths
-
-
 def authors_test(args: Args, policies: dict, generator: torch.Generator) -> dict:
     """The authors' test: sampled actions, every episode from the run's initial state, on the plain env."""
     env = make_env(args.env_id, args.seed)
+    outcome = Outcome.from_args(args)
     results = {}
     for name, actor in policies.items():
-        res = evaluate(
-            actor, env, args.authors_test_episodes, lambda ep: args.seed, False, generator, args.success_distance
-        )
+        res = evaluate(actor, env, args.authors_test_episodes, lambda ep: args.seed, False, generator, outcome)
         for key in ("return", "final_distance", "success_rate"):
             results[f"eval/authors_test/{name}_{key}"] = res[key]
     env.close()
@@ -1131,6 +1146,7 @@ def train_oracle(args: Args, writer: SummaryWriter, device: torch.device):
     obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
     ep_return = 0.0
     last_return = float("nan")
+    outcome = Outcome.from_args(args)
     for step in range(n):
         if step < args.oracle_learning_starts:
             action = env.action_space.sample()
@@ -1147,7 +1163,9 @@ def train_oracle(args: Args, writer: SummaryWriter, device: torch.device):
         ep_return += float(reward)
         if terminated or truncated:
             writer.add_scalar("oracle/episodic_return", ep_return, step)
-            writer.add_scalar("oracle/final_distance", final_distance(info), step)
+            distance = outcome(info, ep_return)[0]
+            if not math.isnan(distance):
+                writer.add_scalar("oracle/final_distance", distance, step)
             last_return = ep_return
             ep_return = 0.0
             next_obs, _ = env.reset(seed=reset_seed)
@@ -1175,6 +1193,107 @@ def train_oracle(args: Args, writer: SummaryWriter, device: torch.device):
         progress(step + 1, **{"return": last_return})
     env.close()
     return actor, qf, n / max(time.time() - progress.start, 1e-9)
+
+
+class RecoveredReward:
+    """The reward INFORM recovers (Eq. 3), imitation-style: reward(obs, action, next_obs, terminated) -> array.
+    V(s') is averaged over `samples` actions drawn with a fixed generator, so the reward is deterministic."""
+
+    def __init__(self, q_net: QEnsemble, actor: Actor, gamma: float, temperature: float, samples: int = 16):
+        self.q_net = q_net
+        self.actor = actor
+        self.gamma = gamma
+        self.temperature = temperature
+        self.samples = samples
+
+    @classmethod
+    def load(cls, run_dir: str, samples: int = 16) -> "RecoveredReward":  # from a run's inform_critic.pt and actor
+        critic = torch.load(os.path.join(run_dir, "inform_critic.pt"), weights_only=True)
+        q_net = QEnsemble(**critic["kwargs"])
+        q_net.load_state_dict(critic["state_dict"])
+        actor = actor_from_checkpoint(torch.load(os.path.join(run_dir, "inform_actor.pt"), weights_only=True))
+        return cls(q_net, actor, critic["gamma"], critic["temperature"], samples)
+
+    @torch.no_grad()
+    def __call__(self, obs, action, next_obs, terminated) -> np.ndarray:
+        obs_t = torch.as_tensor(np.asarray(obs), dtype=torch.float32)
+        obs_t = obs_t if obs_t.ndim == 2 else obs_t.unsqueeze(0)
+        act_t = torch.as_tensor(np.asarray(action), dtype=torch.float32).reshape(obs_t.shape[0], -1)
+        next_t = torch.as_tensor(np.asarray(next_obs), dtype=torch.float32).reshape(obs_t.shape)
+        term_t = torch.as_tensor(np.asarray(terminated), dtype=torch.float32).reshape(-1)
+        g = torch.Generator().manual_seed(0)
+        v_next = torch.stack(
+            [soft_value(self.q_net, self.actor, next_t, self.temperature, g) for _ in range(self.samples)]
+        ).mean(0)
+        return recover_reward(self.q_net(obs_t, act_t).min(0).values, v_next, term_t, self.gamma).numpy()
+
+
+class RecoveredRewardWrapper(gym.Wrapper):
+    """Any Gymnasium agent trains on the recovered reward; the env's own goes to info['env_reward']."""
+
+    def __init__(self, env: gym.Env, reward_fn: RecoveredReward):
+        super().__init__(env)
+        self.reward_fn = reward_fn
+        self._obs = None
+
+    def reset(self, **kwargs):
+        self._obs, info = self.env.reset(**kwargs)
+        return self._obs, info
+
+    def step(self, action):
+        next_obs, reward, terminated, truncated, info = self.env.step(action)
+        new_reward = float(self.reward_fn(self._obs, action, next_obs, terminated)[0])
+        self._obs = next_obs
+        return next_obs, new_reward, terminated, truncated, {**info, "env_reward": reward}
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# PUSHER ONLY: the object's and the goal's coordinates, the obstacle test and its model, the videos' camera. On any
+# other --env-id the obstacle test is skipped (the summary says so) and videos use the env's own camera.
+
+
+def object_xy(obs: np.ndarray) -> np.ndarray:  # the object's xy in Pusher's observation (also along a trajectory)
+    return obs[..., 17:19]
+
+
+def obstacle_skipped(args: Args) -> str | None:
+    """Why the obstacle test does not run, or None when it does."""
+    if args.env_id not in PUSHER_IDS:
+        return f"the obstacle test is Pusher's; {args.env_id} has none"
+    if args.obstacle_episodes == 0:
+        return "--obstacle-episodes 0"
+    return None
+
+
+def obstacle_test(args: Args, policies: dict, generator: torch.Generator) -> tuple[dict, dict, dict]:
+    """The robustness test: each policy on the obstacle variant, every episode from the run's initial state, sampled
+    actions. Returns the metrics, the final distances, and the object's xy path of one deterministic episode per
+    policy with and without the boxes (Fig. 5a)."""
+    start, goal = start_and_goal(args.env_id, args.seed)
+    boxes = obstacle_positions(args.obstacle_layout, start, goal)
+    results = {
+        "obstacle/box_positions": boxes.round(4).tolist(),
+        "obstacle/min_box_distance_to_path": min(distance_to_segment(b, start, goal) for b in boxes),
+    }
+    distances = {}
+    paths = {"boxes": boxes, "start": start, "goal": goal}
+    env = make_env(args.env_id, args.seed, obstacles=boxes)
+    plain = make_env(args.env_id, args.seed)
+    at_start = lambda episode: args.seed  # noqa: E731
+    outcome = Outcome.from_args(args)
+    for name, actor in policies.items():
+        res = evaluate(actor, env, args.obstacle_episodes, at_start, False, generator, outcome)
+        det = evaluate(actor, env, 1, at_start, True, generator, outcome)
+        det_plain = evaluate(actor, plain, 1, at_start, True, torch.Generator(), outcome)
+        paths[f"{name}_obstacle"] = object_xy(det["trajectories"][0])
+        paths[f"{name}_plain"] = object_xy(det_plain["trajectories"][0])
+        distances[name] = res["distances"]
+        for key in ("final_distance", "final_distance_std", "success_rate", "return"):
+            results[f"eval/obstacle/{name}_{key}"] = res[key]
+        results[f"eval/obstacle/{name}_final_distance_deterministic"] = det["final_distance"]
+    env.close()
+    plain.close()
+    return results, distances, paths
 
 
 # the robustness test's three 3 cm cubes on the table (docs/protocol.md): the paper's positions (layout "paper"), the
@@ -1251,7 +1370,7 @@ def start_and_goal(env_id: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
     env = gym.make(env_id)
     obs, _ = env.reset(seed=seed)
     env.close()
-    return obs[17:19].copy(), obs[20:22].copy()
+    return object_xy(obs).copy(), obs[20:22].copy()
 
 
 def obstacle_positions(layout: str, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
@@ -1270,56 +1389,19 @@ def distance_to_segment(point: np.ndarray, a: np.ndarray, b: np.ndarray) -> floa
     return float(np.linalg.norm(point - (a + t * (b - a))))
 
 
-class RecoveredReward:
-    """The reward INFORM recovers (Eq. 3), imitation-style: reward(obs, action, next_obs, terminated) -> array.
-    V(s') is averaged over `samples` actions drawn with a fixed generator, so the reward is deterministic."""
-
-    def __init__(self, q_net: QEnsemble, actor: Actor, gamma: float, temperature: float, samples: int = 16):
-        self.q_net = q_net
-        self.actor = actor
-        self.gamma = gamma
-        self.temperature = temperature
-        self.samples = samples
-
-    @classmethod
-    def load(cls, run_dir: str, samples: int = 16) -> "RecoveredReward":  # from a run's inform_critic.pt and actor
-        critic = torch.load(os.path.join(run_dir, "inform_critic.pt"), weights_only=True)
-        q_net = QEnsemble(**critic["kwargs"])
-        q_net.load_state_dict(critic["state_dict"])
-        actor = actor_from_checkpoint(torch.load(os.path.join(run_dir, "inform_actor.pt"), weights_only=True))
-        return cls(q_net, actor, critic["gamma"], critic["temperature"], samples)
-
-    @torch.no_grad()
-    def __call__(self, obs, action, next_obs, terminated) -> np.ndarray:
-        obs_t = torch.as_tensor(np.asarray(obs), dtype=torch.float32)
-        obs_t = obs_t if obs_t.ndim == 2 else obs_t.unsqueeze(0)
-        act_t = torch.as_tensor(np.asarray(action), dtype=torch.float32).reshape(obs_t.shape[0], -1)
-        next_t = torch.as_tensor(np.asarray(next_obs), dtype=torch.float32).reshape(obs_t.shape)
-        term_t = torch.as_tensor(np.asarray(terminated), dtype=torch.float32).reshape(-1)
-        g = torch.Generator().manual_seed(0)
-        v_next = torch.stack(
-            [soft_value(self.q_net, self.actor, next_t, self.temperature, g) for _ in range(self.samples)]
-        ).mean(0)
-        return recover_reward(self.q_net(obs_t, act_t).min(0).values, v_next, term_t, self.gamma).numpy()
+# the videos' camera (--capture-video): a fixed camera added to the model (mujoco 2.3.7 cannot set a free camera's
+# lookat) looks down on the table from behind the goal: arm, object (white), goal (red), boxes (blue)
+VIDEO_CAMERA = {"lookat": (0.42, -0.2, -0.3), "distance": 1.0, "elevation": -75.0}  # metres, degrees
 
 
-class RecoveredRewardWrapper(gym.Wrapper):
-    """Any Gymnasium agent trains on the recovered reward; the env's own goes to info['env_reward']."""
-
-    def __init__(self, env: gym.Env, reward_fn: RecoveredReward):
-        super().__init__(env)
-        self.reward_fn = reward_fn
-        self._obs = None
-
-    def reset(self, **kwargs):
-        self._obs, info = self.env.reset(**kwargs)
-        return self._obs, info
-
-    def step(self, action):
-        next_obs, reward, terminated, truncated, info = self.env.step(action)
-        new_reward = float(self.reward_fn(self._obs, action, next_obs, terminated)[0])
-        self._obs = next_obs
-        return next_obs, new_reward, terminated, truncated, {**info, "env_reward": reward}
+def video_camera() -> dict:
+    """The camera's MJCF attributes: VIDEO_CAMERA's distance from its lookat, seen from +x (image up is -x)."""
+    x, y, z = VIDEO_CAMERA["lookat"]
+    d = VIDEO_CAMERA["distance"]
+    el = math.radians(VIDEO_CAMERA["elevation"])
+    pos = f"{x + d * math.cos(el):.4f} {y} {z - d * math.sin(el):.4f}"
+    xyaxes = f"0 1 0 {math.sin(el):.4f} 0 {math.cos(el):.4f}"
+    return {"name": "inform_video", "mode": "fixed", "pos": pos, "xyaxes": xyaxes}
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -1515,9 +1597,9 @@ def oracle_checkpoint(args: Args, actor: Actor, qf: QEnsemble, action_low, actio
 
 
 # saved days (--save-buffer, --sleep-from): a day is deterministic, so it is saved once and slept on many times
-DAY_FORMAT = "inform-day-1"
-DAY_FIELDS = ("env_id", "seed", "random_starts", "success_distance", "train_oracle", "hidden_size", "eval_frequency")
-DAY_FIELDS += ("credit_window", "budget_ends_forward_phase")
+DAY_FORMAT = "inform-day-2"
+DAY_FIELDS = ("env_id", "seed", "random_starts", "train_oracle", "hidden_size", "eval_frequency", "credit_window")
+DAY_FIELDS += ("budget_ends_forward_phase", "success_distance", "success_info_key", "success_return")
 DAY_PREFIXES = ("oracle_", "tamer_", "feedback_", "teacher_")
 DAY_TENSORS = ("obs", "actions", "next_obs", "feedback", "terminated", "success")
 
@@ -1539,7 +1621,7 @@ def save_day(path: str, args: Args, buffer: ReplayBuffer, networks: tuple, stats
         oracle_ckpt = oracle_checkpoint(args, oracle_actor, oracle_qf, low.cpu(), high.cpu())
     n = buffer.size
     day = {key: getattr(buffer, key)[:n].cpu().clone() for key in DAY_TENSORS}
-    starts, ends, distances = zip(*buffer.episodes, strict=True)
+    starts, ends, shortfalls = zip(*buffer.episodes, strict=True)
     day.update(
         format=DAY_FORMAT,
         script=os.path.basename(__file__),
@@ -1549,8 +1631,8 @@ def save_day(path: str, args: Args, buffer: ReplayBuffer, networks: tuple, stats
         day_stats=stats,
         episode_start=torch.tensor(starts, dtype=torch.int64),
         episode_end=torch.tensor(ends, dtype=torch.int64),
-        episode_final_distance=torch.tensor(distances, dtype=torch.float64),
-        episode_success=torch.tensor([d < args.success_distance for d in distances]),
+        episode_shortfall=torch.tensor(shortfalls, dtype=torch.float64),  # the final distance, or minus the return
+        episode_success=buffer.success[list(starts)].cpu(),
         oracle={k: v for k, v in oracle_ckpt.items() if k != "path"},
         oracle_path=oracle_ckpt.get("path"),
         tamer_h={"state_dict": state_dict_cpu(h_net), "n": h_net.n},
@@ -1586,7 +1668,7 @@ def restore_day(day: dict, buffer: ReplayBuffer, evaluator, device) -> tuple:
     for key in DAY_TENSORS:
         getattr(buffer, key)[:n] = day[key].to(device)
     buffer.size = n
-    table = (day["episode_start"], day["episode_end"], day["episode_final_distance"])
+    table = (day["episode_start"], day["episode_end"], day["episode_shortfall"])
     buffer.episodes = list(zip(*(column.tolist() for column in table), strict=True))
     obs_dim = buffer.obs.shape[1]
     act_dim = buffer.actions.shape[1]
@@ -1639,6 +1721,8 @@ NON_NEGATIVE_INTS = (
     "seed",
     "teacher_delay",
     "sleep_seed",
+    "obstacle_episodes",
+    "authors_test_episodes",
 )  # every other integer flag (--feedback-budget too) must be >= 1
 
 
@@ -1665,8 +1749,6 @@ def check_args(args: Args) -> None:
     """What tyro cannot know: the env id, ranges, flags that exclude each other. Raises InputError."""
     if args.track and importlib.util.find_spec("wandb") is None:
         raise InputError("--track needs Weights & Biases: `pip install wandb`, or run without --track")
-    if args.env_id not in ENV_IDS:
-        raise InputError(f"unknown --env-id {args.env_id!r}; this script trains on one of {', '.join(ENV_IDS)}")
     if args.env_id == "Pusher-v4" and mujoco_major() >= 3:
         raise InputError(
             "Pusher-v4 needs mujoco<3 (Gymnasium issue 950); use --env-id Pusher-v5, or run in a "
@@ -1684,6 +1766,7 @@ def check_args(args: Args) -> None:
             and (value <= 1.0 if interval.endswith("1]") else value < math.inf)
         ):
             raise InputError(f"{flag} must be in {interval}, got {value}")
+    check_env(args)
     if args.tamer_learning_starts >= args.tamer_total_timesteps:
         raise InputError(
             f"--tamer-learning-starts ({args.tamer_learning_starts}) must be below "
@@ -1701,6 +1784,36 @@ def check_args(args: Args) -> None:
         raise InputError("--save-buffer and --sleep-from exclude each other: a night on a saved day saves no new day")
     if args.sleep_holdout_fraction >= 1:
         raise InputError(f"--sleep-holdout-fraction must be below 1, got {args.sleep_holdout_fraction}")
+
+
+def check_env(args: Args) -> None:
+    """--env-id: a Gymnasium env with a flat observation and continuous actions, whose episodes can be judged (one
+    random step shows whether `info` has --success-info-key). Raises InputError."""
+    try:
+        env = gym.make(args.env_id)
+    except Exception as e:  # unknown id, a missing extra (box2d, ...), a version that needs other packages
+        first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
+        raise InputError(f"--env-id {args.env_id}: Gymnasium cannot make it ({first})") from None
+    try:
+        obs_space, act_space = env.observation_space, env.action_space
+        if not isinstance(act_space, gym.spaces.Box):
+            raise InputError(
+                f"--env-id {args.env_id}: its actions are {type(act_space).__name__}, not continuous (Box); "
+                "discrete tasks run in inform_dqn_gridworld.py"
+            )
+        if not isinstance(obs_space, gym.spaces.Box) or len(obs_space.shape) != 1:
+            raise InputError(f"--env-id {args.env_id}: needs a flat Box observation, not {obs_space}")
+        if args.success_return is None:
+            env.reset(seed=0)
+            info = env.step(act_space.sample())[4]
+            if args.success_info_key not in info:
+                keys = ", ".join(sorted(info)) or "none"
+                raise InputError(
+                    f"--env-id {args.env_id}: its info has no {args.success_info_key!r} to measure a final distance "
+                    f"(it has: {keys}); pass --success-info-key KEY, or --success-return R to judge episodes by return"
+                )
+    finally:
+        env.close()
 
 
 def mujoco_major() -> int:
@@ -1848,10 +1961,14 @@ def print_results(summary: dict, run_dir: str) -> None:
     if summary["status"] == "completed":
         for p in POLICIES:
             e = {k[len("eval/") :].replace(p, "@"): v for k, v in summary.items() if k.startswith("eval/")}
+            obstacle = (
+                f" | obstacle distance {e['obstacle/@_final_distance']:.3f} +- {e['obstacle/@_final_distance_std']:.3f}"
+                if "obstacle/@_final_distance" in e
+                else ""
+            )
             say(
                 f"{p:>6}: return {e['@_return']:.2f} (sampled {e['@_return_sampled']:.2f}) | final distance "
-                f"{e['@_final_distance']:.3f} | success {e['@_success_rate']:.2f} | obstacle distance "
-                f"{e['obstacle/@_final_distance']:.3f} +- {e['obstacle/@_final_distance_std']:.3f}"
+                f"{e['@_final_distance']:.3f} | success {e['@_success_rate']:.2f}{obstacle}"
             )
         say(" | ".join(f"{k} {v:.0f}" for k, v in summary.items() if k.startswith(("time/", "sps/"))))
     say(f"{summary['status']} in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json")
@@ -1865,28 +1982,19 @@ def evaluate_saved(args: Args) -> dict:
     actor = actor_from_checkpoint(read_checkpoint(args.evaluate, "--evaluate", args.env_id))
     evaluator = Evaluator(args, writer=None)
     metrics = evaluator("policy", actor, 0, args.eval_episodes)
-    obstacle, _, _ = obstacle_test(args, {"policy": actor}, evaluator.generator)
+    skipped = obstacle_skipped(args)
+    if skipped:
+        obstacle = {"obstacle/skipped": skipped}
+    else:
+        obstacle, _, _ = obstacle_test(args, {"policy": actor}, evaluator.generator)
     evaluator.close()
     return {**metrics, **obstacle}
 
 
 # --capture-video: headless MuJoCo frames (MUJOCO_GL, as MuJoCo documents it) written as mp4 by imageio-ffmpeg, the
-# ffmpeg that Gymnasium's RecordVideo reaches through moviepy. A fixed camera in the model (mujoco 2.3.7 cannot set a
-# free camera's lookat) looks down on the table from behind the goal: arm, object (white), goal (red), boxes (blue).
-VIDEO_CAMERA = {"lookat": (0.42, -0.2, -0.3), "distance": 1.0, "elevation": -75.0}  # metres, degrees
-
-
+# ffmpeg that Gymnasium's RecordVideo reaches through moviepy. Pusher films with a fixed
+# camera of its own (the Pusher block above); other envs with their default one.
 VIDEO_SIZE = 480  # pixels, square; a multiple of 16, as H.264 wants
-
-
-def video_camera() -> dict:
-    """The camera's MJCF attributes: VIDEO_CAMERA's distance from its lookat, seen from +x (image up is -x)."""
-    x, y, z = VIDEO_CAMERA["lookat"]
-    d = VIDEO_CAMERA["distance"]
-    el = math.radians(VIDEO_CAMERA["elevation"])
-    pos = f"{x + d * math.cos(el):.4f} {y} {z - d * math.sin(el):.4f}"
-    xyaxes = f"0 1 0 {math.sin(el):.4f} 0 {math.cos(el):.4f}"
-    return {"name": "inform_video", "mode": "fixed", "pos": pos, "xyaxes": xyaxes}
 
 
 def check_video(env_id: str) -> None:
@@ -1954,18 +2062,20 @@ def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
             os.remove(tmp)
 
 
-def record_videos(args: Args, policies: dict, boxes: np.ndarray, reset_seed: int, run_dir: str) -> dict:
-    """--capture-video: each policy's deterministic episode as the final evaluation runs it (from `reset_seed`) and
-    as the obstacle test runs it (the run's start, the boxes), by the same `evaluate`, with a generator of its own so
-    no other random stream moves. Writes videos/{policy}[_obstacle].mp4 and videos/videos.json (frames, final
-    distance and reset seed of each)."""
+def record_videos(args: Args, policies: dict, boxes: np.ndarray | None, reset_seed: int, run_dir: str) -> dict:
+    """--capture-video: each policy's deterministic episode as the final evaluation runs it (from `reset_seed`) and,
+    when the obstacle test ran (`boxes`), as it runs it (the run's start, the boxes), by the same `evaluate`, with a
+    generator of its own so no other random stream moves. Writes videos/{policy}[_obstacle].mp4 and
+    videos/videos.json (frames, final distance and reset seed of each)."""
     os.makedirs(f"{run_dir}/videos", exist_ok=True)
     record = {}
     t = time.time()
-    for suffix, obstacles, seed in (("", None, reset_seed), ("_obstacle", boxes, args.seed)):
+    outcome = Outcome.from_args(args)
+    films = [("", None, reset_seed)] + ([("_obstacle", boxes, args.seed)] if boxes is not None else [])
+    for suffix, obstacles, seed in films:
         env = video_env(args.env_id, args.seed, obstacles)
         for name, actor in policies.items():
-            res = evaluate(actor, env, 1, lambda ep, s=seed: s, True, torch.Generator(), args.success_distance)
+            res = evaluate(actor, env, 1, lambda ep, s=seed: s, True, torch.Generator(), outcome)
             frames = env.render()
             write_video(f"{run_dir}/videos/{name}{suffix}.mp4", frames, env.metadata["render_fps"])
             record[f"{name}{suffix}"] = {

@@ -23,11 +23,16 @@ learned teacher. Every maze checkpoint holds the 30 x 4 `q_table` (for the DQN: 
 and action shapes, the training steps and the greedy episode length; the DQN's also holds its state_dict
 and the arguments to rebuild it (`MazeQNetwork(**ckpt["kwargs"])`).
 
+Other continuous-action tasks (`--env-id Reacher-v5`) train the same SAC; an evaluation episode succeeds by its final
+distance |info[--success-info-key]| below --success-distance, or by its return (--success-return), as in
+inform_sac_pusher.py.
+
 Imported by inform_utils/, the only names other code may use (a test holds it to them): Actor.
 
 Examples:
     python oracle_train.py --env-id Pusher-v5 --seed 1 --total-timesteps 200000 \
         --output-path oracles/Pusher-v5__sac_oracle.pt
+    python oracle_train.py --env-id Reacher-v5 --success-distance 0.02 --total-timesteps 100000
     python oracle_train.py --env-id KnoxStoneMaze-v0 --method q-learning --maze-episodes 50
     python oracle_train.py --env-id KnoxStoneMaze-v0 --method dqn --maze-dqn-timesteps 20000
 """
@@ -59,17 +64,15 @@ import gridworld_env
 
 PUSHER_IDS = ("Pusher-v5", "Pusher-v4")
 MAZE_IDS = tuple(gridworld_env.ENV_IDS)
-SUPPORTED_ENV_IDS = PUSHER_IDS + MAZE_IDS
-METHODS = {"pusher": ("sac",), "maze": ("value-iteration", "q-learning", "dqn")}
+METHODS = {"sac": ("sac",), "maze": ("value-iteration", "q-learning", "dqn")}  # SAC: Pusher or any continuous env
 LOG_STD_MIN = -5.0
 LOG_STD_MAX = 2.0
-SUCCESS_DISTANCE = 0.08
 # Reset seeds of the evaluations. Training seeds its env once (--seed, or --seed + step on --resume) and then
 # draws its starts from the env's own RNG, so these fixed blocks are starts it never trains from. The periodic
 # evaluation uses the same block every time, so its numbers compare across steps and choose best.pt; the final
 # evaluation of the written oracle uses another block, so the choice is not judged on the starts it was chosen on.
 SELECTION_EVAL_SEED = 1_000_000
-# the expert bar (docs/protocol.md): over 100 random starts, success >= 0.95 and final distance <= 0.06
+# the expert bar (docs/protocol.md): over 100 random starts, success >= 0.95 and, on Pusher, final distance <= 0.06
 EXPERT_SUCCESS_RATE = 0.95
 EXPERT_FINAL_DISTANCE = 0.06
 FINAL_EVAL_SEED = 20_000
@@ -122,7 +125,15 @@ class Args:
 
     # Oracle (SAC) arguments
     env_id: str = "Pusher-v5"
-    """the environment id (Pusher-v5, or Pusher-v4 where mujoco<3 is installed)"""
+    """Pusher-v5, Pusher-v4 (where mujoco<3 is installed), any continuous-action Gymnasium env (SAC), or a maze id"""
+    success_distance: float = 0.08
+    """an evaluation episode succeeds if its final distance |info[success_info_key]| (Pusher: object to goal) is
+    below this"""
+    success_info_key: str = "reward_dist"
+    """the `info` entry whose absolute value at an episode's end is its final distance (Pusher's, Reacher's)"""
+    success_return: float | None = None
+    """if set, an evaluation episode succeeds if its return is at least this (then the return breaks ties in the
+    choice of the best checkpoint, not the distance)"""
     total_timesteps: int = 200000
     """total environment steps of SAC training"""
     buffer_size: int = 1000000
@@ -160,8 +171,8 @@ class Args:
     checkpoint_frequency: int = 10000
     """write the resumable training state every this many steps"""
     stop_at_expert: bool = False
-    """end training at the first periodic evaluation that meets the expert bar (success rate >= 0.95 and final
-    distance <= 0.06 over its episodes); the held-out final evaluation then judges the written oracle"""
+    """end training at the first periodic evaluation that meets the expert bar (success rate >= 0.95 and, on Pusher,
+    final distance <= 0.06 over its episodes); the held-out final evaluation then judges the written oracle"""
     snapshot_frequency: int = 50000
     """keep a copy of the oracle checkpoint (oracle_step{N}.pt in the run dir) every this many steps"""
     resume: str | None = None
@@ -171,8 +182,8 @@ class Args:
 
     # Maze oracles
     method: str | None = None
-    """sac (Pusher); value-iteration (exact Q*), q-learning or dqn (imperfect, learned teachers) on the maze;
-    default: sac or value-iteration"""
+    """sac (Pusher and other continuous envs); value-iteration (exact Q*), q-learning or dqn (imperfect, learned
+    teachers) on the maze; default: sac or value-iteration"""
     maze_episodes: int = 50
     """episodes of the maze's tabular Q-learning (--method q-learning)"""
     maze_alpha: float = 0.2
@@ -211,11 +222,9 @@ def check_args(args: Args) -> None:
     """What tyro cannot know: the env id, the method, ranges, files. Raises InputError."""
     if args.track and importlib.util.find_spec("wandb") is None:
         raise InputError("--track needs Weights & Biases: `pip install wandb`, or run without --track")
-    if args.track and args.env_id not in PUSHER_IDS:
-        raise InputError("--track mirrors TensorBoard events, which only the Pusher (SAC) training writes")
-    if args.env_id not in SUPPORTED_ENV_IDS:
-        raise InputError(f"unknown --env-id {args.env_id!r}; supported: {', '.join(SUPPORTED_ENV_IDS)}")
-    methods = METHODS["pusher" if args.env_id in PUSHER_IDS else "maze"]
+    if args.track and args.env_id in MAZE_IDS:
+        raise InputError("--track mirrors TensorBoard events, which only the SAC training writes")
+    methods = METHODS["maze" if args.env_id in MAZE_IDS else "sac"]
     if args.method is not None and args.method not in methods:
         raise InputError(f"--method {args.method} does not apply to {args.env_id}; choose one of {', '.join(methods)}")
     if not 0 <= args.seed < 2**32:
@@ -226,7 +235,7 @@ def check_args(args: Args) -> None:
         raise InputError("--policy-lr, --q-lr and --ent-coef must be > 0")
     if args.output_path is not None and (not args.output_path or os.path.isdir(args.output_path)):
         raise InputError(f"--output-path {args.output_path!r} must name a file (it is empty or a directory)")
-    if args.resume is not None and args.env_id not in PUSHER_IDS:
+    if args.resume is not None and args.env_id in MAZE_IDS:
         raise InputError(
             "--resume continues a SAC (Pusher) run; the maze methods train in seconds and have no training state"
         )
@@ -254,6 +263,40 @@ def check_args(args: Args) -> None:
         raise InputError(f"--gamma must be in [0, 1], got {args.gamma}")
     if args.resume is not None and not os.path.isfile(args.resume):
         raise InputError(f"--resume {args.resume}: no such file")
+    if not args.success_distance > 0.0:
+        raise InputError(f"--success-distance must be > 0, got {args.success_distance}")
+    if args.env_id not in MAZE_IDS:
+        check_env(args)
+
+
+def check_env(args: Args) -> None:
+    """--env-id for SAC: a Gymnasium env with a flat observation and continuous actions, whose episodes can be judged
+    (one random step shows whether `info` has --success-info-key). Raises InputError."""
+    try:
+        env = gym.make(args.env_id)
+    except Exception as e:  # unknown id, a missing extra (box2d, ...), a version that needs other packages
+        first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
+        mazes = ", ".join(MAZE_IDS)
+        raise InputError(f"--env-id {args.env_id}: Gymnasium cannot make it ({first}); mazes: {mazes}") from None
+    try:
+        obs_space, act_space = env.observation_space, env.action_space
+        if not isinstance(act_space, gym.spaces.Box):
+            raise InputError(
+                f"--env-id {args.env_id}: its actions are {type(act_space).__name__}, not continuous (Box)"
+            )
+        if not isinstance(obs_space, gym.spaces.Box) or len(obs_space.shape) != 1:
+            raise InputError(f"--env-id {args.env_id}: needs a flat Box observation, not {obs_space}")
+        if args.success_return is None:
+            env.reset(seed=0)
+            info = env.step(act_space.sample())[4]
+            if args.success_info_key not in info:
+                keys = ", ".join(sorted(info)) or "none"
+                raise InputError(
+                    f"--env-id {args.env_id}: its info has no {args.success_info_key!r} to measure a final distance "
+                    f"(it has: {keys}); pass --success-info-key KEY, or --success-return R to judge episodes by return"
+                )
+    finally:
+        env.close()
 
 
 def check_maze_dqn_args(args: Args) -> None:
@@ -367,14 +410,46 @@ def soft_update(target: nn.Module, source: nn.Module, tau: float) -> None:
             target_param.lerp_(param, tau)
 
 
+# How an episode is judged: copied verbatim from inform_sac_pusher.py (a test keeps the copies identical)
+@dataclass(frozen=True)
+class Outcome:
+    """How an episode is judged, in the day's success tags and in every test: its final distance |info[info_key]| at
+    the end (Pusher: object to goal; NaN if the env reports no such entry), and its success: that distance below
+    `distance`, or, with `min_return`, the episode's return at least that. The shortfall ranks episodes for the
+    fallback expert set (lower is better): the distance, or minus the return."""
+
+    info_key: str = "reward_dist"
+    distance: float = 0.08
+    min_return: float | None = None
+
+    @classmethod
+    def from_args(cls, args: Args) -> "Outcome":
+        return cls(args.success_info_key, args.success_distance, args.success_return)
+
+    def __call__(self, info: dict, ep_return: float) -> tuple[float, bool, float]:
+        """(final distance, success, shortfall) of an episode that ended with `info` after earning `ep_return`."""
+        distance = abs(float(info[self.info_key])) if self.info_key in info else math.nan
+        if self.min_return is None:
+            return distance, bool(distance < self.distance), distance
+        return distance, ep_return >= self.min_return, -ep_return
+
+
+def selection_key(evaluation: dict, outcome: Outcome) -> tuple[float, float]:
+    """What makes one evaluation better than another (SB3's EvalCallback keeps the best): the success rate, then the
+    final distance (smaller is better) or, when success is by return, the return."""
+    tie = evaluation["return"] if outcome.min_return is not None else -evaluation["final_distance"]
+    return evaluation["success_rate"], tie
+
+
 @torch.inference_mode()
-def evaluate(actor: Actor, env_id: str, episodes: int, seed: int, device: torch.device) -> dict:
+def evaluate(actor: Actor, env_id: str, episodes: int, seed: int, device: torch.device, outcome: Outcome) -> dict:
     """Deterministic (mean-action) episodes from random starts: return, final distance, success. The unused sample
     comes from its own generator, so evaluating never moves the training RNG."""
     env = gym.make(env_id)
     generator = torch.Generator(device=device).manual_seed(seed)
     returns = []
     distances = []
+    successes = []
     for ep in range(episodes):
         obs, _ = env.reset(seed=seed + ep)
         done = False
@@ -386,15 +461,17 @@ def evaluate(actor: Actor, env_id: str, episodes: int, seed: int, device: torch.
             obs, reward, terminated, truncated, info = env.step(action[0].cpu().numpy())
             ep_return += float(reward)
             done = terminated or truncated
+        distance, success, _ = outcome(info, ep_return)
         returns.append(ep_return)
-        distances.append(abs(float(info["reward_dist"])))
+        distances.append(distance)
+        successes.append(success)
     env.close()
     distances = np.asarray(distances)
     return {
         "return": float(np.mean(returns)),
         "return_std": float(np.std(returns)),
         "final_distance": float(distances.mean()),
-        "success_rate": float((distances < SUCCESS_DISTANCE).mean()),
+        "success_rate": float(np.mean(successes)),
         "episodes": episodes,
     }
 
@@ -575,12 +652,13 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
 
     # the best evaluation so far (SB3's EvalCallback): success rate first, then final distance; a resumed run goes on
     # from the best.pt in its run directory
+    outcome = Outcome.from_args(args)
     best_path = os.path.join(run_dir, "best.pt")
     best_key = (-1.0, -math.inf)
     best_step = None
     if os.path.isfile(best_path):
         best = torch.load(best_path, weights_only=True, map_location="cpu")
-        best_key = (best["evaluation"]["success_rate"], -best["evaluation"]["final_distance"])
+        best_key = selection_key(best["evaluation"], outcome)
         best_step = best["training_steps"]
 
     obs, _ = env.reset(seed=args.seed + start_step)  # random starts: seed once, then the env RNG runs on
@@ -616,7 +694,9 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
         if terminated or truncated:
             writer.add_scalar("charts/episodic_return", ep_return, global_step)
             writer.add_scalar("charts/episodic_length", ep_length, global_step)
-            writer.add_scalar("charts/final_distance", abs(float(info["reward_dist"])), global_step)
+            distance = outcome(info, ep_return)[0]
+            if not math.isnan(distance):
+                writer.add_scalar("charts/final_distance", distance, global_step)
             ep_return = 0.0
             ep_length = 0
             next_obs, _ = env.reset()
@@ -667,32 +747,34 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
             writer.add_scalar("losses/ent_coef_loss", ent_coef_loss.item(), step)
             writer.add_scalar("charts/SPS", sps, step)
         if step % args.eval_frequency == 0 or step == args.total_timesteps:
-            last_eval = evaluate(actor, args.env_id, args.eval_episodes, SELECTION_EVAL_SEED, device)
+            last_eval = evaluate(actor, args.env_id, args.eval_episodes, SELECTION_EVAL_SEED, device, outcome)
             writer.add_scalar("eval/oracle_return", last_eval["return"], step)
             writer.add_scalar("eval/oracle_final_distance", last_eval["final_distance"], step)
             writer.add_scalar("eval/oracle_success_rate", last_eval["success_rate"], step)
-            if (last_eval["success_rate"], -last_eval["final_distance"]) > best_key:
-                best_key = (last_eval["success_rate"], -last_eval["final_distance"])
+            if selection_key(last_eval, outcome) > best_key:
+                best_key = selection_key(last_eval, outcome)
                 best_step = step
                 save_oracle(step, {**last_eval, "reset_seed": SELECTION_EVAL_SEED}, best_path)
             writer.add_scalar("eval/best_success_rate", best_key[0], step)
-            writer.add_scalar("eval/best_final_distance", -best_key[1], step)
+            writer.add_scalar("eval/best_return" if outcome.min_return is not None else "eval/best_final_distance",
+                              best_key[1] if outcome.min_return is not None else -best_key[1], step)  # fmt: skip
             with open(os.path.join(run_dir, "eval_curve.csv"), "a") as f:  # the selection curve, one row per evaluation
                 if f.tell() == 0:
                     f.write("step,success_rate,final_distance,return\n")
                 f.write(f"{step},{last_eval['success_rate']},{last_eval['final_distance']},{last_eval['return']}\n")
             expert_reached = args.stop_at_expert and (
                 last_eval["success_rate"] >= EXPERT_SUCCESS_RATE
-                and last_eval["final_distance"] <= EXPERT_FINAL_DISTANCE
+                and (args.env_id not in PUSHER_IDS or last_eval["final_distance"] <= EXPERT_FINAL_DISTANCE)
             )
         if step % report_every == 0 or step % args.eval_frequency == 0 or step == args.total_timesteps:
             sps = (step - start_step) / max(time.time() - t0, 1e-9)
             eta = (args.total_timesteps - step) / max(sps, 1e-9)
             ev = ""
+            best_tie = best_key[1] if outcome.min_return is not None else -best_key[1]  # its return, or distance
             if last_eval:
                 ev = (
                     f" | eval return {last_eval['return']:.1f} dist {last_eval['final_distance']:.3f} success "
-                    f"{last_eval['success_rate']:.2f} | best {best_key[0]:.2f} / {-best_key[1]:.3f} at {best_step}"
+                    f"{last_eval['success_rate']:.2f} | best {best_key[0]:.2f} / {best_tie:.3f} at {best_step}"
                 )
             print(
                 f"[oracle] {step}/{args.total_timesteps} {100 * step // args.total_timesteps}% | {sps:.0f} SPS"
@@ -721,7 +803,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     best = torch.load(best_path, weights_only=True, map_location="cpu")
     actor.load_state_dict(best["actor_state_dict"])
     qf.load_state_dict(best["qf_state_dict"])
-    final_eval = evaluate(actor, args.env_id, args.final_eval_episodes, FINAL_EVAL_SEED, device)
+    final_eval = evaluate(actor, args.env_id, args.final_eval_episodes, FINAL_EVAL_SEED, device, outcome)
     print(
         f"[oracle] best evaluation at step {best['training_steps']}: success rate "
         f"{best['evaluation']['success_rate']:.2f}, final distance {best['evaluation']['final_distance']:.4f} over "
@@ -934,8 +1016,12 @@ def video_camera() -> dict:
 
 def video_env(env_id: str, size: int = VIDEO_SIZE) -> gym.Env:
     """Pusher from its own model plus the videos' camera (and no shadows: they triple the time of a frame in software
-    OpenGL), rendering every reset and step into a list (Gymnasium's RenderCollection)."""
+    OpenGL), or another env with its own camera, rendering every reset and step into a list (Gymnasium's
+    RenderCollection)."""
     import gymnasium.envs.mujoco as gym_mujoco
+
+    if env_id not in PUSHER_IDS:
+        return gym.wrappers.RenderCollection(gym.make(env_id, render_mode="rgb_array", width=size, height=size))
 
     name = "pusher_v5.xml" if env_id == "Pusher-v5" else "pusher.xml"
     tree = ET.parse(os.path.join(os.path.dirname(gym_mujoco.__file__), "assets", name))
@@ -963,9 +1049,9 @@ def video_env(env_id: str, size: int = VIDEO_SIZE) -> gym.Env:
 def check_video(env_id: str) -> None:
     """Before anything is written: pick the headless GL backend (egl when MUJOCO_GL is unset and there is no display),
     render one frame, and find ffmpeg. InputError, one line, if either is missing."""
-    if env_id not in PUSHER_IDS:
+    if env_id in MAZE_IDS:
         raise InputError(
-            f"--capture-video films a Pusher teacher; the maze's are drawn by inform_dqn_gridworld.py "
+            f"--capture-video films a SAC teacher; the maze's are drawn by inform_dqn_gridworld.py "
             f"--capture-video, not for {env_id}"
         )
     if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
@@ -1028,6 +1114,7 @@ def record_teacher(args: Args, actor: Actor, run_dir: str, device: torch.device)
     reset seed, frames and final distance."""
     os.makedirs(os.path.join(run_dir, "videos"), exist_ok=True)
     env = video_env(args.env_id)
+    outcome = Outcome.from_args(args)
     generator = torch.Generator(device=device).manual_seed(FINAL_EVAL_SEED)
     frames = []
     record = {}
@@ -1036,18 +1123,20 @@ def record_teacher(args: Args, actor: Actor, run_dir: str, device: torch.device)
         obs, _ = env.reset(seed=FINAL_EVAL_SEED + ep)
         done = False
         info = {}
+        ep_return = 0.0
         while not done:
             _, _, action = actor.get_action(
                 torch.as_tensor(obs, dtype=torch.float32, device=device).unsqueeze(0), generator
             )
-            obs, _, terminated, truncated, info = env.step(action[0].cpu().numpy())
+            obs, reward, terminated, truncated, info = env.step(action[0].cpu().numpy())
+            ep_return += float(reward)
             done = terminated or truncated
         episode = env.render()
         frames += episode
         record[f"episode_{ep}"] = {
             "reset_seed": FINAL_EVAL_SEED + ep,
             "frames": len(episode),
-            "final_distance": abs(float(info["reward_dist"])),
+            "final_distance": outcome(info, ep_return)[0],
         }
     write_video(os.path.join(run_dir, "videos", "oracle.mp4"), frames, env.metadata["render_fps"])
     env.close()
@@ -1074,12 +1163,12 @@ def main() -> None:
     args = tyro.cli(Args)
     try:
         check_args(args)
-        is_pusher = args.env_id in PUSHER_IDS
+        is_sac = args.env_id not in MAZE_IDS
         if args.capture_video:
             check_video(args.env_id)
-        args.method = args.method or ("sac" if is_pusher else "value-iteration")
+        args.method = args.method or ("sac" if is_sac else "value-iteration")
         args.output_path = args.output_path or os.path.join("oracles", f"{args.env_id}__{args.method}_oracle.pt")
-        if is_pusher:
+        if is_sac:
             train_sac(args, read_training_state(args.resume) if args.resume is not None else None)
         else:
             train_maze(args)

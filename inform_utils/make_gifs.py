@@ -117,10 +117,12 @@ def pusher_gif(run_dir: str, out_dir: str, size: int, frame_step: int) -> str:
     panels = []
     for p, actor in actors.items():
         env = isp.video_env(env_id, seed, boxes, size=size)
-        res = isp.evaluate(actor, env, 1, lambda ep: seed, True, torch.Generator(), a["success_distance"])
+        outcome = isp.Outcome(a.get("success_info_key", "reward_dist"), a["success_distance"], a.get("success_return"))
+        res = isp.evaluate(actor, env, 1, lambda ep: seed, True, torch.Generator(), outcome)
         frames = env.render()
         env.close()
-        if not np.allclose(res["paths"][0], paths[p], atol=1e-6):  # the GIF must show the episode the run measured
+        path = isp.object_xy(res["trajectories"][0])
+        if not np.allclose(path, paths[p], atol=1e-6):  # the GIF must show the episode the run measured
             raise ValueError(f"{run_dir}: {p}'s episode here differs from the run's (obstacle_paths.npz); make the "
                              "GIF with the mujoco and gymnasium versions the run used")  # fmt: skip
         distance = res["final_distance"]

@@ -537,12 +537,12 @@ def test_malformed_flags_get_tyros_message(tmp_path, script, flags, phrase):
 # one SAC for the Pusher oracle, in two scripts (CleanRL repeats code across files): held together here
 
 
-def test_both_scripts_carry_the_same_networks():
+def test_both_scripts_carry_the_same_networks_and_judge_episodes_alike():
     import inspect
 
     import oracle_train
 
-    for name in ("BatchedLinear", "QEnsemble", "Actor", "soft_update", "video_camera", "write_video"):
+    for name in ("BatchedLinear", "QEnsemble", "Actor", "soft_update", "video_camera", "write_video", "Outcome"):
         assert inspect.getsource(getattr(isp, name)) == inspect.getsource(getattr(oracle_train, name)), name
 
 

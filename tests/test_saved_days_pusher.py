@@ -86,7 +86,8 @@ def test_the_day_file_is_plain_tensors_and_its_table_adds_up(day):
     starts, ends = saved["episode_start"], saved["episode_end"]
     assert starts[0] == 0 and ends[-1] == n and torch.equal(starts[1:], ends[:-1])  # episodes tile the buffer
     assert len(starts) == summary["sleep/episodes"]
-    assert torch.equal(saved["episode_success"], saved["episode_final_distance"] < 1.0)
+    assert torch.equal(saved["episode_success"], saved["episode_shortfall"] < 1.0)  # the final distance, here
+    assert torch.equal(saved["episode_success"], saved["success"][starts])  # each episode's tag, on its transitions
     assert saved["day_args"]["seed"] == 1 and saved["format"] == isp.DAY_FORMAT
 
 
