@@ -6,12 +6,18 @@ and the expert) on the 30-cell maze; what the paper leaves open is in docs/proto
 `main`: Args, the network, Eq. 1-4 and the teacher, the buffer, the day, the night, main. Everything else comes after
 main.
 
+Gymnasium's toy-text tasks that carry their model (`--env-id FrozenLake-v1`, `CliffWalking-v1`, `Taxi-v4`) run from
+their id alone: exact Q* by value iteration on `env.unwrapped.P`, one-hot observations, and an episode succeeds if it
+ends on the task's goal (the terminal that earns its top reward) within --success-max-steps. The maze's own tests
+(the wall maze, its start cells, the reward table and the drawings) are skipped there, and the summary says so.
+
 Imported by inform_utils/, the only names other code may use (a test holds it to them): Args, main, check_args,
 StopSignals, Teacher, ReplayBuffer, greedy_actions, greedy_episode, load_q_network, maze_frames, InputError.
 
     python inform_dqn_gridworld.py --seed 1
     python inform_dqn_gridworld.py --teacher-noise 0.2 --teacher-delay 1 --credit-window 2   # a human-like teacher
     python inform_dqn_gridworld.py --teacher human   # teach it yourself (docs/teachers.md)
+    python inform_dqn_gridworld.py --env-id FrozenLake-v1 --success-max-steps 100   # a toy-text task (slippery ice)
 """
 
 import collections
@@ -63,6 +69,7 @@ except ModuleNotFoundError as e:  # a copy of this script without the maze besid
 
 MAZE_IDS = tuple(gridworld_env.ENV_IDS) if gridworld_env else ("KnoxStoneMaze-v0",)
 POLICIES = ("oracle", "tamer", "inform")
+TOY_TEXT_MAX_STEPS = 200  # the step limit of a toy-text env registered without one (CliffWalking), as the maze's
 if gridworld_env:
     ALL_STARTS = tuple(cell for cell in range(gridworld_env.N_CELLS) if cell != gridworld_env.GOAL)  # the 29 others
     OPTIMUM = gridworld_env.greedy_episode_length(gridworld_env.optimal_q("plain").argmax(1))  # 19 steps from S
@@ -93,7 +100,8 @@ class Args:
     wandb_entity: str | None = None
     """the Weights & Biases team or user (None: your default)"""
     env_id: str = "KnoxStoneMaze-v0"
-    """the maze to train on (one of the ids gridworld_env registers)"""
+    """the maze to train on (one of the ids gridworld_env registers), or a Gymnasium toy-text env with a model
+    (FrozenLake-v1, CliffWalking-v1, Taxi-v4, ...)"""
 
     # Oracle (the simulated teacher)
     oracle_gamma: float = 0.99
@@ -123,7 +131,8 @@ class Args:
     feedback_alpha_end: float = 0.999
     """alpha of Eq. 4 at the end of the forward phase (alpha rises linearly: the teacher gets stricter)"""
     success_max_steps: int = 30
-    """an episode is tagged success if it reaches the goal in fewer than this many steps"""
+    """an episode is tagged success if it reaches the goal (the terminal that earns the task's top reward) in fewer
+    than this many steps"""
 
     # The teacher as a person (docs/protocol.md); the defaults are the paper's perfect, instant, tireless teacher
     teacher: Literal["oracle", "human"] = "oracle"
@@ -183,10 +192,66 @@ class Args:
     """forward-phase environment steps between greedy evaluations"""
     sleep_eval_frequency: int = 500
     """sleep-phase gradient steps between greedy evaluations"""
+    eval_episodes: int = 20
+    """greedy episodes of each evaluation on a toy-text env, on fixed reset seeds (the maze's tests are one episode
+    from each of their start cells)"""
     log_frequency: int | None = None
     """steps between scalar logs (losses, SPS, feedback) (None: 100; with --teacher human 1, every answer)"""
     evaluate: str | None = None
     """re-evaluate a saved tamer_h.pt or inform_q.pt, print its episode lengths as JSON, train nothing"""
+
+
+# the task: the maze, or a toy-text env that carries its model (P[s][a] = [(probability, s', reward, terminated)])
+
+
+def make_env(env_id: str) -> gym.Env:
+    """The maze, or a toy-text env with its state as a one-hot vector (the maze's observation) and a step limit."""
+    if env_id in MAZE_IDS:
+        return gym.make(env_id)
+    limit = None if gym.spec(env_id).max_episode_steps else TOY_TEXT_MAX_STEPS
+    return OneHot(gym.make(env_id, max_episode_steps=limit))
+
+
+class OneHot(gym.ObservationWrapper):
+    def __init__(self, env: gym.Env):
+        super().__init__(env)
+        self.observation_space = gym.spaces.Box(0.0, 1.0, (int(env.observation_space.n),), np.float32)
+
+    def observation(self, obs):
+        one_hot = np.zeros(self.observation_space.shape, np.float32)
+        one_hot[int(obs)] = 1.0
+        return one_hot
+
+
+def optimal_q(env: gym.Env, gamma: float) -> np.ndarray:
+    """Exact Q* by value iteration (the "fully trained model"): the maze's own, or from a toy-text env's model, whose
+    slippery moves give expected values."""
+    if env.spec.id in MAZE_IDS:
+        return gridworld_env.optimal_q(env.unwrapped.variant, gamma)
+    model = env.unwrapped.P
+    n_states, n_actions = len(model), len(model[0])
+    k = max(len(outcomes) for moves in model.values() for outcomes in moves.values())
+    prob, reward, going_on = (np.zeros((n_states, n_actions, k)) for _ in range(3))
+    next_state = np.zeros((n_states, n_actions, k), dtype=np.int64)
+    for state, moves in model.items():
+        for action, outcomes in moves.items():
+            for i, (p, s_next, r, terminated) in enumerate(outcomes):
+                prob[state, action, i], next_state[state, action, i] = p, s_next
+                reward[state, action, i], going_on[state, action, i] = r, not terminated
+    q = np.zeros((n_states, n_actions))
+    while True:
+        q_new = (prob * (reward + gamma * going_on * q.max(1)[next_state])).sum(-1)
+        if np.abs(q_new - q).max() < 1e-10:
+            return q_new
+        q = q_new
+
+
+def top_reward(env: gym.Env) -> float:
+    """The reward of the task's goal, which a success must end on: the maze pays +1 at G and nothing else; a toy-text
+    env, the largest reward in its model (FrozenLake's goal, Taxi's drop-off, CliffWalking's last step)."""
+    if env.spec.id in MAZE_IDS:
+        return 1.0
+    return max(r for moves in env.unwrapped.P.values() for outcomes in moves.values() for _, _, r, _ in outcomes)
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -320,15 +385,18 @@ def reward_table(q_net, next_cell, gamma, temperature, device):
     return recover_reward(q, soft_value(q, temperature)[next_cell], terminated, gamma)
 
 
-def greedy_actions(q_net, device) -> np.ndarray:
-    """The greedy policy as a table: one forward pass over every cell's one-hot observation."""
+def greedy_actions(q_net, device, n_states: int | None = None) -> np.ndarray:
+    """The greedy policy as a table: one forward pass over every state's one-hot observation (the maze's 30 cells
+    unless `n_states` says otherwise)."""
     with torch.no_grad():
-        return q_net(torch.eye(gridworld_env.N_CELLS, device=device)).argmax(1).cpu().numpy()
+        eye = torch.eye(n_states or gridworld_env.N_CELLS, device=device)
+        return q_net(eye).argmax(1).cpu().numpy()
 
 
-def is_success(terminated: bool, length: int, max_steps: int) -> bool:
-    """The success tag: the goal was reached in fewer than `max_steps` steps."""
-    return bool(terminated) and length < max_steps
+def is_success(terminated: bool, reward: float, length: int, max_steps: int, goal_reward: float) -> bool:
+    """The success tag: the goal was reached in fewer than `max_steps` steps. The goal is the terminal that earns the
+    task's top reward (the maze's G; not FrozenLake's holes, which end the episode with nothing)."""
+    return bool(terminated) and reward >= goal_reward and length < max_steps
 
 
 class ReplayBuffer:
@@ -380,6 +448,8 @@ def forward_phase(args: Args, env, q_star: np.ndarray, buffer: ReplayBuffer, eva
     optimum_at = None  # (step, +1 signals) at the first evaluation where TAMER's greedy path is the shortest
     evaluated_at = 0
     ep_start = ep_length = successes = 0
+    ep_return = 0.0
+    goal_reward = top_reward(env)
     obs, _ = env.reset(seed=args.seed)
     for step in range(n):
         epsilon = linear_schedule(args.start_e, args.end_e, int(args.exploration_fraction * n), step)
@@ -403,17 +473,19 @@ def forward_phase(args: Args, env, q_star: np.ndarray, buffer: ReplayBuffer, eva
         labels = teacher(step, h_star)  # {transition: h} that this step's arriving signal labels
         buffer.feedback[list(labels)] = torch.tensor(list(labels.values()), device=device)
 
-        next_obs, _, terminated, truncated, _ = env.step(action)
+        next_obs, reward, terminated, truncated, _ = env.step(action)
         buffer.add(obs, action, next_obs, terminated)
         ep_length += 1
+        ep_return += float(reward)
         obs = next_obs
         if terminated or truncated:  # an episode cut off by the end of the phase stays untagged: a failure
-            success = buffer.tag_episode(ep_start, is_success(terminated, ep_length, args.success_max_steps))
-            successes += success
-            writer.add_scalar("charts/episodic_return", float(terminated), step + 1)
+            success = is_success(terminated, reward, ep_length, args.success_max_steps, goal_reward)
+            successes += buffer.tag_episode(ep_start, success)
+            writer.add_scalar("charts/episodic_return", ep_return, step + 1)
             writer.add_scalar("charts/episodic_length", ep_length, step + 1)
             ep_start = step + 1
             ep_length = 0
+            ep_return = 0.0
             obs, _ = env.reset()
 
         # ALGO LOGIC: TAMER's update: H regresses on the feedback (Eq. 1); a person's answer gets several (below main)
@@ -438,17 +510,17 @@ def forward_phase(args: Args, env, q_star: np.ndarray, buffer: ReplayBuffer, eva
             writer.add_scalar("charts/SPS", progress.sps(step + 1), step + 1)
         report = {"positives": teacher.positives}
         if (step + 1) % args.eval_frequency == 0 or last_step:
-            metrics = evaluator("tamer", greedy_actions(h_net, device), step + 1)
+            metrics = evaluator("tamer", greedy_actions(h_net, device, buffer.obs.shape[1]), step + 1)
             evaluated_at = step + 1
             report["eval length"] = metrics["eval/tamer_episode_length"]
-            if optimum_at is None and report["eval length"] == OPTIMUM:
+            if optimum_at is None and report["eval length"] == evaluator.optimum:
                 optimum_at = (step + 1, teacher.positives)
         progress(step + 1, **report)
         if last_step:
             break
 
     if evaluated_at != buffer.size:  # the person stopped between two evaluations
-        evaluator("tamer", greedy_actions(h_net, device), buffer.size)
+        evaluator("tamer", greedy_actions(h_net, device, buffer.obs.shape[1]), buffer.size)
     if human is not None:
         human.finish(buffer.size, teacher.positives, successes)
     stats = {
@@ -536,9 +608,9 @@ def sleep_phase(args: Args, buffer: ReplayBuffer, n_actions: int, evaluator, wri
             writer.add_scalar("sleep/SPS", progress.sps(step), step)
         report = {"iq_loss": losses.get("losses/iq_loss")}
         if step % args.sleep_eval_frequency == 0 or last_step:
-            metrics = evaluator("inform", greedy_actions(q_net, device), step)
+            metrics = evaluator("inform", greedy_actions(q_net, device, buffer.obs.shape[1]), step)
             report["eval length"] = metrics["eval/inform_episode_length"]
-            if "sleep/step_to_inform_optimum" not in stats and report["eval length"] == OPTIMUM:
+            if "sleep/step_to_inform_optimum" not in stats and report["eval length"] == evaluator.optimum:
                 stats["sleep/step_to_inform_optimum"] = step
         progress(step, **report)
     return q_net, {**stats, **losses}
@@ -588,7 +660,7 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
             "hyperparameters",
             "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
         )
-        env = gym.make(args.env_id)
+        env = make_env(args.env_id)
         env.action_space.seed(args.seed)
         evaluator = Evaluator(args, writer)
         obs_dim = env.observation_space.shape[0]
@@ -598,7 +670,7 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
             # ---- oracle: exact Q* by value iteration (the "fully trained model"), or a teacher from oracle_train.py
             phase = "oracle"
             t0 = time.time()
-            q_star = gridworld_env.optimal_q(env.unwrapped.variant, args.oracle_gamma) if oracle_q is None else oracle_q
+            q_star = optimal_q(env, args.oracle_gamma) if oracle_q is None else oracle_q
             summary["time/oracle_s"] = time.time() - t0
             evaluator("oracle", q_star.argmax(1), 0)
 
@@ -631,16 +703,22 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
 
         # ---- the recovered reward (Eq. 3) on the maze the agent learned in, then the final evaluation
         phase = "eval"
-        policies = {"oracle": q_star.argmax(1), "tamer": greedy_actions(h_net, device)}
+        policies = {"oracle": q_star.argmax(1), "tamer": greedy_actions(h_net, device, obs_dim)}
         if q_net is not None:
-            policies["inform"] = greedy_actions(q_net, device)
-            reward = reward_table(q_net, env.unwrapped.next_cell, args.sleep_gamma, args.sleep_temperature, device)
-            figure = reward_figure(reward.numpy(), f"recovered reward, seed {args.seed}")
-            writer.add_figure("sleep/recovered_reward", figure)
+            policies["inform"] = greedy_actions(q_net, device, obs_dim)
+            extra = {"env_id": args.env_id, "gamma": args.sleep_gamma, "temperature": args.sleep_temperature}
             if args.save_model:
-                extra = {"env_id": args.env_id, "gamma": args.sleep_gamma, "temperature": args.sleep_temperature}
                 save_network(f"{run_dir}/inform_q.pt", q_net, **extra)
-                save_atomic({"reward": reward, **extra}, f"{run_dir}/recovered_reward.pt")
+            if args.env_id in MAZE_IDS:  # the reward table needs the maze's deterministic moves
+                reward = reward_table(q_net, env.unwrapped.next_cell, args.sleep_gamma, args.sleep_temperature, device)
+                figure = reward_figure(reward.numpy(), f"recovered reward, seed {args.seed}")
+                writer.add_figure("sleep/recovered_reward", figure)
+                if args.save_model:
+                    save_atomic({"reward": reward, **extra}, f"{run_dir}/recovered_reward.pt")
+        if args.env_id not in MAZE_IDS:
+            summary["maze_tests/skipped"] = (
+                f"the wall maze, start cells, reward table and drawings: none on {args.env_id}"
+            )
         final_evaluation(args, env, policies, h_net, q_net, evaluator, run_dir, summary["feedback/steps"])
     except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
         status = "interrupted"
@@ -677,54 +755,77 @@ def final_evaluation(args: Args, env, policies: dict, h_net, q_net, evaluator, r
             print("\nINFORM (after the sleep), greedy from S:\n" + draw_greedy_path(policies["inform"], variant))
 
 
-def evaluate(policy: np.ndarray, env: gym.Env, start_cells, success_max_steps: int):
-    """Run the greedy table policy once from each start cell; mean episode length and success rate."""
+def evaluate(policy: np.ndarray, env: gym.Env, resets: list[dict], success_max_steps: int):
+    """Run the greedy table policy once from each reset (the keyword arguments of env.reset: a maze's start cell, a
+    toy-text env's seed); mean episode length and success rate."""
     lengths = []
     successes = []
-    for cell in start_cells:
-        obs, _ = env.reset(options={"start_cell": cell})
+    goal_reward = top_reward(env)
+    for reset in resets:
+        obs, _ = env.reset(**reset)
         terminated = truncated = False
         length = 0
+        reward = 0.0
         while not (terminated or truncated):
-            obs, _, terminated, truncated, _ = env.step(policy[int(obs.argmax())])
+            obs, reward, terminated, truncated, _ = env.step(policy[int(obs.argmax())])
             length += 1
         lengths.append(length)
-        successes.append(is_success(terminated, length, success_max_steps))
+        successes.append(is_success(terminated, reward, length, success_max_steps, goal_reward))
     return float(np.mean(lengths)), float(np.mean(successes))
 
 
+def start_cells(*cells: int) -> list[dict]:  # a maze's resets from these start cells
+    return [{"options": {"start_cell": cell}} for cell in cells]
+
+
 class Evaluator:
-    """Greedy evaluation on the plain maze, the wall maze, the start set and all 29 starts; logs eval/ tags."""
+    """Greedy evaluation on the plain maze, the wall maze, the start set and all 29 starts, or on a toy-text env from
+    --eval-episodes fixed reset seeds; logs eval/ tags. `optimum` is the shortest mean length a greedy policy can
+    have there (the maze's 19 steps; on a toy-text env, exact Q*'s)."""
 
     def __init__(self, args: Args, writer: SummaryWriter | None):
         self.writer = writer
         self.success_max_steps = args.success_max_steps
-        self.envs = {
-            name: gym.make(env_id)
-            for name, env_id in [
-                ("plain", "KnoxStoneMaze-v0"),
-                ("wall", "KnoxStoneMazeWall-v0"),
-                ("start_set", "KnoxStoneMazeStartSet-v0"),
-            ]
-        }
+        self.maze = args.env_id in MAZE_IDS
+        if self.maze:
+            self.envs = {
+                name: gym.make(env_id)
+                for name, env_id in [
+                    ("plain", "KnoxStoneMaze-v0"),
+                    ("wall", "KnoxStoneMazeWall-v0"),
+                    ("start_set", "KnoxStoneMazeStartSet-v0"),
+                ]
+            }
+            self.optimum = OPTIMUM
+        else:
+            self.envs = {"plain": make_env(args.env_id)}
+            self.resets = [{"seed": 1_000_000 + 1000 * args.seed + ep} for ep in range(args.eval_episodes)]
+            q_star = optimal_q(self.envs["plain"], args.oracle_gamma)
+            self.optimum = evaluate(q_star.argmax(1), self.envs["plain"], self.resets, self.success_max_steps)[0]
         self.seconds = 0.0
         self.final = {}
 
     def __call__(self, name: str, policy: np.ndarray, step: int) -> dict:
         t0 = time.time()
-        length, _ = evaluate(policy, self.envs["plain"], [gridworld_env.START], self.success_max_steps)
-        wall_length, _ = evaluate(policy, self.envs["wall"], [gridworld_env.START], self.success_max_steps)
-        set_length, set_success = evaluate(
-            policy, self.envs["start_set"], gridworld_env.START_SET, self.success_max_steps
-        )
-        _, all_success = evaluate(policy, self.envs["plain"], ALL_STARTS, self.success_max_steps)
-        metrics = {
-            f"eval/{name}_episode_length": length,
-            f"eval/wall/{name}_episode_length": wall_length,
-            f"eval/start_set/{name}_episode_length": set_length,
-            f"eval/start_set/{name}_success_rate": set_success,
-            f"eval/all_starts/{name}_success_rate": all_success,
-        }
+        if self.maze:
+            length, _ = evaluate(policy, self.envs["plain"], start_cells(gridworld_env.START), self.success_max_steps)
+            wall_length, _ = evaluate(
+                policy, self.envs["wall"], start_cells(gridworld_env.START), self.success_max_steps
+            )
+            set_length, set_success = evaluate(
+                policy, self.envs["start_set"], start_cells(*gridworld_env.START_SET), self.success_max_steps
+            )
+            _, all_success = evaluate(policy, self.envs["plain"], start_cells(*ALL_STARTS), self.success_max_steps)
+            metrics = {
+                f"eval/{name}_episode_length": length,
+                f"eval/wall/{name}_episode_length": wall_length,
+                f"eval/start_set/{name}_episode_length": set_length,
+                f"eval/start_set/{name}_success_rate": set_success,
+                f"eval/all_starts/{name}_success_rate": all_success,
+            }
+        else:
+            length, success = evaluate(policy, self.envs["plain"], self.resets, self.success_max_steps)
+            metrics = {f"eval/{name}_episode_length": length, f"eval/{name}_success_rate": success}
         for tag, value in metrics.items():
             if self.writer is not None:
                 self.writer.add_scalar(tag, value, step)
@@ -964,8 +1065,9 @@ def load_oracle(path: str, env_id: str) -> np.ndarray:
     return q_table.double().numpy()
 
 
-def load_q_network(path: str) -> QNetwork:
-    """Rebuild a saved H or Q network (tamer_h.pt, inform_q.pt) from its state_dict and arguments."""
+def load_q_network(path: str, n_states: int = 30) -> QNetwork:
+    """Rebuild a saved H or Q network (tamer_h.pt, inform_q.pt) from its state_dict and arguments; it must read
+    `n_states`-d one-hot observations (the maze's 30 cells by default)."""
     ckpt = read_checkpoint(path)
     if "state_dict" not in ckpt or "kwargs" not in ckpt:
         raise InputError(f"{path}: not a saved network of this script (needs 'state_dict' and 'kwargs')")
@@ -974,8 +1076,8 @@ def load_q_network(path: str) -> QNetwork:
         net.load_state_dict(ckpt["state_dict"])
     except RuntimeError as e:
         raise InputError(f"{path}: the weights do not fit the network: {str(e).splitlines()[0][:160]}") from None
-    if ckpt["kwargs"].get("obs_dim") != gridworld_env.N_CELLS:
-        raise InputError(f"{path}: a network for {ckpt['kwargs'].get('obs_dim')}-d observations, not the maze's 30")
+    if ckpt["kwargs"].get("obs_dim") != n_states:
+        raise InputError(f"{path}: a network for {ckpt['kwargs'].get('obs_dim')}-d observations, not {n_states}-d")
     return net
 
 
@@ -1001,7 +1103,7 @@ def network_kwargs(net: nn.Module) -> dict:
 
 # Saved days (--save-buffer, --sleep-from): one forward phase, many nights. day.pt holds only tensors and plain values
 DAY_FORMAT = "inform-day-1"
-DAY_ARGS = (  # the flags that shape the day: what the oracle, forward_phase and the Teacher read
+DAY_ARGS = (  # the flags that shape the day: what the oracle, forward_phase, the Teacher and the evaluation read
     "env_id",
     "seed",
     "oracle_gamma",
@@ -1026,6 +1128,7 @@ DAY_ARGS = (  # the flags that shape the day: what the oracle, forward_phase and
     "budget_ends_forward_phase",
     "human_updates_per_answer",
     "eval_frequency",
+    "eval_episodes",
 )
 DAY_TENSORS = ("obs", "actions", "next_obs", "feedback", "terminated", "success")  # the buffer, one row a transition
 EPISODE_TABLE = ("episode_start", "episode_end", "episode_length", "episode_success", "episode_ended")
@@ -1080,8 +1183,11 @@ def load_day(run_dir: str, args: Args) -> dict:
     day = read_checkpoint(path)
     if day.get("format") != DAY_FORMAT:
         raise InputError(f"{path}: not a saved day of this script (format {day.get('format')!r}, not {DAY_FORMAT!r})")
-    if day.get("env_id") not in MAZE_IDS:
-        raise InputError(f"{path}: a day on {day.get('env_id')!r}, not on a maze ({', '.join(MAZE_IDS)})")
+    try:
+        check_env(str(day.get("env_id")))
+    except InputError as e:
+        raise InputError(f"{path}: a day on a task this script cannot run: {e}") from None
+    n_states, n_actions = env_shape(day["env_id"])
     required = ("day_args", *DAY_TENSORS, *EPISODE_TABLE, "h_net", "q_star", "rng", "day_stats")
     missing = [key for key in required if key not in day]
     missing += [f"day_args.{name}" for name in DAY_ARGS if name not in day.get("day_args", {})]
@@ -1090,8 +1196,8 @@ def load_day(run_dir: str, args: Args) -> dict:
     n = day["obs"].shape[0] if isinstance(day["obs"], torch.Tensor) else -1
     episodes = day["episode_start"].shape[0] if isinstance(day["episode_start"], torch.Tensor) else -1
     shapes = {name: (n,) for name in DAY_TENSORS} | {name: (episodes,) for name in EPISODE_TABLE}
-    shapes |= {"obs": (n, gridworld_env.N_CELLS), "next_obs": (n, gridworld_env.N_CELLS)}
-    shapes["q_star"] = (gridworld_env.N_CELLS, gridworld_env.N_ACTIONS)
+    shapes |= {"obs": (n, n_states), "next_obs": (n, n_states)}
+    shapes["q_star"] = (n_states, n_actions)
     for name, shape in shapes.items():
         found = tuple(day[name].shape) if isinstance(day[name], torch.Tensor) else type(day[name]).__name__
         if found != shape:
@@ -1103,8 +1209,8 @@ def load_day(run_dir: str, args: Args) -> dict:
         raise InputError(f"{path}: its day_stats hold more than plain numbers")
     try:
         QNetwork(**day["h_net"]["kwargs"]).load_state_dict(day["h_net"]["state_dict"])
-        if day["h_net"]["kwargs"]["obs_dim"] != gridworld_env.N_CELLS:
-            raise ValueError(f"H is a network for {day['h_net']['kwargs']['obs_dim']}-d observations, not the maze's")
+        if day["h_net"]["kwargs"]["obs_dim"] != n_states:
+            raise ValueError(f"H is a network for {day['h_net']['kwargs']['obs_dim']}-d observations, not {n_states}-d")
         torch.Generator().set_state(day["rng"]["torch"])
         np.random.RandomState().set_state(numpy_state(day["rng"]))
         random.Random().setstate(python_state(day["rng"]))
@@ -1214,8 +1320,13 @@ def check_args(args: Args) -> None:
             and (value <= 1.0 if interval.endswith("1]") else value < math.inf)
         ):
             raise InputError(f"{flag} must be in {interval}, got {value}")
+    check_env(args.env_id)
     if args.env_id not in MAZE_IDS:
-        raise InputError(f"unknown --env-id {args.env_id!r}; this script trains on one of {', '.join(MAZE_IDS)}")
+        maze_only = {"--teacher human": args.teacher == "human", "--capture-video": args.capture_video}
+        maze_only["--oracle-path"] = args.oracle_path is not None
+        used = [flag for flag, on in maze_only.items() if on]
+        if used:
+            raise InputError(f"{', '.join(used)}: the maze's only (exact Q* teaches on {args.env_id}); drop it")
     if args.oracle_gamma >= 1.0:
         raise InputError("--oracle-gamma must be below 1 for value iteration to converge")
     if args.teacher == "oracle" and args.tamer_learning_starts < args.tamer_batch_size:
@@ -1237,6 +1348,36 @@ def check_args(args: Args) -> None:
             f"--teacher human takes your answers as they are; drop {', '.join(changed)} "
             "(they distort the simulated teacher only)"
         )
+
+
+def check_env(env_id: str) -> None:
+    """--env-id: a maze, or a Gymnasium env with discrete states and actions and a model (env.unwrapped.P)."""
+    if env_id in MAZE_IDS:
+        return
+    try:
+        env = gym.make(env_id)
+    except Exception as e:  # unknown id, a missing extra, ...
+        first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
+        raise InputError(
+            f"--env-id {env_id}: Gymnasium cannot make it ({first}); mazes: {', '.join(MAZE_IDS)}"
+        ) from None
+    discrete = isinstance(env.observation_space, gym.spaces.Discrete) and isinstance(
+        env.action_space, gym.spaces.Discrete
+    )
+    has_model = isinstance(getattr(env.unwrapped, "P", None), dict)
+    env.close()
+    if not (discrete and has_model):
+        raise InputError(
+            f"--env-id {env_id}: this script needs discrete states and actions and the env's model (env.unwrapped.P, "
+            "as FrozenLake-v1, CliffWalking-v1 and Taxi-v4 have); continuous tasks run in inform_sac_pusher.py"
+        )
+
+
+def env_shape(env_id: str) -> tuple[int, int]:  # (states, actions)
+    env = make_env(env_id)
+    shape = env.observation_space.shape[0], int(env.action_space.n)
+    env.close()
+    return shape
 
 
 class Diverged(Exception):
@@ -1377,14 +1518,23 @@ def end_run(args, summary, status, phase, run_dir, run_start, evaluator, closing
 def print_results(summary: dict, run_dir: str) -> None:
     if summary["status"] == "completed":
         lengths = {p: summary.get(f"eval/{p}_episode_length") for p in POLICIES}  # no INFORM if the sleep was skipped
-        say(" | ".join(f"{p}: {v:.0f} steps" for p, v in lengths.items() if v is not None) + f" (optimum: {OPTIMUM})")
+        if summary["args"]["env_id"] in MAZE_IDS:
+            say(
+                " | ".join(f"{p}: {v:.0f} steps" for p, v in lengths.items() if v is not None)
+                + f" (optimum: {OPTIMUM})"
+            )
+        else:  # a toy-text env: the mean over the evaluation's episodes
+            say(" | ".join(f"{p}: {v:.1f} steps, success {summary[f'eval/{p}_success_rate']:.2f}"
+                           for p, v in lengths.items() if v is not None))  # fmt: skip
     say(f"{summary['status']} in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json")
 
 
 def evaluate_saved(args: Args) -> dict:
     """--evaluate: a saved tamer_h.pt or inform_q.pt, its greedy policy on the plain and wall mazes, the start set."""
     evaluator = Evaluator(args, writer=None)
-    metrics = evaluator("policy", greedy_actions(load_q_network(args.evaluate), torch.device("cpu")), 0)
+    n_states = evaluator.envs["plain"].observation_space.shape[0]
+    policy = greedy_actions(load_q_network(args.evaluate, n_states), torch.device("cpu"), n_states)
+    metrics = evaluator("policy", policy, 0)
     evaluator.close()
     return metrics
 

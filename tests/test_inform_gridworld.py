@@ -132,10 +132,10 @@ def test_reward_table_is_eq3_over_the_maze():
 
 # success tag and buffer ---------------------------------------------------------------------------------------------
 def test_success_tag():
-    assert inform.is_success(True, 19, 30)
-    assert inform.is_success(True, 29, 30)
-    assert not inform.is_success(True, 30, 30)  # fewer than 30 steps
-    assert not inform.is_success(False, 5, 30)  # truncated, not at the goal
+    assert inform.is_success(True, 1.0, 19, 30, 1.0)  # G (+1) in 19 steps
+    assert inform.is_success(True, 1.0, 29, 30, 1.0)
+    assert not inform.is_success(True, 1.0, 30, 30, 1.0)  # fewer than 30 steps
+    assert not inform.is_success(False, 0.0, 5, 30, 1.0)  # truncated, not at the goal
 
 
 def test_buffer_tags_whole_trajectories():
@@ -156,9 +156,9 @@ def test_greedy_actions_and_evaluate():
     q = g.optimal_q("plain")
     policy = inform.greedy_actions(TableQ(q), torch.device("cpu"))
     assert np.array_equal(policy, q.argmax(1))
-    length, success = inform.evaluate(policy, gym.make("KnoxStoneMaze-v0"), [g.START], 30)
+    length, success = inform.evaluate(policy, gym.make("KnoxStoneMaze-v0"), inform.start_cells(g.START), 30)
     assert (length, success) == (19, 1.0)
-    length, success = inform.evaluate(policy, gym.make("KnoxStoneMazeWall-v0"), [g.START], 30)
+    length, success = inform.evaluate(policy, gym.make("KnoxStoneMazeWall-v0"), inform.start_cells(g.START), 30)
     assert (length, success) == (200, 0.0)
 
 
