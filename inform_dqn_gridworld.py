@@ -452,6 +452,7 @@ def forward_phase(args: Args, env, q_star: np.ndarray, buffer: ReplayBuffer, eva
     goal_reward = top_reward(env)
     obs, _ = env.reset(seed=args.seed)
     for step in range(n):
+        StopSignals.check()  # a stop signal ends the run here, between two steps
         epsilon = linear_schedule(args.start_e, args.end_e, int(args.exploration_fraction * n), step)
         explore = random.random() < epsilon
         cell = int(obs.argmax())
@@ -570,6 +571,7 @@ def sleep_phase(args: Args, buffer: ReplayBuffer, n_actions: int, evaluator, wri
     losses = {}
     progress = Progress("sleep", args.sleep_gradient_steps, evaluator=evaluator)
     for step in range(1, args.sleep_gradient_steps + 1):
+        StopSignals.check()
         # ALGO LOGIC: the sleep update: Q by IQ-Learn (Eq. 2), the target Q follows softly
         replay = torch.randint(0, buffer.size, (batch_size,), device=device)
         expert = expert_idx[torch.randint(0, expert_idx.numel(), (batch_size,), device=device)]
@@ -630,9 +632,9 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
     failure = None
     phase = "startup"
     try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
-        with stop.held():  # a stop waits until the directory exists and is known, so the summary can go there
-            run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
+        run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
         print(f"run directory: {run_dir}", flush=True)
+        StopSignals.check()  # a stop while starting ends here, with a summary in the run directory
         random.seed(args.seed)
         np.random.seed(args.seed)
         torch.manual_seed(args.seed)
@@ -655,7 +657,7 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
                 dir=run_dir,
                 save_code=True,
             )
-        writer = HeldWriter(run_dir, stop)
+        writer = SummaryWriter(run_dir)
         writer.add_text(
             "hyperparameters",
             "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
@@ -889,7 +891,8 @@ class HumanTeacher:
         )
         while True:
             print("good move? [y / Enter / q] ", end="", flush=True)
-            line = sys.stdin.readline()
+            with StopSignals.waiting():  # Ctrl-C while you think stops the run at once
+                line = sys.stdin.readline()
             answer = line.strip().lower() if line else "q"
             if self.echo:
                 print(answer or "(Enter)", flush=True)
@@ -1386,40 +1389,52 @@ class Diverged(Exception):
 
 class StopSignals:
     """SIGINT (Ctrl-C; unless ignored: nohup, `&`), SIGTERM (kill, Slurm) and SIGHUP (a closed terminal) stop the
-    run: the first one raises KeyboardInterrupt, which main catches to save what finished. Never inside a TensorBoard
-    call (see `held`): an interrupt in its queue put can swallow the wake-up of the writer's flush thread, and close()
-    then waits for the thread's next flush, up to 120 s. Later signals, and any after the summary, are only noted."""
+    run. The handler only records the signal. `StopSignals.check()`, at the head of every loop, then raises
+    KeyboardInterrupt in our own code, never inside a library call (one raised inside TensorBoard's queue put could
+    leave close() waiting up to 120 s), and main catches it to save what finished. Only a wait for a person's answer
+    (`waiting()`: the maze's person at the terminal), which may never come, is interrupted at once. Signals after the
+    first, and any after the summary, are only noted."""
+
+    current = None  # the run's StopSignals, which check() and waiting() read
 
     def __init__(self):
         self.received = []
-        self.holding = 0
-        self.pending = False
+        self.raised = False
+        self.waiting_for_input = False
         self.finished = False
         self.broken_pipe = False
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
             if signal.getsignal(sig) is not signal.SIG_IGN:
                 signal.signal(sig, self.handler)
+        StopSignals.current = self
 
     def handler(self, signum, frame):
         self.received.append(signal.Signals(signum).name)
-        if len(self.received) > 1 or self.finished:
-            return
-        if self.holding:
-            self.pending = True
-            return
-        raise KeyboardInterrupt
+        if self.waiting_for_input:
+            StopSignals.check()
 
+    @classmethod
+    def check(cls) -> None:
+        """KeyboardInterrupt if a stop signal came (once: main then saves what finished, and says so)."""
+        stop = cls.current
+        if stop is not None and stop.received and not (stop.raised or stop.finished):
+            stop.raised = True
+            raise KeyboardInterrupt
+
+    @classmethod
     @contextlib.contextmanager
-    def held(self):
-        """A stop signal that arrives in here takes effect as soon as the block ends."""
-        self.holding += 1
+    def waiting(cls):
+        """A wait for a person: a stop signal that comes before it or during it raises at once."""
+        stop = cls.current
+        if stop is None:  # none installed (the script imported, not run): a plain wait
+            yield
+            return
+        stop.waiting_for_input = True
         try:
+            cls.check()
             yield
         finally:
-            self.holding -= 1
-            if self.pending and not self.holding:
-                self.pending = False
-                raise KeyboardInterrupt
+            stop.waiting_for_input = False
 
     def reason(self) -> str:
         """What stopped the run: the first signal; else SIGPIPE if the reader of our output died, else Ctrl-C."""
@@ -1431,24 +1446,6 @@ class StopSignals:
         if status == "interrupted" or self.received:
             return 128 + signal.Signals[self.reason()].value
         return {"completed": 0, "diverged": 1}[status]
-
-
-class HeldWriter:
-    """TensorBoard's SummaryWriter, each call inside StopSignals.held()."""
-
-    def __init__(self, log_dir: str, stop: StopSignals):
-        self.stop = stop
-        with stop.held():
-            self.writer = SummaryWriter(log_dir)
-
-    def __getattr__(self, name):
-        method = getattr(self.writer, name)
-
-        def held_call(*args, **kwargs):
-            with self.stop.held():
-                return method(*args, **kwargs)
-
-        return held_call
 
 
 def say(text: str, file=None) -> None:

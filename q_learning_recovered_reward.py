@@ -191,6 +191,7 @@ def train_agent(env: gym.Env, reward: dict | None, args: Args, seed: int, varian
     total_steps = 0
     obs, _ = env.reset(seed=seed)
     for _ in range(args.num_episodes):
+        StopSignals.check()  # a stop signal ends the run here, between two episodes
         s = int(obs.argmax())
         length = 0
         terminated = False
@@ -372,9 +373,8 @@ def main(args: Args, sources: list[dict], stop: "StopSignals | None" = None) -> 
     times = {}
     arm = next(iter(arms))
     try:
-        with stop.held():  # a stop waits until the directory exists and is known, so the summary can go there
-            run_dir = make_run_dir(run_name)  # only now: every input has been read and checked
-        writer = HeldWriter(run_dir, stop)
+        run_dir = make_run_dir(run_name)  # only now: every input has been read and checked
+        writer = SummaryWriter(run_dir)
         writer.add_text(
             "hyperparameters",
             "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
@@ -748,20 +748,23 @@ def reward_for(source: dict, reward_source: str, next_cell: np.ndarray) -> dict:
 # How a run ends: signals, a dead reader of our output, messages that cannot crash the exit ---------------------------
 class StopSignals:
     """SIGINT (Ctrl-C; unless ignored: nohup, `&`), SIGTERM (kill, Slurm) and SIGHUP (a closed terminal) stop the
-    run: the first one raises KeyboardInterrupt, which main catches to save what finished. Never inside a TensorBoard
-    call (see `held`): an interrupt in its queue put can swallow the wake-up of the writer's flush thread, and close()
-    then waits for the thread's next flush, up to 120 s. Later signals, and any after the summary, are only noted."""
+    run. The handler only records the signal. `StopSignals.check()`, at the head of every agent's episodes, then raises
+    KeyboardInterrupt in our own code, never inside a library call (one raised inside TensorBoard's queue put could
+    leave close() waiting up to 120 s), and main catches it to save what finished. Signals after the first, and any
+    after the summary, are only noted."""
+
+    current = None  # the run's StopSignals, which check() reads
 
     def __init__(self):
         self.received = []
-        self.holding = 0
-        self.pending = False
+        self.raised = False
         self.finished = False
         self.broken_pipe = False
         self.previous = {}
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
             if signal.getsignal(sig) is not signal.SIG_IGN:
                 self.previous[sig] = signal.signal(sig, self.handler)
+        StopSignals.current = self
 
     def restore(self):
         """The handlers from before (main also runs inside other programs, e.g. the tests)."""
@@ -770,24 +773,14 @@ class StopSignals:
 
     def handler(self, signum, frame):
         self.received.append(signal.Signals(signum).name)
-        if len(self.received) > 1 or self.finished:
-            return
-        if self.holding:
-            self.pending = True
-            return
-        raise KeyboardInterrupt
 
-    @contextlib.contextmanager
-    def held(self):
-        """A stop signal that arrives in here takes effect as soon as the block ends."""
-        self.holding += 1
-        try:
-            yield
-        finally:
-            self.holding -= 1
-            if self.pending and not self.holding:
-                self.pending = False
-                raise KeyboardInterrupt
+    @classmethod
+    def check(cls) -> None:
+        """KeyboardInterrupt if a stop signal came (once: main then saves what finished, and says so)."""
+        stop = cls.current
+        if stop is not None and stop.received and not (stop.raised or stop.finished):
+            stop.raised = True
+            raise KeyboardInterrupt
 
     def reason(self) -> str:
         """What stopped the run: the first signal; else SIGPIPE if the reader of our output died, else Ctrl-C."""
@@ -799,24 +792,6 @@ class StopSignals:
         if status == "interrupted" or self.received:
             return 128 + signal.Signals[self.reason()].value
         return 0
-
-
-class HeldWriter:
-    """TensorBoard's SummaryWriter, each call inside StopSignals.held()."""
-
-    def __init__(self, log_dir: str, stop: StopSignals):
-        self.stop = stop
-        with stop.held():
-            self.writer = SummaryWriter(log_dir)
-
-    def __getattr__(self, name):
-        method = getattr(self.writer, name)
-
-        def held_call(*args, **kwargs):
-            with self.stop.held():
-                return method(*args, **kwargs)
-
-        return held_call
 
 
 def say(text: str, file=None) -> None:

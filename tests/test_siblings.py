@@ -21,7 +21,6 @@ SHARED = (
     "InputError",
     "Diverged",
     "StopSignals",
-    "HeldWriter",
     "say",
     "make_run_dir",
     "write_json_atomic",
