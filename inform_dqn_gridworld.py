@@ -1284,11 +1284,41 @@ class InputError(Exception):
     """Bad input from the user: a flag value, a file. Reported as one line, before anything is written."""
 
 
-# every other integer flag (--feedback-budget too) must be >= 1
-NON_NEGATIVE_INTS = ("seed", "teacher_delay", "sleep_seed")
-FLOAT_RANGES = {
-    "tau": "(0, 1]",
+# The range of every flag that has one (InputError outside it). A flag not listed has none, so a new flag is never
+# refused for its default. Counts start at 1 unless 0 means something.
+RANGES = {
+    **dict.fromkeys(
+        (
+            "num_threads",
+            "tamer_total_timesteps",
+            "tamer_learning_starts",
+            "tamer_batch_size",
+            "tamer_train_frequency",
+            "success_max_steps",
+            "credit_window",
+            "feedback_budget",
+            "human_updates_per_answer",
+            "sleep_gradient_steps",
+            "sleep_batch_size",
+            "eval_frequency",
+            "sleep_eval_frequency",
+            "eval_episodes",
+            "log_frequency",
+        ),
+        "[1, inf)",
+    ),
+    **dict.fromkeys(("seed", "teacher_delay", "sleep_seed"), "[0, inf)"),
+    **dict.fromkeys(
+        (
+            "tamer_h_lr",
+            "exploration_fraction",
+            "sleep_q_lr",
+            "sleep_temperature",
+        ),
+        "(0, inf)",
+    ),
     "sleep_chi2_coef": "[0, inf)",
+    "tau": "(0, 1]",
     **dict.fromkeys(
         (
             "feedback_alpha_start",
@@ -1303,7 +1333,14 @@ FLOAT_RANGES = {
         "[0, 1]",
     ),
 }
-# every other float flag (learning rates, temperature, exploration fraction) must be in (0, inf)
+
+
+def in_range(value: float, interval: str) -> bool:
+    """Whether `value` lies in an interval written as "[0, 1]", "(0, inf)", ...; NaN never does."""
+    low, high = (float(bound) for bound in interval[1:-1].split(", "))
+    above = value >= low if interval[0] == "[" else value > low
+    below = value <= high if interval[-1] == "]" else value < high
+    return above and below
 
 
 def check_args(args: Args) -> None:
@@ -1313,16 +1350,12 @@ def check_args(args: Args) -> None:
     fill_teacher_defaults(args)
     for f in fields(args):
         value = getattr(args, f.name)
-        flag = "--" + f.name.replace("_", "-")
-        low = int(f.name not in NON_NEGATIVE_INTS)
-        if f.type in (int, int | None) and value is not None and value < low:
-            raise InputError(f"{flag} must be >= {low}, got {value}")
-        interval = FLOAT_RANGES.get(f.name, "(0, inf)") if f.type in (float, float | None) else None
-        if interval and not (
-            (value >= 0.0 if interval[0] == "[" else value > 0.0)  # NaN fails both tests
-            and (value <= 1.0 if interval.endswith("1]") else value < math.inf)
-        ):
-            raise InputError(f"{flag} must be in {interval}, got {value}")
+        interval = RANGES.get(f.name)
+        if interval is not None and value is not None and not in_range(value, interval):
+            flag = "--" + f.name.replace("_", "-")
+            counts = isinstance(value, int) and interval.endswith(", inf)")  # "[1, inf)": must be >= 1
+            must = f"be >= {interval[1:-6]}" if counts else f"be in {interval}"
+            raise InputError(f"{flag} must {must}, got {value}")
     check_env(args.env_id)
     if args.env_id not in MAZE_IDS:
         maze_only = {"--teacher human": args.teacher == "human", "--capture-video": args.capture_video}

@@ -1721,20 +1721,56 @@ class InputError(Exception):
     """Bad input from the user: a flag value, a file. Reported as one line, before anything is written."""
 
 
-NON_NEGATIVE_INTS = (
-    "seed",
-    "teacher_delay",
-    "sleep_seed",
-    "obstacle_episodes",
-    "authors_test_episodes",
-)  # every other integer flag (--feedback-budget too) must be >= 1
-
-
-FLOAT_RANGES = {
+# The range of every flag that has one (InputError outside it). A flag not listed has none, so a new flag is never
+# refused for its default. Counts start at 1 unless 0 means something.
+RANGES = {
+    **dict.fromkeys(
+        (
+            "num_threads",
+            "oracle_total_timesteps",
+            "oracle_learning_starts",
+            "oracle_batch_size",
+            "oracle_policy_frequency",
+            "hidden_size",
+            "tamer_total_timesteps",
+            "tamer_learning_starts",
+            "tamer_batch_size",
+            "tamer_policy_frequency",
+            "credit_window",
+            "feedback_budget",
+            "sleep_gradient_steps",
+            "sleep_batch_size",
+            "sleep_policy_frequency",
+            "eval_episodes",
+            "eval_frequency",
+            "sleep_eval_frequency",
+            "periodic_eval_episodes",
+            "log_frequency",
+        ),
+        "[1, inf)",
+    ),
+    **dict.fromkeys(("seed", "teacher_delay", "sleep_seed", "obstacle_episodes", "authors_test_episodes"), "[0, inf)"),
+    **dict.fromkeys(
+        (
+            "success_distance",
+            "oracle_q_lr",
+            "oracle_policy_lr",
+            "tamer_h_lr",
+            "tamer_policy_lr",
+            "sleep_q_lr",
+            "sleep_policy_lr",
+            "sleep_temperature",
+        ),
+        "(0, inf)",
+    ),
+    **dict.fromkeys(
+        (
+            "sleep_chi2_coef",
+            "sleep_bc_coef",
+        ),
+        "[0, inf)",
+    ),
     "tau": "(0, 1]",
-    "sleep_chi2_coef": "[0, inf)",
-    "sleep_bc_coef": "[0, inf)",
-    "sleep_holdout_fraction": "[0, 1]",
     **dict.fromkeys(
         (
             "feedback_alpha_start",
@@ -1743,10 +1779,19 @@ FLOAT_RANGES = {
             "oracle_gamma",
             "teacher_noise",
             "teacher_sparsity",
+            "sleep_holdout_fraction",
         ),
         "[0, 1]",
     ),
 }
+
+
+def in_range(value: float, interval: str) -> bool:
+    """Whether `value` lies in an interval written as "[0, 1]", "(0, inf)", ...; NaN never does."""
+    low, high = (float(bound) for bound in interval[1:-1].split(", "))
+    above = value >= low if interval[0] == "[" else value > low
+    below = value <= high if interval[-1] == "]" else value < high
+    return above and below
 
 
 def check_args(args: Args) -> None:
@@ -1760,16 +1805,12 @@ def check_args(args: Args) -> None:
         )
     for f in fields(args):
         value = getattr(args, f.name)
-        flag = "--" + f.name.replace("_", "-")
-        low = int(f.name not in NON_NEGATIVE_INTS)
-        if f.type in (int, int | None) and value is not None and value < low:
-            raise InputError(f"{flag} must be >= {low}, got {value}")
-        interval = FLOAT_RANGES.get(f.name, "(0, inf)") if f.type is float else None
-        if interval and not (
-            (value >= 0.0 if interval[0] == "[" else value > 0.0)  # NaN fails both tests
-            and (value <= 1.0 if interval.endswith("1]") else value < math.inf)
-        ):
-            raise InputError(f"{flag} must be in {interval}, got {value}")
+        interval = RANGES.get(f.name)
+        if interval is not None and value is not None and not in_range(value, interval):
+            flag = "--" + f.name.replace("_", "-")
+            counts = isinstance(value, int) and interval.endswith(", inf)")  # "[1, inf)": must be >= 1
+            must = f"be >= {interval[1:-6]}" if counts else f"be in {interval}"
+            raise InputError(f"{flag} must {must}, got {value}")
     check_env(args)
     if args.tamer_learning_starts >= args.tamer_total_timesteps:
         raise InputError(

@@ -126,3 +126,20 @@ def test_bad_input_is_refused_in_one_line(run_script, script, flags, phrase, tyr
     assert not (cwd / PWNED).exists()  # the pickle payload never ran
     assert not any((cwd / "runs").glob("*")), "a run directory was left behind"
     assert snapshot(cwd) == before, f"files written: {sorted(snapshot(cwd) - before)}"
+
+
+@pytest.mark.parametrize("module", ["inform_sac_pusher", "inform_dqn_gridworld"])
+def test_a_new_flag_is_never_refused_for_its_default(module):
+    """A hacker adds `coef: float = 0.0` (or an int 0, or a negative shift) to Args: only flags listed in RANGES have a
+    range, so the run starts; the listed ones are still checked."""
+    import dataclasses
+    import importlib
+
+    script = importlib.import_module(module)
+    new_flags = [("new_coef", float, 0.0), ("new_count", int, 0), ("new_shift", float, -1.0)]
+    extended = dataclasses.make_dataclass("Extended", new_flags, bases=(script.Args,))
+    script.check_args(extended())  # no InputError
+    with pytest.raises(script.InputError, match="--tamer-total-timesteps must be >= 1, got 0"):
+        script.check_args(extended(tamer_total_timesteps=0))
+    assert script.in_range(0.0, "[0, 1]") and not script.in_range(0.0, "(0, 1]")
+    assert script.in_range(1.0, "(0, 1]") and not script.in_range(float("nan"), "[0, inf)")
