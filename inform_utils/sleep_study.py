@@ -1,5 +1,6 @@
-"""The sleep study: does the night consolidate, and when? Many nights on saved days (inform_sac_pusher.py
---save-buffer, then --sleep-from), each variant of the sleep and both controls, then one table.
+"""The sleep study: does the night consolidate, and when? Many nights on saved days (inform_sac_pusher.py or
+inform_dqn_gridworld.py --save-buffer, then --sleep-from), each variant of the sleep and both controls, then one
+table.
 
 Each night runs `inform_sac_pusher.py --sleep-from DAY` with the variant's flags, a 15% hold-out (so every night
 logs the offline criterion on the same held-out episodes), any flags given after `--`, and a sleep seed; then its
@@ -11,6 +12,11 @@ obstacle_distances.npz, random_starts.json), and a night already there is not ru
     python inform_sac_pusher.py --env-id Pusher-v4 --seed 1 --save-buffer          # a day: runs/<day>/day.pt
     python -m inform_utils.sleep_study --days runs/<day> --campaign sleep_study    # the nights on it
     python -m inform_utils.sleep_study --table --campaign sleep_study               # the table
+    python -m inform_utils.sleep_study --script inform_dqn_gridworld.py --days runs/<maze day> --campaign maze_sleep \
+        --sleep-seeds 1 2 3                                                         # the maze's nights
+
+On the maze, a night has no hold-out and no random-start test (its tests already start from every cell): the
+columns are the greedy path from S, the held-out start cells and all 29 cells.
 """
 
 import glob
@@ -22,15 +28,15 @@ import subprocess
 import sys
 import time
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 import tyro
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SCRIPT = os.path.join(REPO, "inform_sac_pusher.py")
 # the variants of the sleep (docs/protocol.md, "Saved days and the sleep's variants"), in the order they run: the
 # default and the controls first
-VARIANTS = {
+PUSHER_VARIANTS = {
     "default": [],
     "sham": ["--sleep-control", "sham"],
     "bc": ["--sleep-control", "bc"],
@@ -45,29 +51,70 @@ VARIANTS = {
     "iqlearn_offline": ["--sleep-loss-rows", "expert", "--sleep-actor-states", "expert", "--sleep-policy-lr", "3e-5"],
     "authors": ["--sleep-protocol", "authors"],  # last: 100k gradient steps, 20 times the others
 }
-COMMON = ["--sleep-holdout-fraction", "0.15"]  # every night logs the offline criterion on the same held-out episodes
-TWO_SEEDS = ("default", "sham", "bc", "authors")  # the rest get one sleep seed
-COLUMNS = (  # (name, summary key, +1 if higher is better)
-    ("fixed-start return", "eval/{p}_return", 1),
-    ("authors' test distance", "eval/authors_test/{p}_final_distance", -1),
-    ("random-start success", "random_starts/{p}_success_rate", 1),
-    ("obstacle distance", "eval/obstacle/{p}_final_distance", -1),
-)
+MAZE_VARIANTS = {
+    "default": [],
+    "sham": ["--sleep-control", "sham"],
+    "bc": ["--sleep-control", "bc"],
+    "expert_rows": ["--sleep-loss-rows", "expert"],
+    "temperature0.01": ["--sleep-temperature", "0.01"],
+}
 CONTROLS = ("sham", "bc")
+
+
+@dataclass(frozen=True)
+class Study:
+    """What the study needs to know of a script: its variants, the flags every night gets, the variants with all the
+    sleep seeds, the table's columns ((name, summary key, +1 if higher is better)) and the Pusher-only extras."""
+
+    variants: dict
+    common: tuple
+    all_seeds: tuple
+    columns: tuple
+    pusher: bool  # the offline pick, the random-start test and the obstacle test
+
+
+STUDIES = {
+    "inform_sac_pusher.py": Study(
+        PUSHER_VARIANTS,
+        ("--sleep-holdout-fraction", "0.15"),  # every night logs the offline criterion on the same held-out episodes
+        ("default", "sham", "bc", "authors"),
+        (
+            ("fixed-start return", "eval/{p}_return", 1),
+            ("authors' test distance", "eval/authors_test/{p}_final_distance", -1),
+            ("random-start success", "random_starts/{p}_success_rate", 1),
+            ("obstacle distance", "eval/obstacle/{p}_final_distance", -1),
+        ),
+        pusher=True,
+    ),
+    "inform_dqn_gridworld.py": Study(
+        MAZE_VARIANTS,
+        (),
+        ("default", "sham", "bc"),
+        (
+            ("length from S", "eval/{p}_episode_length", -1),
+            ("held-out start cells: success", "eval/start_set/{p}_success_rate", 1),
+            ("all 29 cells: success", "eval/all_starts/{p}_success_rate", 1),
+            ("wall maze: length from S", "eval/wall/{p}_episode_length", -1),
+        ),
+        pusher=False,
+    ),
+}
 
 
 @dataclass
 class Args:
     days: list[str] = field(default_factory=list)
     """run directories holding a day.pt (made with --save-buffer)"""
+    script: Literal["inform_sac_pusher.py", "inform_dqn_gridworld.py"] = "inform_sac_pusher.py"
+    """the script that made the days and runs the nights"""
     campaign: str = "sleep_study"
     """{results_dir}/{campaign}/ receives the nights"""
     results_dir: str = "results"
     """where campaigns are kept (relative to the working directory, where runs/ goes too)"""
-    variants: list[str] = field(default_factory=lambda: list(VARIANTS))
-    """the variants to run, in this order (names of VARIANTS)"""
+    variants: list[str] | None = None
+    """the variants to run, in this order (names of the script's variants; None: all)"""
     sleep_seeds: list[int] = field(default_factory=lambda: [1, 2])
-    """the sleep seeds of the variants in TWO_SEEDS; the others use the first"""
+    """the sleep seeds of the default, the controls (and the authors' protocol); the other variants use the first"""
     random_start_episodes: int = 50
     """episodes of the random-start test of each night's policies"""
     table: bool = False
@@ -95,7 +142,17 @@ def random_starts(run_dir: str, seed: int, env_id: str, episodes: int) -> dict:
         path = os.path.join(run_dir, f"{name}_actor.pt")
         if not os.path.isfile(path):
             continue
-        cmd = [sys.executable, SCRIPT, "--env-id", env_id, "--seed", str(seed), "--evaluate", path, "--random-starts"]
+        cmd = [
+            sys.executable,
+            os.path.join(REPO, "inform_sac_pusher.py"),
+            "--env-id",
+            env_id,
+            "--seed",
+            str(seed),
+            "--evaluate",
+            path,
+            "--random-starts",
+        ]
         cmd += ["--eval-episodes", str(episodes), "--obstacle-episodes", "1"]
         proc = subprocess.run(cmd, capture_output=True, text=True, check=True)
         metrics = json.loads(proc.stdout[proc.stdout.index("{") :])
@@ -109,8 +166,9 @@ def run_night(args: Args, day: str, variant: str, seed: int, extra: list[str]) -
     dest = night_dir(args, day_name, variant, seed)
     if completed(dest):
         return
-    cmd = [sys.executable, SCRIPT, "--sleep-from", day, "--exp-name", f"night_{variant}", "--sleep-seed", str(seed)]
-    cmd += [*COMMON, *extra, *VARIANTS[variant]]
+    study = STUDIES[args.script]
+    cmd = [sys.executable, os.path.join(REPO, args.script), "--sleep-from", day, "--exp-name", f"night_{variant}"]
+    cmd += ["--sleep-seed", str(seed), *study.common, *extra, *study.variants[variant]]
     t0 = time.time()
     print(f"[study] {day_name} {variant} sleep seed {seed}: {' '.join(cmd[1:])}", flush=True)
     proc = subprocess.run(cmd, capture_output=True, text=True)
@@ -121,9 +179,11 @@ def run_night(args: Args, day: str, variant: str, seed: int, extra: list[str]) -
     run_dir = line.split(": ", 1)[1]
     with open(os.path.join(run_dir, "summary.json")) as f:
         summary = json.load(f)
-    extra = random_starts(run_dir, summary["seed"], summary["args"]["env_id"], args.random_start_episodes)
+    extra = {}
+    if study.pusher:
+        extra = random_starts(run_dir, summary["seed"], summary["args"]["env_id"], args.random_start_episodes)
     os.makedirs(dest, exist_ok=True)
-    for name in ("summary.json", "obstacle_distances.npz"):
+    for name in ("summary.json", "obstacle_distances.npz") if study.pusher else ("summary.json",):
         shutil.copy(os.path.join(run_dir, name), dest)
     with open(os.path.join(dest, "random_starts.json"), "w") as f:
         json.dump(extra, f, indent=1)
@@ -189,31 +249,37 @@ def table(args: Args) -> str:
     """Each variant's INFORM (and the checkpoint the offline criterion picked) against TAMER and the controls: mean +-
     sd over days and sleep seeds; 'beats both controls on' lists the measures where the variant's mean is better than
     each control's by more than the default's spread between sleep seeds."""
+    study = STUDIES[args.script]
+    columns = study.columns
     rows = load(args)
     if not rows:
         return f"no completed nights under {args.results_dir}/{args.campaign}"
     days = sorted({r["day"] for r in rows})
     unfinished = [path for path in night_dirs(args) if not completed(path)]
-    spread = {name: seed_spread(rows, key.format(p="inform")) for name, key, _ in COLUMNS}
+    spread = {name: seed_spread(rows, key.format(p="inform")) for name, key, _ in columns}
     lines = [f"{len(rows)} nights on {len(days)} day(s): {', '.join(days)}"]
     lines += ["spread between the default's sleep seeds: " + ", ".join(f"{k} {v:.3g}" for k, v in spread.items() if v)]
-    head = ["policy", "nights", *(name for name, _, _ in COLUMNS), "obstacle vs TAMER", "beats both controls on"]
+    head = ["policy", "nights", *(name for name, _, _ in columns)]
+    head += ["obstacle vs TAMER"] if study.pusher else []
+    head += ["beats both controls on"]
     lines += ["", "| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
     by_day = {}
     for r in rows:  # TAMER and the oracle: one row per day (every night of a day has the same)
         by_day.setdefault(r["day"], r)
     for p in ("oracle", "tamer"):
-        cells = [mean_sd([r.get(key.format(p=p)) for r in by_day.values()]) for _, key, _ in COLUMNS]
-        lines.append(f"| {p} | {len(by_day)} days | " + " | ".join(cells) + " | - | - |")
-    for variant in [v for v in VARIANTS if any(r["variant"] == v for r in rows)]:
+        cells = [mean_sd([r.get(key.format(p=p)) for r in by_day.values()]) for _, key, _ in columns]
+        lines.append(
+            f"| {p} | {len(by_day)} days | " + " | ".join(cells) + " | -" * (len(head) - len(cells) - 2) + " |"
+        )
+    for variant in [v for v in study.variants if any(r["variant"] == v for r in rows)]:
         mine = [r for r in rows if r["variant"] == variant]
-        for p in ("inform", "inform_selected"):
-            cells = [mean_sd([r.get(key.format(p=p)) for r in mine]) for _, key, _ in COLUMNS]
+        for p in ("inform", "inform_selected") if study.pusher else ("inform",):
+            cells = [mean_sd([r.get(key.format(p=p)) for r in mine]) for _, key, _ in columns]
             beats = "-"
             controls = {c: [r for r in rows if r["variant"] == c] for c in CONTROLS}
             if variant not in CONTROLS and all(controls.values()):
                 wins = []
-                for name, key, sign in COLUMNS:
+                for name, key, sign in columns:
                     here = mean(mine, key.format(p=p))
                     there = [mean(nights, key.format(p="inform")) for nights in controls.values()]
                     if spread[name] is not None and here is not None and None not in there:
@@ -221,7 +287,7 @@ def table(args: Args) -> str:
                             wins.append(name)
                 beats = ", ".join(wins) or "none"
             name = variant if p == "inform" else f"{variant}, offline pick"
-            row = [name, str(len(mine)), *cells, obstacle_p(args, mine, p), beats]
+            row = [name, str(len(mine)), *cells, *([obstacle_p(args, mine, p)] if study.pusher else []), beats]
             lines.append("| " + " | ".join(row) + " |")
     for path in unfinished:  # kept for their curves, left out of the table: say so
         with open(os.path.join(path, "summary.json")) as f:
@@ -236,15 +302,17 @@ if __name__ == "__main__":
     argv = sys.argv[1:]
     extra = argv[argv.index("--") + 1 :] if "--" in argv else []  # flags after -- go to every night
     args = tyro.cli(Args, args=argv[: argv.index("--")] if "--" in argv else argv)
-    unknown = [v for v in args.variants if v not in VARIANTS]
+    study = STUDIES[args.script]
+    variants = args.variants or list(study.variants)
+    unknown = [v for v in variants if v not in study.variants]
     if unknown:
-        sys.exit(f"error: unknown variant(s) {', '.join(unknown)}; choose from {', '.join(VARIANTS)}")
+        sys.exit(f"error: unknown variant(s) {', '.join(unknown)}; choose from {', '.join(study.variants)}")
     if not args.table:
         for day in args.days:
             if not os.path.isfile(os.path.join(day, "day.pt")):
-                sys.exit(f"error: {day} holds no day.pt; make one with inform_sac_pusher.py --save-buffer")
-        for variant in args.variants:
-            for seed in args.sleep_seeds[: 2 if variant in TWO_SEEDS else 1]:
+                sys.exit(f"error: {day} holds no day.pt; make one with {args.script} --save-buffer")
+        for variant in variants:
+            for seed in args.sleep_seeds if variant in study.all_seeds else args.sleep_seeds[:1]:
                 for day in args.days:
                     run_night(args, day, variant, seed, extra)
     print(table(args))

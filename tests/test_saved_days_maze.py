@@ -231,3 +231,28 @@ def test_iq_loss_on_expert_rows_only():
     assert expert["iq_value_term"].item() == pytest.approx((v[1] - y[1]).item(), rel=1e-5)
     assert expert["iq_chi2_term"].item() == pytest.approx(0.5 * td[1].item() ** 2, rel=1e-5)
     assert every["iq_value_term"].item() == pytest.approx((v - y).mean().item(), rel=1e-5)
+
+
+def test_the_sleep_study_runs_maze_nights_and_tabulates_them(saved_day, tmp_path):
+    """python -m inform_utils.sleep_study --script inform_dqn_gridworld.py: the maze's nights (the default with two
+    sleep seeds, a control with both, a variant with the first), its own columns, and a rerun that runs nothing."""
+    day_dir, _ = saved_day
+    cwd = tmp_path  # the nights' runs/ and results/ land here
+    cmd = [sys.executable, "-m", "inform_utils.sleep_study", "--script", SCRIPT, "--days", day_dir, "--campaign", "m"]
+    cmd += ["--variants", "default", "sham", "expert_rows", "--sleep-seeds", "4", "5", "--", *TINY]
+    env = {**os.environ, "PYTHONPATH": REPO}
+    proc = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    nights = cwd / "results" / "m" / os.path.basename(day_dir)
+    assert sorted(os.listdir(nights)) == ["default__sleep4", "default__sleep5", "expert_rows__sleep4", "sham__sleep4",
+                                          "sham__sleep5"]  # fmt: skip
+    summary = json.loads((nights / "expert_rows__sleep4" / "summary.json").read_text())
+    assert summary["args"]["sleep_seed"] == 4 and summary["args"]["sleep_loss_rows"] == "expert"
+    assert "held-out start cells: success" in proc.stdout and "obstacle" not in proc.stdout
+    assert (
+        "| default | 2 |" in proc.stdout
+        and "| expert_rows | 1 |" in proc.stdout
+        and "| tamer | 1 days |" in proc.stdout
+    )
+    again = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=600)  # resumes: nothing runs
+    assert again.returncode == 0 and "[study]" not in again.stdout
