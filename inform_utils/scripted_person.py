@@ -6,6 +6,7 @@ from), then types q. Per seed: the answers until TAMER's greedy path first reach
 the episode lengths at the end.
 
     python -m inform_utils.scripted_person --seeds 1 2 3 4 5
+    python -m inform_utils.scripted_person --keep-dir person_days --flags --save-buffer   # days to sleep on again
 """
 
 import glob
@@ -43,6 +44,9 @@ class Args:
     """extra flags for the script (the human mode's defaults otherwise)"""
     timeout: float = 600.0
     """seconds a whole run may take"""
+    keep_dir: str | None = None
+    """keep each seed's run in {keep_dir}/seed{seed}/runs/ (with --flags --save-buffer: a day to sleep on again with
+    --sleep-from); default: each run in a temporary directory, removed"""
 
 
 def read_move(screen: str) -> tuple[int, int, int, int]:
@@ -103,7 +107,11 @@ def main(args: Args) -> list[dict]:
           "TAMER greedy length | INFORM greedy length | sleep skipped |\n| --- | --- | --- | --- | --- | --- | --- |",
           flush=True)  # fmt: skip
     for seed in args.seeds:
-        with tempfile.TemporaryDirectory() as cwd:
+        with tempfile.TemporaryDirectory() as tmp:
+            cwd = os.path.join(args.keep_dir, f"seed{seed}") if args.keep_dir else tmp
+            os.makedirs(cwd, exist_ok=True)
+            if glob.glob(os.path.join(cwd, "runs", "*")):
+                sys.exit(f"error: {cwd}/runs is not empty; give --keep-dir a new directory")
             r = teach(seed, args, q_star, cwd)
         results.append(r)
         print(f"| {seed} | {r['feedback/answers_to_tamer_goal']} | {r['feedback/answers']} | "

@@ -343,13 +343,17 @@ def test_a_person_who_stops_too_early_gets_an_honest_skip(tmp_path):
 
 
 @pytest.mark.slow
-def test_a_scripted_person_teaches_the_maze_in_few_answers():
+def test_a_scripted_person_teaches_the_maze_in_few_answers(tmp_path):
     """The human mode's promise, measured as in the README: a person answering as Q* would (y for the best move,
-    Enter otherwise), through a pseudo-terminal, until TAMER's greedy path from S reaches G (seed 1)."""
+    Enter otherwise), through a pseudo-terminal, until TAMER's greedy path from S reaches G (seed 1). The taught day
+    is kept (--keep-dir, --flags --save-buffer) to sleep on again."""
     from inform_utils import scripted_person
 
-    args = scripted_person.Args(seeds=[1], max_answers=300)
+    args = scripted_person.Args(seeds=[1], max_answers=300, keep_dir=str(tmp_path), flags=["--save-buffer"])
     (result,) = scripted_person.main(args)
+    assert len(glob.glob(str(tmp_path / "seed1" / "runs" / "*" / "day.pt"))) == 1
+    with pytest.raises(SystemExit, match="not empty"):  # a kept run is never overwritten
+        scripted_person.main(args)
     assert result["exit"] == 0 and result["status"] == "completed"
     assert result["feedback/answers_to_tamer_goal"] is not None and result["feedback/answers_to_tamer_goal"] <= 150
     assert result["eval/tamer_episode_length"] < 200  # TAMER's greedy policy reaches G from S
