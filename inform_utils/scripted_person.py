@@ -6,7 +6,7 @@ from), then types q. Per seed: the answers until TAMER's greedy path first reach
 the episode lengths at the end.
 
     python -m inform_utils.scripted_person --seeds 1 2 3 4 5
-    python -m inform_utils.scripted_person --keep-dir person_days --flags --save-buffer   # days to sleep on again
+    python -m inform_utils.scripted_person --keep-dir person_days --flags=--save-buffer   # days to sleep on again
 """
 
 import glob
@@ -45,7 +45,7 @@ class Args:
     timeout: float = 600.0
     """seconds a whole run may take"""
     keep_dir: str | None = None
-    """keep each seed's run in {keep_dir}/seed{seed}/runs/ (with --flags --save-buffer: a day to sleep on again with
+    """keep each seed's run in {keep_dir}/seed{seed}/runs/ (with --flags=--save-buffer: a day to sleep on again with
     --sleep-from); default: each run in a temporary directory, removed"""
 
 
