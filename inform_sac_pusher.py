@@ -665,8 +665,8 @@ def sleep_phase(
     expert_idx, fallback_episodes = buffer.expert_indices(keep)
     if fallback_episodes:
         print(
-            f"[sleep] warning: no successful episode; using the {fallback_episodes} episodes that ended closest to "
-            "the goal as the expert set",
+            f"[sleep] warning: no successful episode; using the {fallback_episodes} episodes that came closest "
+            "(the smallest final distance, or with --success-return the highest return) as the expert set",
             flush=True,
         )
     print(f"[sleep] {expert_idx.numel()} expert transitions, {replay_idx.numel()} in the buffer", flush=True)
