@@ -1026,32 +1026,37 @@ class Progress:
             )
 
 
-def read_checkpoint(path: str) -> dict:
-    """torch.load(path, weights_only=True), with every way it can fail turned into one InputError naming the file."""
+def read_checkpoint(path: str, flag: str, env_id: str | None) -> dict:
+    """The checkpoint `flag` names (--oracle-path, --evaluate, --sleep-from), read with torch.load(weights_only=True):
+    tensors and plain values only, never code; if it names an env, that must be `env_id` (None: any). Every way it
+    can fail is one InputError naming the flag and the file."""
+    where = f"{flag} {path}"
     if not os.path.isfile(path):
-        raise InputError(f"{path}: no such file")
+        raise InputError(f"{where}: no such file")
     if not zipfile.is_zipfile(path):  # torch.save writes a zip archive; a truncated one has lost its directory
-        raise InputError(f"{path}: not a torch checkpoint, or a truncated one (not a complete zip archive)")
+        raise InputError(f"{where}: not a torch checkpoint, or a truncated one (not a complete zip archive)")
     try:
         ckpt = torch.load(path, weights_only=True, map_location="cpu")
     except pickle.UnpicklingError as e:
         unsupported = [line.strip() for line in str(e).splitlines() if "unsupported" in line.lower()]
         raise InputError(
-            f"{path}: refused, it holds more than tensors and plain values (it could run code): "
+            f"{where}: refused, it holds more than tensors and plain values (it could run code): "
             f"{(unsupported or [type(e).__name__])[0][:160]}"
         ) from None
     except Exception as e:  # a damaged archive: torch raises RuntimeError, EOFError, ...
         raise InputError(
-            f"{path}: corrupt checkpoint: {(str(e).strip() or type(e).__name__).splitlines()[0][:160]}"
+            f"{where}: corrupt checkpoint: {(str(e).strip() or type(e).__name__).splitlines()[0][:160]}"
         ) from None
     if not isinstance(ckpt, dict):
-        raise InputError(f"{path}: not a checkpoint of this project (expected a dict, found {type(ckpt).__name__})")
+        raise InputError(f"{where}: not a checkpoint of this project (expected a dict, found {type(ckpt).__name__})")
+    if env_id is not None and "env_id" in ckpt and ckpt["env_id"] != env_id:
+        raise InputError(f"{where}: made for {ckpt['env_id']!r}, not for --env-id {env_id}")
     return ckpt
 
 
 def load_oracle(path: str, env_id: str) -> np.ndarray:
     """The maze teacher's Q table from an oracle_train.py checkpoint, checked against the env and its shapes."""
-    ckpt = read_checkpoint(path)
+    ckpt = read_checkpoint(path, "--oracle-path", None)  # what it is, then which maze (below)
     if "q_table" not in ckpt:
         raise InputError(f"{path}: not a maze oracle checkpoint (no 'q_table'); make one with oracle_train.py")
     if ckpt.get("env_id") != env_id:
@@ -1068,10 +1073,10 @@ def load_oracle(path: str, env_id: str) -> np.ndarray:
     return q_table.double().numpy()
 
 
-def load_q_network(path: str, n_states: int = 30) -> QNetwork:
+def load_q_network(path: str, n_states: int = 30, flag: str = "--evaluate") -> QNetwork:
     """Rebuild a saved H or Q network (tamer_h.pt, inform_q.pt) from its state_dict and arguments; it must read
     `n_states`-d one-hot observations (the maze's 30 cells by default)."""
-    ckpt = read_checkpoint(path)
+    ckpt = read_checkpoint(path, flag, None)
     if "state_dict" not in ckpt or "kwargs" not in ckpt:
         raise InputError(f"{path}: not a saved network of this script (needs 'state_dict' and 'kwargs')")
     net = QNetwork(**ckpt["kwargs"])
@@ -1183,7 +1188,7 @@ def load_day(run_dir: str, args: Args) -> dict:
         raise InputError(f"--sleep-from {run_dir}: no such directory")
     if not os.path.exists(path):
         raise InputError(f"--sleep-from {run_dir}: no day.pt in it (a run saves its day with --save-buffer)")
-    day = read_checkpoint(path)
+    day = read_checkpoint(path, "--sleep-from", None)
     if day.get("format") != DAY_FORMAT:
         raise InputError(f"{path}: not a saved day of this script (format {day.get('format')!r}, not {DAY_FORMAT!r})")
     try:

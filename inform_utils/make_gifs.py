@@ -150,8 +150,8 @@ def maze_gif(run_dir: str, out_dir: str) -> str:
     summary = read_summary(run_dir, "inform_dqn_gridworld.py")
     a = summary["args"]
     try:
-        nets = {"tamer": maze.load_q_network(os.path.join(run_dir, "tamer_h.pt")),
-                "inform": maze.load_q_network(os.path.join(run_dir, "inform_q.pt"))}  # fmt: skip
+        nets = {"tamer": maze.load_q_network(os.path.join(run_dir, "tamer_h.pt"), flag="--maze-run"),
+                "inform": maze.load_q_network(os.path.join(run_dir, "inform_q.pt"), flag="--maze-run")}  # fmt: skip
     except maze.InputError as e:
         raise ValueError(str(e)) from None
     policies = {p: maze.greedy_actions(net, torch.device("cpu")) for p, net in nets.items()}

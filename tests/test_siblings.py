@@ -136,3 +136,4 @@ def test_the_siblings_are_called_alike():
         assert list(inspect.signature(script.Evaluator).parameters) == ["args", "writer"], script.__name__
         assert list(inspect.signature(script.evaluate).parameters)[1] == "env", script.__name__  # (policy, env, ...)
         assert list(inspect.signature(script.evaluate_saved).parameters) == ["args"], script.__name__
+        assert list(inspect.signature(script.read_checkpoint).parameters) == ["path", "flag", "env_id"], script.__name__
