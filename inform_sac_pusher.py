@@ -17,7 +17,8 @@ read_checkpoint, actor_from_checkpoint, check_video, video_env, mujoco_major, In
 
     python inform_sac_pusher.py --seed 1                            # Pusher-v5, the authors' budget
     python inform_sac_pusher.py --env-id Pusher-v4 --seed 1         # the paper's Pusher (needs mujoco==2.3.7)
-    python inform_sac_pusher.py --env-id Reacher-v5 --success-distance 0.02 --tamer-total-timesteps 50000
+    python inform_sac_pusher.py --env-id Reacher-v5 --success-distance 0.02 --random-starts \
+        --tamer-total-timesteps 30000                               # another task, its teacher in oracles/
 """
 
 import atexit
