@@ -22,6 +22,8 @@ Importing this module registers:
     KnoxStoneMaze-v0           the plain maze, start S           (shortest path 19)
     KnoxStoneMazeWall-v0       the wall variant, start S         (shortest path 25)
     KnoxStoneMazeStartSet-v0   the plain maze, start drawn from START_SET each reset
+    KnoxStoneMazeAnyStart-v0   the plain maze, start drawn from all 29 cells but G each reset (a day that covers
+                               the maze)
 
     import gymnasium as gym, gridworld_env
     env = gym.make("KnoxStoneMaze-v0", render_mode="ansi")
@@ -57,6 +59,7 @@ N_ACTIONS = 4
 START = 4
 GOAL = 5
 START_SET = (7, 8, 9, 12, 15, 16, 17, 20, 21, 22)  # the authors' generalisation starts
+ANY_START = tuple(cell for cell in range(N_CELLS) if cell != GOAL)  # every cell but G
 MOVES = ((-1, 0), (1, 0), (0, -1), (0, 1))  # up, down, left, right
 ACTION_NAMES = ("up", "down", "left", "right")
 
@@ -199,6 +202,7 @@ ENV_IDS = {  # every id this module registers, with its constructor arguments
     "KnoxStoneMaze-v0": {"variant": "plain"},
     "KnoxStoneMazeWall-v0": {"variant": "wall"},
     "KnoxStoneMazeStartSet-v0": {"variant": "plain", "start_cells": START_SET},
+    "KnoxStoneMazeAnyStart-v0": {"variant": "plain", "start_cells": ANY_START},
 }
 
 

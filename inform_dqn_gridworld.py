@@ -71,7 +71,6 @@ MAZE_IDS = tuple(gridworld_env.ENV_IDS) if gridworld_env else ("KnoxStoneMaze-v0
 POLICIES = ("oracle", "tamer", "inform")
 TOY_TEXT_MAX_STEPS = 200  # the step limit of a toy-text env registered without one (CliffWalking), as the maze's
 if gridworld_env:
-    ALL_STARTS = tuple(cell for cell in range(gridworld_env.N_CELLS) if cell != gridworld_env.GOAL)  # the 29 others
     OPTIMUM = gridworld_env.greedy_episode_length(gridworld_env.optimal_q("plain").argmax(1))  # 19 steps from S
 
 
@@ -817,7 +816,9 @@ class Evaluator:
             set_length, set_success = evaluate(
                 policy, self.envs["start_set"], start_cells(*gridworld_env.START_SET), self.success_max_steps
             )
-            _, all_success = evaluate(policy, self.envs["plain"], start_cells(*ALL_STARTS), self.success_max_steps)
+            _, all_success = evaluate(
+                policy, self.envs["plain"], start_cells(*gridworld_env.ANY_START), self.success_max_steps
+            )
             metrics = {
                 f"eval/{name}_episode_length": length,
                 f"eval/wall/{name}_episode_length": wall_length,

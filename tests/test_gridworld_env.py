@@ -22,7 +22,7 @@ MAZE = """\
 """
 
 
-@pytest.mark.parametrize("env_id", ["KnoxStoneMaze-v0", "KnoxStoneMazeWall-v0", "KnoxStoneMazeStartSet-v0"])
+@pytest.mark.parametrize("env_id", list(g.ENV_IDS))
 def test_check_env(env_id):
     env = gym.make(env_id)
     check_env(env.unwrapped)
@@ -86,6 +86,12 @@ def test_start_set_resets_are_seeded():
     starts = [env.reset(seed=s)[1]["cell"] for s in range(40)]
     assert set(starts) <= set(g.START_SET) and len(set(starts)) > 3
     assert starts == [env.reset(seed=s)[1]["cell"] for s in range(40)]
+
+
+def test_any_start_covers_every_cell_but_the_goal():
+    env = gym.make("KnoxStoneMazeAnyStart-v0")
+    starts = {env.reset(seed=s)[1]["cell"] for s in range(400)}
+    assert starts == set(range(g.N_CELLS)) - {g.GOAL}
 
 
 def test_rgb_render():
