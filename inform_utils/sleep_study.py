@@ -59,6 +59,15 @@ MAZE_VARIANTS = {
     "temperature0.01": ["--sleep-temperature", "0.01"],
 }
 CONTROLS = ("sham", "bc")
+# the smallest difference a measure can show: one episode of the random-start test, one start cell, one step. A
+# variant must beat a control by more than this even where the default's sleep seeds happened to agree exactly.
+RESOLUTION = {
+    "random-start success": None,  # 1 / --random-start-episodes
+    "held-out start cells: success": 1 / 10,
+    "all 29 cells: success": 1 / 29,
+    "length from S": 1.0,
+    "wall maze: length from S": 1.0,
+}
 
 
 @dataclass(frozen=True)
@@ -232,23 +241,54 @@ def seed_spread(rows: list[dict], key: str) -> float | None:
     return statistics.mean(spreads) if spreads else None
 
 
+def day_means(rows: list[dict], variant: str, key: str) -> dict:
+    """{day: the mean of the variant's nights on that day}; variant "tamer" or "oracle": that policy's value on the
+    day (the same in every night of it)."""
+    out = {}
+    for day in sorted({r["day"] for r in rows}):
+        if variant in ("tamer", "oracle"):
+            values = [
+                r[key.format(p=variant)] for r in rows if r["day"] == day and r.get(key.format(p=variant)) is not None
+            ]
+            values = values[:1]
+        else:
+            values = [r[key.format(p="inform")] for r in rows if r["day"] == day and r["variant"] == variant]
+            values = [v for v in values if v is not None]
+        if values:
+            out[day] = statistics.mean(values)
+    return out
+
+
+def paired(rows: list[dict], variant: str, other: str, key: str, sign: int) -> list[float]:
+    """Per day on which both ran: how much better the variant's nights are than `other` (a variant, or tamer), in
+    the measure's own direction (positive: better). Comparing day by day keeps a variant that ran on fewer days from
+    being judged against other days' controls."""
+    mine, theirs = day_means(rows, variant, key), day_means(rows, other, key)
+    return [sign * (mine[d] - theirs[d]) for d in mine if d in theirs]
+
+
 def obstacle_p(args: Args, nights: list[dict], policy: str) -> str:
-    """Welch's t-test of the policy's obstacle final distances against TAMER's, episodes pooled over the nights."""
+    """Welch's t-test of the policy's obstacle final distances against TAMER's, episodes pooled over the nights, and
+    on how many days the policy's mean ended closer than TAMER's."""
     from scipy.stats import ttest_ind
 
-    mine, tamer = [], []
+    mine, tamer, by_day = [], [], {}
     for r in nights:
         with np.load(os.path.join(args.results_dir, args.campaign, r["day"], r["dir"], "obstacle_distances.npz")) as d:
             mine.extend(d[policy])
             tamer.extend(d["tamer"])
+            by_day.setdefault(r["day"], (float(np.mean(d["tamer"])), []))[1].append(float(np.mean(d[policy])))
     p = ttest_ind(mine, tamer, equal_var=False).pvalue
-    return f"{'closer' if np.mean(mine) < np.mean(tamer) else 'farther'}, p = {p:.2g}"
+    closer = sum(statistics.mean(means) < t for t, means in by_day.values())
+    side = "closer" if np.mean(mine) < np.mean(tamer) else "farther"
+    return f"{side}, p = {p:.2g}; closer on {closer} of {len(by_day)} days"
 
 
 def table(args: Args) -> str:
     """Each variant's INFORM (and the checkpoint the offline criterion picked) against TAMER and the controls: mean +-
-    sd over days and sleep seeds; 'beats both controls on' lists the measures where the variant's mean is better than
-    each control's by more than the default's spread between sleep seeds."""
+    sd over days and sleep seeds; 'beats both controls on' lists the measures where the variant is better than each
+    control, compared day by day on the days it ran, by more than the default's spread between sleep seeds. Then the
+    verdict, one row per variant and measure."""
     study = STUDIES[args.script]
     columns = study.columns
     rows = load(args)
@@ -259,6 +299,9 @@ def table(args: Args) -> str:
     spread = {name: seed_spread(rows, key.format(p="inform")) for name, key, _ in columns}
     lines = [f"{len(rows)} nights on {len(days)} day(s): {', '.join(days)}"]
     lines += ["spread between the default's sleep seeds: " + ", ".join(f"{k} {v:.3g}" for k, v in spread.items() if v)]
+    for name in spread:  # the bar a gain must clear: that spread, and never less than the measure's resolution
+        floor = 1 / args.random_start_episodes if name == "random-start success" else RESOLUTION.get(name, 0.0)
+        spread[name] = None if spread[name] is None else max(spread[name], floor)
     head = ["policy", "nights", *(name for name, _, _ in columns)]
     head += ["obstacle vs TAMER"] if study.pusher else []
     head += ["beats both controls on"]
@@ -271,30 +314,56 @@ def table(args: Args) -> str:
         lines.append(
             f"| {p} | {len(by_day)} days | " + " | ".join(cells) + " | -" * (len(head) - len(cells) - 2) + " |"
         )
-    for variant in [v for v in study.variants if any(r["variant"] == v for r in rows)]:
+    ran = [v for v in study.variants if any(r["variant"] == v for r in rows)]
+    for variant in ran:
         mine = [r for r in rows if r["variant"] == variant]
         for p in ("inform", "inform_selected") if study.pusher else ("inform",):
             cells = [mean_sd([r.get(key.format(p=p)) for r in mine]) for _, key, _ in columns]
             beats = "-"
-            controls = {c: [r for r in rows if r["variant"] == c] for c in CONTROLS}
-            if variant not in CONTROLS and all(controls.values()):
-                wins = []
-                for name, key, sign in columns:
-                    here = mean(mine, key.format(p=p))
-                    there = [mean(nights, key.format(p="inform")) for nights in controls.values()]
-                    if spread[name] is not None and here is not None and None not in there:
-                        if all(sign * (here - t) > spread[name] for t in there):
-                            wins.append(name)
+            if variant not in CONTROLS and p == "inform":
+                wins = [name for name, key, sign in columns if helps(rows, variant, key, sign, spread[name])]
                 beats = ", ".join(wins) or "none"
             name = variant if p == "inform" else f"{variant}, offline pick"
             row = [name, str(len(mine)), *cells, *([obstacle_p(args, mine, p)] if study.pusher else []), beats]
             lines.append("| " + " | ".join(row) + " |")
+    lines += ["", verdict(rows, ran, columns, spread)]
     for path in unfinished:  # kept for their curves, left out of the table: say so
         with open(os.path.join(path, "summary.json")) as f:
             summary = json.load(f)
         cause = summary.get("signal") or summary.get("error")
         why = f"{summary.get('status')} in its {summary.get('phase')} phase ({cause})"
         lines.append(f"\nnot in the table: {os.path.relpath(path, args.results_dir)}, {why}")
+    return "\n".join(lines)
+
+
+def helps(rows: list[dict], variant: str, key: str, sign: int, spread: float | None) -> bool:
+    """Consolidation helps on a measure only where the variant beats both controls, day by day on the days it ran,
+    by more than the spread between sleep seeds (on average over those days)."""
+    gains = [paired(rows, variant, control, key, sign) for control in CONTROLS]
+    return spread is not None and all(g and statistics.mean(g) > spread for g in gains)
+
+
+def verdict(rows: list[dict], variants: list[str], columns: tuple, spread: dict) -> str:
+    """One row per variant and measure: its gain over TAMER and over each control (positive: better), the mean over
+    the days it ran, compared on the same days; on how many days it beat TAMER; and whether it helps."""
+    head = ["variant", "measure", "days", "vs TAMER (days better, worse)", *(f"vs {c}" for c in CONTROLS)]
+    head += ["bar (seed spread, at least one unit)", "helps"]
+    lines = ["verdict (paired by day; gains are in the measure's own direction: positive = better)", ""]
+    lines += ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
+    for variant in [v for v in variants if v not in CONTROLS]:
+        for name, key, sign in columns:
+            tamer = paired(rows, variant, "tamer", key, sign)
+            if not tamer:
+                continue
+            cells = [variant, name, str(len(tamer))]
+            better, worse = sum(g > 0 for g in tamer), sum(g < 0 for g in tamer)
+            cells.append(f"{statistics.mean(tamer):+.3g} ({better} better, {worse} worse)")
+            for control in CONTROLS:
+                gains = paired(rows, variant, control, key, sign)
+                cells.append(f"{statistics.mean(gains):+.3g}" if gains else "-")
+            cells.append(f"{spread[name]:.3g}" if spread[name] is not None else "-")
+            cells.append("yes" if helps(rows, variant, key, sign, spread[name]) else "no")
+            lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 

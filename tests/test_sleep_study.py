@@ -1,0 +1,48 @@
+"""The sleep study's verdict on hand-made nights: variants are compared with TAMER and the controls day by day, on
+the days they ran, and "helps" needs a gain over both controls above the sleep seeds' spread."""
+
+from inform_utils import sleep_study as ss
+
+KEY = "eval/{p}_return"
+
+
+def night(day, variant, value, seed=1, tamer=None):
+    return {"day": day, "variant": variant, "seed": seed, "eval/inform_return": value, "eval/tamer_return": tamer}
+
+
+# day A: TAMER 10; day B: TAMER 20. The variant x ran on day A only.
+ROWS = [
+    night("A", "default", 12.0, 1, 10.0),
+    night("A", "default", 13.0, 2, 10.0),
+    night("A", "sham", 11.0, 1, 10.0),
+    night("A", "bc", 11.5, 1, 10.0),
+    night("A", "x", 14.0, 1, 10.0),
+    night("B", "default", 21.0, 1, 20.0),
+    night("B", "default", 21.5, 2, 20.0),
+    night("B", "sham", 21.0, 1, 20.0),
+    night("B", "bc", 20.9, 1, 20.0),
+]
+
+
+def test_gains_are_paired_by_day():
+    assert ss.paired(ROWS, "default", "tamer", KEY, 1) == [2.5, 1.25]  # 12.5 - 10, 21.25 - 20
+    assert ss.paired(ROWS, "x", "sham", KEY, 1) == [3.0]  # day A only: day B's sham (21) is not x's control
+    assert ss.paired(ROWS, "x", "bc", KEY, -1) == [-2.5]  # lower is better: the gain changes sign
+    assert ss.seed_spread(ROWS, "eval/inform_return") == 0.75  # the default's ranges 1 and 0.5
+
+
+def test_helps_only_above_the_spread_against_both_controls():
+    assert ss.helps(ROWS, "x", KEY, 1, 0.75)  # +3 over sham, +2.5 over bc
+    assert not ss.helps(ROWS, "x", KEY, 1, 2.6)  # not by more than the bar over bc
+    # the default (12.5 on A, 21.25 on B): over sham 1.5 and 0.25 (mean 0.875), over bc 1.0 and 0.35 (mean 0.675)
+    assert not ss.helps(ROWS, "default", KEY, 1, 0.7)
+    assert ss.helps(ROWS, "default", KEY, 1, 0.6)
+    assert not ss.helps(ROWS, "default", KEY, 1, None)  # no second sleep seed: no bar, no claim
+
+
+def test_the_verdict_table_names_each_variant_and_measure():
+    columns = (("return", KEY, 1),)
+    text = ss.verdict(ROWS, ["default", "sham", "bc", "x"], columns, {"return": 0.75})
+    assert "| x | return | 1 | +4 (1 better, 0 worse) | +3 | +2.5 | 0.75 | yes |" in text
+    assert "| default | return | 2 | +1.88 (2 better, 0 worse) | +0.875 | +0.675 | 0.75 | no |" in text
+    assert "| sham |" not in text and "| bc |" not in text  # the controls are what the others are measured against
