@@ -126,6 +126,32 @@ def test_an_env_that_cannot_be_judged_is_refused_in_one_line(flags, needle):
     assert needle in str(err.value) and "\n" not in str(err.value)
 
 
+@pytest.mark.parametrize(
+    "flags",
+    [
+        ["--env-id", "CartPole-v1"],
+        ["--env-id", "NoSuchEnv-v0"],
+        ["--env-id", "InvertedPendulum-v5"],
+        ["--env-id", "InvertedPendulum-v5", "--success-return", "100"],
+        ["--env-id", "Reacher-v5"],
+        ["--env-id", "Reacher-v5", "--success-info-key", "tip"],
+    ],
+)
+def test_the_teacher_script_takes_the_same_envs(flags):
+    """check_env is copied into oracle_train.py (single-file scripts) with its own hints: both take or refuse an env
+    alike, with the same message up to the hint."""
+    import oracle_train
+
+    errors = []
+    for module in (isp, oracle_train):
+        try:
+            module.check_env(tyro.cli(module.Args, args=flags))
+            errors.append(None)
+        except module.InputError as e:
+            errors.append(str(e).split("; ")[0].split(", not continuous")[0])
+    assert errors[0] == errors[1]
+
+
 def test_oracle_train_on_reacher_gives_a_teacher_the_script_takes(tmp_path):
     """oracle_train.py --env-id Reacher-v5 chooses its checkpoint by Reacher's success, and inform_sac_pusher.py
     --oracle-path accepts what it writes."""
