@@ -75,6 +75,21 @@ def test_a_night_on_a_saved_day_gives_the_runs_own_numbers(day):
     assert again["args"]["tamer_total_timesteps"] == 600  # the day's flags, though this command did not pass them
 
 
+def test_a_day_saved_in_the_first_format_gives_the_same_night(day, tmp_path):
+    """Days saved before other tasks (format inform-day-1) kept Pusher's final distances as `episode_final_distance`;
+    --sleep-from still reads them, and the night is the same."""
+    cwd, run_dir, original = day
+    old = tmp_path / "old_day"
+    old.mkdir()
+    saved = torch.load(os.path.join(run_dir, "day.pt"), weights_only=True)
+    saved["episode_final_distance"] = saved.pop("episode_shortfall")  # float64 then too
+    saved["format"] = "inform-day-1"
+    torch.save(saved, old / "day.pt")
+    again = summary_of(run(cwd, *NIGHT, "--sleep-from", str(old)), cwd)[1]
+    keys = [k for k in original if k.startswith(COMPARED)]
+    assert {k: again[k] for k in keys} == {k: original[k] for k in keys}
+
+
 def test_the_day_file_is_plain_tensors_and_its_table_adds_up(day):
     _, run_dir, summary = day
     saved = torch.load(os.path.join(run_dir, "day.pt"), weights_only=True)
