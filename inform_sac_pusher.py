@@ -1658,8 +1658,10 @@ def load_day(run_dir: str) -> dict:
         day = torch.load(path, weights_only=True, map_location="cpu")
     except Exception as e:
         raise InputError(f"--sleep-from {path}: not a readable weights-only day ({type(e).__name__})") from None
-    if isinstance(day, dict) and day.get("format") == "inform-day-1":  # saved before other tasks: Pusher's distance
+    if isinstance(day, dict) and day.get("format") == "inform-day-1" and "episode_final_distance" in day:
+        # saved before other tasks: Pusher's final distances, and episodes judged by Outcome's defaults
         day["episode_shortfall"] = day.pop("episode_final_distance")
+        day["day_args"] = {"success_info_key": "reward_dist", "success_return": None, **day["day_args"]}
         day["format"] = DAY_FORMAT
     if not isinstance(day, dict) or day.get("format") != DAY_FORMAT or day.get("script") != os.path.basename(__file__):
         raise InputError(f"--sleep-from {path}: not a day saved by this script's --save-buffer ({DAY_FORMAT})")

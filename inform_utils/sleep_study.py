@@ -167,7 +167,7 @@ def random_starts(run_dir: str, seed: int, env_id: str, episodes: int) -> dict:
         metrics = json.loads(proc.stdout[proc.stdout.index("{") :])
         for key in ("return", "final_distance", "success_rate"):
             out[f"random_starts/{name}_{key}"] = metrics[f"eval/policy_{key}"]
-    return out
+    return {**out, "random_starts/episodes": episodes} if out else out
 
 
 def run_night(args: Args, day: str, variant: str, seed: int, extra: list[str]) -> None:
@@ -241,29 +241,27 @@ def seed_spread(rows: list[dict], key: str) -> float | None:
     return statistics.mean(spreads) if spreads else None
 
 
-def day_means(rows: list[dict], variant: str, key: str) -> dict:
-    """{day: the mean of the variant's nights on that day}; variant "tamer" or "oracle": that policy's value on the
-    day (the same in every night of it)."""
+def day_means(rows: list[dict], variant: str, key: str, policy: str = "inform") -> dict:
+    """{day: the mean of the variant's `policy` (inform: the night's last actor; inform_selected: the offline pick)
+    over its nights on that day}; variant "tamer" or "oracle": that policy's value on the day (the same in every night
+    of it)."""
     out = {}
     for day in sorted({r["day"] for r in rows}):
         if variant in ("tamer", "oracle"):
-            values = [
-                r[key.format(p=variant)] for r in rows if r["day"] == day and r.get(key.format(p=variant)) is not None
-            ]
-            values = values[:1]
+            values = [r.get(key.format(p=variant)) for r in rows if r["day"] == day][:1]
         else:
-            values = [r[key.format(p="inform")] for r in rows if r["day"] == day and r["variant"] == variant]
-            values = [v for v in values if v is not None]
+            values = [r.get(key.format(p=policy)) for r in rows if r["day"] == day and r["variant"] == variant]
+        values = [v for v in values if v is not None]
         if values:
             out[day] = statistics.mean(values)
     return out
 
 
-def paired(rows: list[dict], variant: str, other: str, key: str, sign: int) -> list[float]:
+def paired(rows: list[dict], variant: str, other: str, key: str, sign: int, policy: str = "inform") -> list[float]:
     """Per day on which both ran: how much better the variant's nights are than `other` (a variant, or tamer), in
-    the measure's own direction (positive: better). Comparing day by day keeps a variant that ran on fewer days from
-    being judged against other days' controls."""
-    mine, theirs = day_means(rows, variant, key), day_means(rows, other, key)
+    the measure's own direction (positive: better); the same `policy` of both. Comparing day by day keeps a variant
+    that ran on fewer days from being judged against other days' controls."""
+    mine, theirs = day_means(rows, variant, key, policy), day_means(rows, other, key, policy)
     return [sign * (mine[d] - theirs[d]) for d in mine if d in theirs]
 
 
@@ -287,8 +285,8 @@ def obstacle_p(args: Args, nights: list[dict], policy: str) -> str:
 def table(args: Args) -> str:
     """Each variant's INFORM (and the checkpoint the offline criterion picked) against TAMER and the controls: mean +-
     sd over days and sleep seeds; 'beats both controls on' lists the measures where the variant is better than each
-    control, compared day by day on the days it ran, by more than the default's spread between sleep seeds. Then the
-    verdict, one row per variant and measure."""
+    control by more than the default's spread between sleep seeds on every day it ran (compared day by day). Then the
+    verdict, one row per variant, policy and measure."""
     study = STUDIES[args.script]
     columns = study.columns
     rows = load(args)
@@ -298,9 +296,11 @@ def table(args: Args) -> str:
     unfinished = [path for path in night_dirs(args) if not completed(path)]
     spread = {name: seed_spread(rows, key.format(p="inform")) for name, key, _ in columns}
     lines = [f"{len(rows)} nights on {len(days)} day(s): {', '.join(days)}"]
-    lines += ["spread between the default's sleep seeds: " + ", ".join(f"{k} {v:.3g}" for k, v in spread.items() if v)]
+    measured = ", ".join(f"{k} {v:.3g}" for k, v in spread.items() if v is not None)
+    lines += [f"spread between the default's sleep seeds: {measured or 'none (one sleep seed)'}"]
+    episodes = {r.get("random_starts/episodes", args.random_start_episodes) for r in rows}  # as the nights ran it
     for name in spread:  # the bar a gain must clear: that spread, and never less than the measure's resolution
-        floor = 1 / args.random_start_episodes if name == "random-start success" else RESOLUTION.get(name, 0.0)
+        floor = 1 / min(episodes) if name == "random-start success" else RESOLUTION.get(name, 0.0)
         spread[name] = None if spread[name] is None else max(spread[name], floor)
     head = ["policy", "nights", *(name for name, _, _ in columns)]
     head += ["obstacle vs TAMER"] if study.pusher else []
@@ -320,13 +320,13 @@ def table(args: Args) -> str:
         for p in ("inform", "inform_selected") if study.pusher else ("inform",):
             cells = [mean_sd([r.get(key.format(p=p)) for r in mine]) for _, key, _ in columns]
             beats = "-"
-            if variant not in CONTROLS and p == "inform":
-                wins = [name for name, key, sign in columns if helps(rows, variant, key, sign, spread[name])]
+            if variant not in CONTROLS:
+                wins = [name for name, key, sign in columns if helps(rows, variant, key, sign, spread[name], p)]
                 beats = ", ".join(wins) or "none"
             name = variant if p == "inform" else f"{variant}, offline pick"
             row = [name, str(len(mine)), *cells, *([obstacle_p(args, mine, p)] if study.pusher else []), beats]
             lines.append("| " + " | ".join(row) + " |")
-    lines += ["", verdict(rows, ran, columns, spread)]
+    lines += ["", verdict(rows, ran, columns, spread, ("inform", "inform_selected") if study.pusher else ("inform",))]
     for path in unfinished:  # kept for their curves, left out of the table: say so
         with open(os.path.join(path, "summary.json")) as f:
             summary = json.load(f)
@@ -336,34 +336,42 @@ def table(args: Args) -> str:
     return "\n".join(lines)
 
 
-def helps(rows: list[dict], variant: str, key: str, sign: int, spread: float | None) -> bool:
-    """Consolidation helps on a measure only where the variant beats both controls, day by day on the days it ran,
-    by more than the spread between sleep seeds (on average over those days)."""
-    gains = [paired(rows, variant, control, key, sign) for control in CONTROLS]
-    return spread is not None and all(g and statistics.mean(g) > spread for g in gains)
+def helps(rows: list[dict], variant: str, key: str, sign: int, bar: float | None, policy: str = "inform") -> bool:
+    """Consolidation helps on a measure only where the variant beats both controls by more than the bar (the spread
+    between sleep seeds) on every day it ran, compared day by day."""
+    gains = [paired(rows, variant, control, key, sign, policy) for control in CONTROLS]
+    return bar is not None and all(g and min(g) > bar for g in gains)
 
 
-def verdict(rows: list[dict], variants: list[str], columns: tuple, spread: dict) -> str:
-    """One row per variant and measure: its gain over TAMER and over each control (positive: better), the mean over
-    the days it ran, compared on the same days; on how many days it beat TAMER; and whether it helps."""
-    head = ["variant", "measure", "days", "vs TAMER (days better, worse)", *(f"vs {c}" for c in CONTROLS)]
-    head += ["bar (seed spread, at least one unit)", "helps"]
+def verdict(rows: list[dict], variants: list[str], columns: tuple, bar: dict, policies: tuple) -> str:
+    """One row per variant, policy and measure: its gain over TAMER and over each control (positive: better), the
+    mean over the days it ran, compared on the same days; on how many days it beat TAMER, and on how many it beat each
+    control by more than the bar; and whether it helps (beats both by more than the bar on every day)."""
+    head = ["variant", "measure", "days", "vs TAMER (days better, worse)"]
+    head += [f"vs {c} (days above the bar)" for c in CONTROLS] + ["bar (seed spread, at least one unit)", "helps"]
     lines = ["verdict (paired by day; gains are in the measure's own direction: positive = better)", ""]
     lines += ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
     for variant in [v for v in variants if v not in CONTROLS]:
-        for name, key, sign in columns:
-            tamer = paired(rows, variant, "tamer", key, sign)
-            if not tamer:
-                continue
-            cells = [variant, name, str(len(tamer))]
-            better, worse = sum(g > 0 for g in tamer), sum(g < 0 for g in tamer)
-            cells.append(f"{statistics.mean(tamer):+.3g} ({better} better, {worse} worse)")
-            for control in CONTROLS:
-                gains = paired(rows, variant, control, key, sign)
-                cells.append(f"{statistics.mean(gains):+.3g}" if gains else "-")
-            cells.append(f"{spread[name]:.3g}" if spread[name] is not None else "-")
-            cells.append("yes" if helps(rows, variant, key, sign, spread[name]) else "no")
-            lines.append("| " + " | ".join(cells) + " |")
+        for policy in policies:
+            for name, key, sign in columns:
+                tamer = paired(rows, variant, "tamer", key, sign, policy)
+                if not tamer:
+                    continue
+                label = variant if policy == "inform" else f"{variant}, offline pick"
+                better, worse = sum(g > 1e-12 for g in tamer), sum(g < -1e-12 for g in tamer)
+                cells = [
+                    label,
+                    name,
+                    str(len(tamer)),
+                    f"{statistics.mean(tamer):+.3g} ({better} better, {worse} worse)",
+                ]
+                for control in CONTROLS:
+                    gains = paired(rows, variant, control, key, sign, policy)
+                    above = sum(g > bar[name] for g in gains) if bar[name] is not None else 0
+                    cells.append(f"{statistics.mean(gains):+.3g} ({above} of {len(gains)})" if gains else "-")
+                cells.append(f"{bar[name]:.3g}" if bar[name] is not None else "-")
+                cells.append("yes" if helps(rows, variant, key, sign, bar[name], policy) else "no")
+                lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 

@@ -84,10 +84,13 @@ def test_a_day_saved_in_the_first_format_gives_the_same_night(day, tmp_path):
     saved = torch.load(os.path.join(run_dir, "day.pt"), weights_only=True)
     saved["episode_final_distance"] = saved.pop("episode_shortfall")  # float64 then too
     saved["format"] = "inform-day-1"
+    for flag in ("success_info_key", "success_return"):  # not day flags then
+        del saved["day_args"][flag]
     torch.save(saved, old / "day.pt")
-    again = summary_of(run(cwd, *NIGHT, "--sleep-from", str(old)), cwd)[1]
+    again = summary_of(run(cwd, *NIGHT, "--sleep-from", str(old), "--success-return", "-30"), cwd)[1]
     keys = [k for k in original if k.startswith(COMPARED)]
     assert {k: again[k] for k in keys} == {k: original[k] for k in keys}
+    assert again["args"]["success_return"] is None  # the old day's rule, not this command's
 
 
 def test_the_day_file_is_plain_tensors_and_its_table_adds_up(day):

@@ -31,18 +31,30 @@ def test_gains_are_paired_by_day():
     assert ss.seed_spread(ROWS, "eval/inform_return") == 0.75  # the default's ranges 1 and 0.5
 
 
-def test_helps_only_above_the_spread_against_both_controls():
+def test_the_offline_pick_is_compared_with_the_controls_picks():
+    rows = [{**r, "eval/inform_selected_return": r["eval/inform_return"] - (5.0 if r["variant"] == "x" else 0.0)}
+            for r in ROWS]  # fmt: skip
+    assert ss.paired(rows, "x", "sham", KEY, 1, "inform_selected") == [-2.0]  # x's pick: 9 against sham's 11
+    assert ss.helps(rows, "x", KEY, 1, 0.75) and not ss.helps(rows, "x", KEY, 1, 0.75, "inform_selected")
+    night_without_the_key = {"day": "A", "variant": "x", "seed": 2, "eval/tamer_return": 10.0}
+    assert ss.day_means([*rows, night_without_the_key], "x", KEY) == {"A": 14.0}  # a missing value is left out
+
+
+def test_helps_only_above_the_bar_against_both_controls_on_every_day():
     assert ss.helps(ROWS, "x", KEY, 1, 0.75)  # +3 over sham, +2.5 over bc
     assert not ss.helps(ROWS, "x", KEY, 1, 2.6)  # not by more than the bar over bc
-    # the default (12.5 on A, 21.25 on B): over sham 1.5 and 0.25 (mean 0.875), over bc 1.0 and 0.35 (mean 0.675)
-    assert not ss.helps(ROWS, "default", KEY, 1, 0.7)
-    assert ss.helps(ROWS, "default", KEY, 1, 0.6)
+    # the default (12.5 on A, 21.25 on B): over sham 1.5 and 0.25, over bc 1.0 and 0.35; its means (0.875, 0.675)
+    # clear 0.6, but day B's 0.25 does not
+    assert not ss.helps(ROWS, "default", KEY, 1, 0.6)
+    assert ss.helps(ROWS, "default", KEY, 1, 0.2)
     assert not ss.helps(ROWS, "default", KEY, 1, None)  # no second sleep seed: no bar, no claim
 
 
 def test_the_verdict_table_names_each_variant_and_measure():
     columns = (("return", KEY, 1),)
-    text = ss.verdict(ROWS, ["default", "sham", "bc", "x"], columns, {"return": 0.75})
-    assert "| x | return | 1 | +4 (1 better, 0 worse) | +3 | +2.5 | 0.75 | yes |" in text
-    assert "| default | return | 2 | +1.88 (2 better, 0 worse) | +0.875 | +0.675 | 0.75 | no |" in text
+    text = ss.verdict(ROWS, ["default", "sham", "bc", "x"], columns, {"return": 0.75}, ("inform",))
+    assert "| x | return | 1 | +4 (1 better, 0 worse) | +3 (1 of 1) | +2.5 (1 of 1) | 0.75 | yes |" in text
+    assert (
+        "| default | return | 2 | +1.88 (2 better, 0 worse) | +0.875 (1 of 2) | +0.675 (1 of 2) | 0.75 | no |" in text
+    )
     assert "| sham |" not in text and "| bc |" not in text  # the controls are what the others are measured against
