@@ -441,6 +441,17 @@ def selection_key(evaluation: dict, outcome: Outcome) -> tuple[float, float]:
     return evaluation["success_rate"], tie
 
 
+STOP = []  # the stop signals received; main's handler only records them, and stop_check() acts on them
+
+
+def stop_check() -> None:
+    """KeyboardInterrupt if a stop signal came (once), at the head of every loop: in our own code, never inside a
+    library call (TensorBoard's writer, a checkpoint being written)."""
+    if STOP and STOP[-1] != "raised":
+        STOP.append("raised")
+        raise KeyboardInterrupt
+
+
 @torch.inference_mode()
 def evaluate(actor: Actor, env_id: str, episodes: int, seed: int, device: torch.device, outcome: Outcome) -> dict:
     """Deterministic (mean-action) episodes from random starts: return, final distance, success. The unused sample
@@ -451,6 +462,7 @@ def evaluate(actor: Actor, env_id: str, episodes: int, seed: int, device: torch.
     distances = []
     successes = []
     for ep in range(episodes):
+        stop_check()
         obs, _ = env.reset(seed=seed + ep)
         done = False
         ep_return = 0.0
@@ -674,6 +686,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     trained = start_step  # env steps trained so far (fewer than --total-timesteps after --stop-at-expert)
     report_every = max(1, (args.total_timesteps - start_step) // 20)
     for global_step in range(start_step, args.total_timesteps):
+        stop_check()
         if global_step < args.learning_starts:
             action = env.action_space.sample()
         else:
@@ -846,6 +859,7 @@ def maze_q_learning(env: gym.Env, args: Args) -> tuple[np.ndarray, int]:
     steps = 0
     obs, _ = env.reset(seed=args.seed)
     for _ in range(args.maze_episodes):
+        stop_check()
         s = int(obs.argmax())
         done = False
         while not done:
@@ -914,6 +928,7 @@ def maze_dqn(env: gym.Env, args: Args) -> tuple[MazeQNetwork, int]:
     s = int(obs.argmax())
     decay_steps = max(1, int(args.maze_dqn_exploration_fraction * args.maze_dqn_timesteps))
     for global_step in range(args.maze_dqn_timesteps):
+        stop_check()
         epsilon = linear_schedule(args.maze_dqn_start_e, args.maze_dqn_end_e, decay_steps, global_step)
         if rng.random() < epsilon:
             action = int(env.action_space.sample())
@@ -1120,6 +1135,7 @@ def record_teacher(args: Args, actor: Actor, run_dir: str, device: torch.device)
     record = {}
     t0 = time.time()
     for ep in range(VIDEO_EPISODES):
+        stop_check()
         obs, _ = env.reset(seed=FINAL_EVAL_SEED + ep)
         done = False
         info = {}
@@ -1151,15 +1167,14 @@ def record_teacher(args: Args, actor: Actor, run_dir: str, device: torch.device)
 
 
 def main() -> None:
-    received = []  # SIGTERM (Slurm's cancel and time limit, kill) stops training as Ctrl-C does
-
+    # Ctrl-C, SIGTERM (Slurm's cancel and time limit, kill) and SIGHUP (a closed terminal) stop training: recorded
+    # here, acted on by stop_check() at the next loop head. An ignored signal stays ignored (nohup, `&`).
     def stop(signum, frame):
-        received.append(signal.Signals(signum).name)
-        raise KeyboardInterrupt
+        STOP.append(signal.Signals(signum).name)
 
-    signal.signal(signal.SIGTERM, stop)
-    if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:  # a closed terminal; nohup keeps ignoring it
-        signal.signal(signal.SIGHUP, stop)
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        if signal.getsignal(sig) is not signal.SIG_IGN:
+            signal.signal(sig, stop)
     args = tyro.cli(Args)
     try:
         check_args(args)
@@ -1178,11 +1193,14 @@ def main() -> None:
     except KeyboardInterrupt:
         # nothing half-written: every file is saved atomically; SAC's state is saved every --checkpoint-frequency steps
         print(
-            f"interrupted ({(received or ['SIGINT'])[0]}); no oracle checkpoint was written. SAC training continues "
+            f"interrupted ({(STOP or ['SIGINT'])[0]}); no oracle checkpoint was written. SAC training continues "
             "from its last saved state with --resume <run dir>/training_state.pt",
             file=sys.stderr,
         )
-        sys.exit(128 + signal.Signals[received[0]].value if received else 130)  # 143 SIGTERM, 129 SIGHUP
+        sys.exit(128 + signal.Signals[STOP[0]].value if STOP else 130)  # 143 SIGTERM, 129 SIGHUP
+    if STOP:  # after the last loop: the oracle is complete, and the caller (a shell loop, too) still asked to stop
+        print(f"{STOP[0]} received after training finished; the oracle checkpoint is complete", file=sys.stderr)
+        sys.exit(128 + signal.Signals[STOP[0]].value)
 
 
 if __name__ == "__main__":
