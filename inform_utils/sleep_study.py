@@ -59,6 +59,7 @@ MAZE_VARIANTS = {
     "temperature0.01": ["--sleep-temperature", "0.01"],
 }
 CONTROLS = ("sham", "bc")
+TOLERANCE = 1e-9  # differences of means below this are rounding (0.32 - 0.30 is a little over 0.02 in floating point)
 # the smallest difference a measure can show: one episode of the random-start test, one start cell, one step. A
 # variant must beat a control by more than this even where the default's sleep seeds happened to agree exactly.
 RESOLUTION = {
@@ -340,7 +341,7 @@ def helps(rows: list[dict], variant: str, key: str, sign: int, bar: float | None
     """Consolidation helps on a measure only where the variant beats both controls by more than the bar (the spread
     between sleep seeds) on every day it ran, compared day by day."""
     gains = [paired(rows, variant, control, key, sign, policy) for control in CONTROLS]
-    return bar is not None and all(g and min(g) > bar for g in gains)
+    return bar is not None and all(g and min(g) > bar + TOLERANCE for g in gains)
 
 
 def verdict(rows: list[dict], variants: list[str], columns: tuple, bar: dict, policies: tuple) -> str:
@@ -358,7 +359,7 @@ def verdict(rows: list[dict], variants: list[str], columns: tuple, bar: dict, po
                 if not tamer:
                     continue
                 label = variant if policy == "inform" else f"{variant}, offline pick"
-                better, worse = sum(g > 1e-12 for g in tamer), sum(g < -1e-12 for g in tamer)
+                better, worse = sum(g > TOLERANCE for g in tamer), sum(g < -TOLERANCE for g in tamer)
                 cells = [
                     label,
                     name,
@@ -367,7 +368,7 @@ def verdict(rows: list[dict], variants: list[str], columns: tuple, bar: dict, po
                 ]
                 for control in CONTROLS:
                     gains = paired(rows, variant, control, key, sign, policy)
-                    above = sum(g > bar[name] for g in gains) if bar[name] is not None else 0
+                    above = sum(g > bar[name] + TOLERANCE for g in gains) if bar[name] is not None else 0
                     cells.append(f"{statistics.mean(gains):+.3g} ({above} of {len(gains)})" if gains else "-")
                 cells.append(f"{bar[name]:.3g}" if bar[name] is not None else "-")
                 cells.append("yes" if helps(rows, variant, key, sign, bar[name], policy) else "no")

@@ -50,6 +50,12 @@ def test_helps_only_above_the_bar_against_both_controls_on_every_day():
     assert not ss.helps(ROWS, "default", KEY, 1, None)  # no second sleep seed: no bar, no claim
 
 
+def test_a_gain_equal_to_the_bar_does_not_clear_it_despite_rounding():
+    rows = [night("A", "x", 0.32, 1, 0.3), night("A", "sham", 0.30, 1, 0.3), night("A", "bc", 0.28, 1, 0.3)]
+    assert ss.paired(rows, "x", "sham", KEY, 1)[0] > 0.02  # 0.020000000000000018
+    assert not ss.helps(rows, "x", KEY, 1, 0.02)
+
+
 def test_the_verdict_table_names_each_variant_and_measure():
     columns = (("return", KEY, 1),)
     text = ss.verdict(ROWS, ["default", "sham", "bc", "x"], columns, {"return": 0.75}, ("inform",))
