@@ -227,11 +227,6 @@ def mean_sd(values: list[float]) -> str:
     return f"{statistics.mean(values):.3f} ± {sd:.3f}"
 
 
-def mean(rows: list[dict], key: str) -> float | None:
-    values = [r[key] for r in rows if r.get(key) is not None]
-    return statistics.mean(values) if values else None
-
-
 def seed_spread(rows: list[dict], key: str) -> float | None:
     """The mean over days of the range between the default's sleep seeds: how much a night differs by chance."""
     spreads = []
@@ -337,11 +332,16 @@ def table(args: Args) -> str:
     return "\n".join(lines)
 
 
+def clears(gains: list[float], bar: float | None) -> int:
+    """On how many days a gain is more than the bar (none without a bar)."""
+    return 0 if bar is None else sum(g > bar + TOLERANCE for g in gains)
+
+
 def helps(rows: list[dict], variant: str, key: str, sign: int, bar: float | None, policy: str = "inform") -> bool:
     """Consolidation helps on a measure only where the variant beats both controls by more than the bar (the spread
     between sleep seeds) on every day it ran, compared day by day."""
     gains = [paired(rows, variant, control, key, sign, policy) for control in CONTROLS]
-    return bar is not None and all(g and min(g) > bar + TOLERANCE for g in gains)
+    return all(g and clears(g, bar) == len(g) for g in gains)
 
 
 def verdict(rows: list[dict], variants: list[str], columns: tuple, bar: dict, policies: tuple) -> str:
@@ -368,8 +368,9 @@ def verdict(rows: list[dict], variants: list[str], columns: tuple, bar: dict, po
                 ]
                 for control in CONTROLS:
                     gains = paired(rows, variant, control, key, sign, policy)
-                    above = sum(g > bar[name] + TOLERANCE for g in gains) if bar[name] is not None else 0
-                    cells.append(f"{statistics.mean(gains):+.3g} ({above} of {len(gains)})" if gains else "-")
+                    cells.append(
+                        f"{statistics.mean(gains):+.3g} ({clears(gains, bar[name])} of {len(gains)})" if gains else "-"
+                    )
                 cells.append(f"{bar[name]:.3g}" if bar[name] is not None else "-")
                 cells.append("yes" if helps(rows, variant, key, sign, bar[name], policy) else "no")
                 lines.append("| " + " | ".join(cells) + " |")
