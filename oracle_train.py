@@ -441,14 +441,18 @@ def selection_key(evaluation: dict, outcome: Outcome) -> tuple[float, float]:
     return evaluation["success_rate"], tie
 
 
-STOP = []  # the stop signals received; main's handler only records them, and stop_check() acts on them
+class Stop:
+    """The stop signals received (main's handler only records them) and whether stop_check() has acted on them."""
+
+    signals = []
+    raised = False
 
 
 def stop_check() -> None:
     """KeyboardInterrupt if a stop signal came (once), at the head of every loop: in our own code, never inside a
     library call (TensorBoard's writer, a checkpoint being written)."""
-    if STOP and STOP[-1] != "raised":
-        STOP.append("raised")
+    if Stop.signals and not Stop.raised:
+        Stop.raised = True
         raise KeyboardInterrupt
 
 
@@ -1170,7 +1174,7 @@ def main() -> None:
     # Ctrl-C, SIGTERM (Slurm's cancel and time limit, kill) and SIGHUP (a closed terminal) stop training: recorded
     # here, acted on by stop_check() at the next loop head. An ignored signal stays ignored (nohup, `&`).
     def stop(signum, frame):
-        STOP.append(signal.Signals(signum).name)
+        Stop.signals.append(signal.Signals(signum).name)
 
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         if signal.getsignal(sig) is not signal.SIG_IGN:
@@ -1192,15 +1196,16 @@ def main() -> None:
         sys.exit(2)
     except KeyboardInterrupt:
         # nothing half-written: every file is saved atomically; SAC's state is saved every --checkpoint-frequency steps
+        reason = (Stop.signals or ["SIGINT"])[0]
         print(
-            f"interrupted ({(STOP or ['SIGINT'])[0]}); no oracle checkpoint was written. SAC training continues "
+            f"interrupted ({reason}); no oracle checkpoint was written. SAC training continues "
             "from its last saved state with --resume <run dir>/training_state.pt",
             file=sys.stderr,
         )
-        sys.exit(128 + signal.Signals[STOP[0]].value if STOP else 130)  # 143 SIGTERM, 129 SIGHUP
-    if STOP:  # after the last loop: the oracle is complete, and the caller (a shell loop, too) still asked to stop
-        print(f"{STOP[0]} received after training finished; the oracle checkpoint is complete", file=sys.stderr)
-        sys.exit(128 + signal.Signals[STOP[0]].value)
+        sys.exit(128 + signal.Signals[reason].value)  # 130 SIGINT, 143 SIGTERM, 129 SIGHUP
+    if Stop.signals:  # after the last loop: the oracle is complete, and the caller (a shell loop too) asked to stop
+        print(f"{Stop.signals[0]} received after training finished; the oracle checkpoint is complete", file=sys.stderr)
+        sys.exit(128 + signal.Signals[Stop.signals[0]].value)
 
 
 if __name__ == "__main__":
