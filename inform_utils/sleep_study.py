@@ -216,7 +216,9 @@ def load(args: Args) -> list[dict]:
         variant, seed = os.path.basename(path).rsplit("__sleep", 1)
         day = os.path.basename(os.path.dirname(path))
         rows.append({"day": day, "dir": os.path.basename(path), "variant": variant, "seed": int(seed), **summary})
-    return rows
+    # each day's default nights first: TAMER's and the oracle's values on a day are read from its first night, and
+    # their sampled tests share a random stream with the night's own policies, so the nights differ slightly
+    return sorted(rows, key=lambda r: (r["day"], r["variant"] != "default", r["dir"]))
 
 
 def mean_sd(values: list[float]) -> str:
@@ -239,8 +241,8 @@ def seed_spread(rows: list[dict], key: str) -> float | None:
 
 def day_means(rows: list[dict], variant: str, key: str, policy: str = "inform") -> dict:
     """{day: the mean of the variant's `policy` (inform: the night's last actor; inform_selected: the offline pick)
-    over its nights on that day}; variant "tamer" or "oracle": that policy's value on the day (the same in every night
-    of it)."""
+    over its nights on that day}; variant "tamer" or "oracle": that policy's value on the day, from the day's first
+    night (the default's first sleep seed, as load() orders them)."""
     out = {}
     for day in sorted({r["day"] for r in rows}):
         if variant in ("tamer", "oracle"):
@@ -303,7 +305,7 @@ def table(args: Args) -> str:
     head += ["beats both controls on"]
     lines += ["", "| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
     by_day = {}
-    for r in rows:  # TAMER and the oracle: one row per day (every night of a day has the same)
+    for r in rows:  # TAMER and the oracle: one row per day, from its first night (load())
         by_day.setdefault(r["day"], r)
     for p in ("oracle", "tamer"):
         cells = [mean_sd([r.get(key.format(p=p)) for r in by_day.values()]) for _, key, _ in columns]
