@@ -1,6 +1,8 @@
 """The sleep study's verdict on hand-made nights: variants are compared with TAMER and the controls day by day, on
 the days they ran, and "helps" needs a gain over both controls above the sleep seeds' spread."""
 
+import json
+
 from inform_utils import sleep_study as ss
 
 KEY = "eval/{p}_return"
@@ -64,3 +66,16 @@ def test_the_verdict_table_names_each_variant_and_measure():
         "| default | return | 2 | +1.88 (2 better, 0 worse) | +0.875 (1 of 2) | +0.675 (1 of 2) | 0.75 | no |" in text
     )
     assert "| sham |" not in text and "| bc |" not in text  # the controls are what the others are measured against
+
+
+def test_tamer_on_a_day_is_read_from_the_defaults_first_night(tmp_path):
+    # the sampled tests share a stream with the night's policies, so TAMER's value differs a little between nights;
+    # the night that sorts first by name (the authors' protocol) must not be the one that decides it
+    for name, tamer in (("authors__sleep1", 9.0), ("default__sleep2", 10.5), ("default__sleep1", 10.0)):
+        path = tmp_path / "study" / "A" / name
+        path.mkdir(parents=True)
+        (path / "summary.json").write_text(json.dumps({"status": "completed", "eval/tamer_return": tamer}))
+        (path / "random_starts.json").write_text("{}")
+    rows = ss.load(ss.Args(results_dir=str(tmp_path), campaign="study"))
+    assert [r["dir"] for r in rows] == ["default__sleep1", "default__sleep2", "authors__sleep1"]
+    assert ss.day_means(rows, "tamer", KEY) == {"A": 10.0}
