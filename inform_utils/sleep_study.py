@@ -216,9 +216,17 @@ def load(args: Args) -> list[dict]:
         variant, seed = os.path.basename(path).rsplit("__sleep", 1)
         day = os.path.basename(os.path.dirname(path))
         rows.append({"day": day, "dir": os.path.basename(path), "variant": variant, "seed": int(seed), **summary})
-    # each day's default nights first: TAMER's and the oracle's values on a day are read from its first night, and
-    # their sampled tests share a random stream with the night's own policies, so the nights differ slightly
-    return sorted(rows, key=lambda r: (r["day"], r["variant"] != "default", r["dir"]))
+    return sorted(rows, key=lambda r: (r["day"], r["variant"] != "default", r["variant"], r["seed"]))
+
+
+def first_nights(rows: list[dict]) -> dict:
+    """{day: the night TAMER's and the oracle's values on that day are read from}: its first, which load() makes the
+    default's first sleep seed. Their sampled tests share a random stream with the night's own policies, so TAMER's
+    value differs slightly between the nights of a day."""
+    out = {}
+    for r in rows:
+        out.setdefault(r["day"], r)
+    return out
 
 
 def mean_sd(values: list[float]) -> str:
@@ -241,12 +249,12 @@ def seed_spread(rows: list[dict], key: str) -> float | None:
 
 def day_means(rows: list[dict], variant: str, key: str, policy: str = "inform") -> dict:
     """{day: the mean of the variant's `policy` (inform: the night's last actor; inform_selected: the offline pick)
-    over its nights on that day}; variant "tamer" or "oracle": that policy's value on the day, from the day's first
-    night (the default's first sleep seed, as load() orders them)."""
+    over its nights on that day}; variant "tamer" or "oracle": that policy's value on the day (first_nights())."""
     out = {}
-    for day in sorted({r["day"] for r in rows}):
+    first = first_nights(rows)
+    for day in sorted(first):
         if variant in ("tamer", "oracle"):
-            values = [r.get(key.format(p=variant)) for r in rows if r["day"] == day][:1]
+            values = [first[day].get(key.format(p=variant))]
         else:
             values = [r.get(key.format(p=policy)) for r in rows if r["day"] == day and r["variant"] == variant]
         values = [v for v in values if v is not None]
@@ -304,9 +312,7 @@ def table(args: Args) -> str:
     head += ["obstacle vs TAMER"] if study.pusher else []
     head += ["beats both controls on"]
     lines += ["", "| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
-    by_day = {}
-    for r in rows:  # TAMER and the oracle: one row per day, from its first night (load())
-        by_day.setdefault(r["day"], r)
+    by_day = first_nights(rows)  # TAMER and the oracle: one row per day
     for p in ("oracle", "tamer"):
         cells = [mean_sd([r.get(key.format(p=p)) for r in by_day.values()]) for _, key, _ in columns]
         lines.append(
