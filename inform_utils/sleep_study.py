@@ -59,6 +59,9 @@ MAZE_VARIANTS = {
     "temperature0.01": ["--sleep-temperature", "0.01"],
 }
 CONTROLS = ("sham", "bc")
+# the rule for a new default (fixed before the study): on the days of these seeds, with the boxes closer than TAMER
+# at p < RULE_P on at least RULE_CLOSER_DAYS of them, and within RULE_ORACLE_GAP of the oracle on the plain task
+RULE_SEEDS, RULE_P, RULE_CLOSER_DAYS, RULE_ORACLE_GAP = (1, 2, 3, 4, 5), 0.01, 4, 0.15
 TOLERANCE = 1e-9  # differences of means below this are rounding (0.32 - 0.30 is a little over 0.02 in floating point)
 # the smallest difference a measure can show: one episode of the random-start test, one start cell, one step. A
 # variant must beat a control by more than this even where the default's sleep seeds happened to agree exactly.
@@ -214,9 +217,9 @@ def load(args: Args) -> list[dict]:
         with open(os.path.join(path, "random_starts.json")) as f:
             summary.update(json.load(f))
         variant, seed = os.path.basename(path).rsplit("__sleep", 1)
-        day = os.path.basename(os.path.dirname(path))
-        rows.append({"day": day, "dir": os.path.basename(path), "variant": variant, "seed": int(seed), **summary})
-    return sorted(rows, key=lambda r: (r["day"], r["variant"] != "default", r["variant"], r["seed"]))
+        day = os.path.basename(os.path.dirname(path))  # the summary's own "seed" is the day's
+        rows.append({**summary, "day": day, "dir": os.path.basename(path), "variant": variant, "sleep_seed": int(seed)})
+    return sorted(rows, key=lambda r: (r["day"], r["variant"] != "default", r["variant"], r["sleep_seed"]))
 
 
 def first_nights(rows: list[dict]) -> dict:
@@ -271,9 +274,9 @@ def paired(rows: list[dict], variant: str, other: str, key: str, sign: int, poli
     return [sign * (mine[d] - theirs[d]) for d in mine if d in theirs]
 
 
-def obstacle_p(args: Args, nights: list[dict], policy: str) -> str:
-    """Welch's t-test of the policy's obstacle final distances against TAMER's, episodes pooled over the nights, and
-    on how many days the policy's mean ended closer than TAMER's."""
+def obstacle_test(args: Args, nights: list[dict], policy: str) -> tuple[float, bool, int, int]:
+    """Welch's t-test of the policy's obstacle final distances against TAMER's, episodes pooled over the nights: its
+    p, whether the policy ended closer on average, and on how many of the days it ran its mean ended closer."""
     from scipy.stats import ttest_ind
 
     mine, tamer, by_day = [], [], {}
@@ -282,10 +285,18 @@ def obstacle_p(args: Args, nights: list[dict], policy: str) -> str:
             mine.extend(d[policy])
             tamer.extend(d["tamer"])
             by_day.setdefault(r["day"], (float(np.mean(d["tamer"])), []))[1].append(float(np.mean(d[policy])))
-    p = ttest_ind(mine, tamer, equal_var=False).pvalue
-    closer = sum(statistics.mean(means) < t for t, means in by_day.values())
-    side = "closer" if np.mean(mine) < np.mean(tamer) else "farther"
-    return f"{side}, p = {p:.2g}; closer on {closer} of {len(by_day)} days"
+    closer_days = sum(statistics.mean(means) < t for t, means in by_day.values())
+    return (
+        float(ttest_ind(mine, tamer, equal_var=False).pvalue),
+        np.mean(mine) < np.mean(tamer),
+        closer_days,
+        len(by_day),
+    )
+
+
+def obstacle_p(args: Args, nights: list[dict], policy: str) -> str:
+    p, closer, closer_days, days = obstacle_test(args, nights, policy)
+    return f"{'closer' if closer else 'farther'}, p = {p:.2g}; closer on {closer_days} of {days} days"
 
 
 def table(args: Args) -> str:
@@ -331,6 +342,7 @@ def table(args: Args) -> str:
             row = [name, str(len(mine)), *cells, *([obstacle_p(args, mine, p)] if study.pusher else []), beats]
             lines.append("| " + " | ".join(row) + " |")
     lines += ["", verdict(rows, ran, columns, spread, ("inform", "inform_selected") if study.pusher else ("inform",))]
+    lines += ["", default_rule(args, rows, ran)] if study.pusher else []
     for path in unfinished:  # kept for their curves, left out of the table: say so
         with open(os.path.join(path, "summary.json")) as f:
             summary = json.load(f)
@@ -382,6 +394,39 @@ def verdict(rows: list[dict], variants: list[str], columns: tuple, bar: dict, po
                 cells.append(f"{bar[name]:.3g}" if bar[name] is not None else "-")
                 cells.append("yes" if helps(rows, variant, key, sign, bar[name], policy) else "no")
                 lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def default_rule(args: Args, rows: list[dict], variants: list[str]) -> str:
+    """The rule, fixed before the study, for a variant to become the default: on the days of seeds 1-5, with the boxes
+    on the path it ends closer than TAMER (Welch p < 0.01, episodes pooled) on at least 4 of the 5 days, and on the
+    plain task it stays within 15% of the oracle's fixed-start return on every day; then it must hold on three new
+    days (seeds 6-8), which this table does not judge. The controls are no candidates."""
+    days = {r["day"] for r in rows if r.get("seed") in RULE_SEEDS}  # the summary's seed is the day's
+    rows = [r for r in rows if r["day"] in days]
+    oracle = day_means(rows, "oracle", "eval/{p}_return")
+    head = ["variant", "days", "with the boxes vs TAMER", "within 15% of the oracle", "a new default?"]
+    lines = [f"the rule for a new default (days of seeds {RULE_SEEDS[0]}-{RULE_SEEDS[-1]}; then seeds 6-8)", ""]
+    lines += ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
+    for variant in [v for v in variants if v not in CONTROLS]:
+        for policy in ("inform", "inform_selected"):
+            nights = [r for r in rows if r["variant"] == variant]
+            if not nights:
+                continue
+            p, closer, closer_days, n = obstacle_test(args, nights, policy)
+            mine = day_means(rows, variant, "eval/{p}_return", policy)
+            within = sum(oracle[d] - v <= RULE_ORACLE_GAP * abs(oracle[d]) for d, v in mine.items())
+            left = len(RULE_SEEDS) - n  # days still to run
+            if within < len(mine) or (closer_days + left < RULE_CLOSER_DAYS) or (not left and p >= RULE_P):
+                answer = "no"
+            elif left:
+                answer = f"open: ran on {n} of {len(RULE_SEEDS)} days"
+            else:
+                answer = "yes, if it holds on seeds 6-8" if closer else "no"
+            label = variant if policy == "inform" else f"{variant}, offline pick"
+            side = "closer" if closer else "farther"
+            cells = [label, str(n), f"{side}, p = {p:.2g}; closer on {closer_days}", f"{within} of {len(mine)}", answer]
+            lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 

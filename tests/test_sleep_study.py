@@ -3,6 +3,8 @@ the days they ran, and "helps" needs a gain over both controls above the sleep s
 
 import json
 
+import numpy as np
+
 from inform_utils import sleep_study as ss
 
 KEY = "eval/{p}_return"
@@ -70,12 +72,55 @@ def test_the_verdict_table_names_each_variant_and_measure():
 
 def test_tamer_on_a_day_is_read_from_the_defaults_first_night(tmp_path):
     # the sampled tests share a stream with the night's policies, so TAMER's value differs a little between nights;
-    # the night that sorts first by name (the authors' protocol) must not be the one that decides it
-    for name, tamer in (("authors__sleep1", 9.0), ("default__sleep2", 10.5), ("default__sleep1", 10.0)):
+    # the night that sorts first by name (the authors' protocol) must not be the one that decides it; sleep seeds
+    # sort as numbers
+    nights = (
+        ("authors__sleep1", 9.0),
+        ("default__sleep10", 11.0),
+        ("default__sleep2", 10.5),
+        ("default__sleep1", 10.0),
+    )
+    for name, tamer in nights:
         path = tmp_path / "study" / "A" / name
         path.mkdir(parents=True)
-        (path / "summary.json").write_text(json.dumps({"status": "completed", "eval/tamer_return": tamer}))
+        summary = {"status": "completed", "seed": 7, "eval/tamer_return": tamer}  # a summary's seed is the day's
+        (path / "summary.json").write_text(json.dumps(summary))
         (path / "random_starts.json").write_text("{}")
     rows = ss.load(ss.Args(results_dir=str(tmp_path), campaign="study"))
-    assert [r["dir"] for r in rows] == ["default__sleep1", "default__sleep2", "authors__sleep1"]
+    assert [r["dir"] for r in rows] == ["default__sleep1", "default__sleep2", "default__sleep10", "authors__sleep1"]
     assert ss.day_means(rows, "tamer", KEY) == {"A": 10.0}
+
+
+def test_the_rule_for_a_new_default_reads_the_days_of_seeds_1_to_5_only(tmp_path):
+    # x: closer than TAMER with the boxes on 4 of days 1-5 and within 15% of the oracle on each; day 0 (much worse,
+    # and farther with the boxes) is not one of the rule's days. y: as close, but 20% below the oracle on day 3.
+    # z: ran on two days so far, closer on both.
+    rng = np.random.default_rng(0)
+    for seed in (0, 1, 2, 3, 4, 5):
+        for variant in ("default", "x", "y", "z"):
+            if variant == "z" and seed not in (1, 2):
+                continue
+            path = tmp_path / "study" / f"day{seed}" / f"{variant}__sleep1"
+            path.mkdir(parents=True)
+            gap = 0.05 if seed != 5 else -0.05  # day 5: farther than TAMER (TAMER ends at 0.2)
+            distance = 0.3 if seed == 0 else 0.2 - gap
+            ret = -40.0 if seed == 0 else (-24.0 if (variant, seed) == ("y", 3) else -21.0)
+            summary = {"status": "completed", "seed": seed, "eval/oracle_return": -20.0, "eval/inform_return": ret}
+            summary["eval/inform_selected_return"] = ret
+            (path / "summary.json").write_text(json.dumps(summary))
+            (path / "random_starts.json").write_text("{}")
+            noise = rng.normal(0, 0.01, 100)
+            np.savez(
+                path / "obstacle_distances.npz",
+                tamer=0.2 + noise,
+                inform=distance + noise,
+                inform_selected=distance + noise,
+            )
+    args = ss.Args(results_dir=str(tmp_path), campaign="study")
+    text = ss.default_rule(args, ss.load(args), ["default", "sham", "bc", "x", "y", "z"])
+    rows = {line.split(" | ")[0][2:]: line.split(" | ")[1:] for line in text.splitlines() if line.startswith("| ")}
+    assert rows["x"][0] == "5" and "closer on 4" in rows["x"][1] and rows["x"][2] == "5 of 5"
+    assert rows["x"][3] == "yes, if it holds on seeds 6-8 |"
+    assert rows["y"][2] == "4 of 5" and rows["y"][3] == "no |"  # 20% below the oracle on one day
+    assert rows["z"][3] == "open: ran on 2 of 5 days |"
+    assert rows["x, offline pick"][3] == rows["x"][3]
