@@ -403,6 +403,8 @@ def default_rule(args: Args, rows: list[dict], variants: list[str]) -> str:
     plain task it stays within 15% of the oracle's fixed-start return on every day; then it must hold on three new
     days (seeds 6-8), which this table does not judge. The controls are no candidates."""
     days = {r["day"] for r in rows if r.get("seed") in RULE_SEEDS}  # the summary's seed is the day's
+    if not days:
+        return f"the rule for a new default: no day of seeds {RULE_SEEDS[0]}-{RULE_SEEDS[-1]} in this campaign"
     rows = [r for r in rows if r["day"] in days]
     oracle = day_means(rows, "oracle", "eval/{p}_return")
     head = ["variant", "days", "with the boxes vs TAMER", "within 15% of the oracle", "a new default?"]

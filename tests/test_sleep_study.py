@@ -124,3 +124,5 @@ def test_the_rule_for_a_new_default_reads_the_days_of_seeds_1_to_5_only(tmp_path
     assert rows["y"][2] == "4 of 5" and rows["y"][3] == "no |"  # 20% below the oracle on one day
     assert rows["z"][3] == "open: ran on 2 of 5 days |"
     assert rows["x, offline pick"][3] == rows["x"][3]
+    day0 = [r for r in ss.load(args) if r["seed"] == 0]
+    assert "no day of seeds 1-5" in ss.default_rule(args, day0, ["default", "x"])
