@@ -411,10 +411,10 @@ def default_rule(args: Args, rows: list[dict], variants: list[str]) -> str:
     lines = [f"the rule for a new default (days of seeds {RULE_SEEDS[0]}-{RULE_SEEDS[-1]}; then seeds 6-8)", ""]
     lines += ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
     for variant in [v for v in variants if v not in CONTROLS]:
+        nights = [r for r in rows if r["variant"] == variant]
+        if not nights:
+            continue
         for policy in ("inform", "inform_selected"):
-            nights = [r for r in rows if r["variant"] == variant]
-            if not nights:
-                continue
             p, closer, closer_days, n = obstacle_test(args, nights, policy)
             mine = day_means(rows, variant, "eval/{p}_return", policy)
             within = sum(oracle[d] - v <= RULE_ORACLE_GAP * abs(oracle[d]) for d, v in mine.items())
