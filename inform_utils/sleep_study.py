@@ -407,7 +407,13 @@ def default_rule(args: Args, rows: list[dict], variants: list[str]) -> str:
         return f"the rule for a new default: no day of seeds {RULE_SEEDS[0]}-{RULE_SEEDS[-1]} in this campaign"
     rows = [r for r in rows if r["day"] in days]
     oracle = day_means(rows, "oracle", "eval/{p}_return")
-    head = ["variant", "days", "with the boxes vs TAMER", "within 15% of the oracle", "a new default?"]
+    head = [
+        "variant",
+        "days",
+        "with the boxes vs TAMER",
+        f"within {RULE_ORACLE_GAP:.0%} of the oracle",
+        "a new default?",
+    ]
     lines = [f"the rule for a new default (days of seeds {RULE_SEEDS[0]}-{RULE_SEEDS[-1]}; then seeds 6-8)", ""]
     lines += ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
     for variant in [v for v in variants if v not in CONTROLS]:
