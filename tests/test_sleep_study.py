@@ -91,20 +91,17 @@ def test_tamer_on_a_day_is_read_from_the_defaults_first_night(tmp_path):
     assert ss.day_means(rows, "tamer", KEY) == {"A": 10.0}
 
 
-def test_the_rule_for_a_new_default_reads_the_days_of_seeds_1_to_5_only(tmp_path):
-    # x: closer than TAMER with the boxes on 4 of days 1-5 and within 15% of the oracle on each; day 0 (much worse,
-    # and farther with the boxes) is not one of the rule's days. y: as close, but 20% below the oracle on day 3.
-    # z: ran on two days so far, closer on both.
+def make_rule_days(tmp_path, seeds, variants, distance_of, return_of):
+    """Nights on the days of `seeds`, TAMER ending at 0.2 m with the boxes and the oracle at -20 on the plain task;
+    distance_of(variant, seed) and return_of(variant, seed) give the variant's (None: it did not run that day)."""
     rng = np.random.default_rng(0)
-    for seed in (0, 1, 2, 3, 4, 5):
-        for variant in ("default", "x", "y", "z"):
-            if variant == "z" and seed not in (1, 2):
+    for seed in seeds:
+        for variant in variants:
+            distance, ret = distance_of(variant, seed), return_of(variant, seed)
+            if distance is None:
                 continue
             path = tmp_path / "study" / f"day{seed}" / f"{variant}__sleep1"
             path.mkdir(parents=True)
-            gap = 0.05 if seed != 5 else -0.05  # day 5: farther than TAMER (TAMER ends at 0.2)
-            distance = 0.3 if seed == 0 else 0.2 - gap
-            ret = -40.0 if seed == 0 else (-24.0 if (variant, seed) == ("y", 3) else -21.0)
             summary = {"status": "completed", "seed": seed, "eval/oracle_return": -20.0, "eval/inform_return": ret}
             summary["eval/inform_selected_return"] = ret
             (path / "summary.json").write_text(json.dumps(summary))
@@ -116,13 +113,78 @@ def test_the_rule_for_a_new_default_reads_the_days_of_seeds_1_to_5_only(tmp_path
                 inform=distance + noise,
                 inform_selected=distance + noise,
             )
-    args = ss.Args(results_dir=str(tmp_path), campaign="study")
+    return ss.Args(results_dir=str(tmp_path), campaign="study")
+
+
+def rule_rows(text: str, table: int = 0) -> dict:
+    """{label: the other cells} of the rule's first (0) or second (1) table."""
+    tables = text.split("does it hold on the new days")
+    rows = [line.split(" | ") for line in tables[table].splitlines() if line.startswith("| ")][2:]  # no header
+    return {cells[0][2:]: [c.rstrip(" |") for c in cells[1:]] for cells in rows}
+
+
+def test_the_rule_for_a_new_default_reads_the_days_of_seeds_1_to_5_only(tmp_path):
+    # x: closer than TAMER with the boxes on 4 of days 1-5 and within 15% of the oracle on each; day 0 (much worse,
+    # and farther with the boxes) is not one of the rule's days. y: as close, but 20% below the oracle on day 3.
+    # z: ran on two days so far, closer on both. The default is farther everywhere.
+    def distance(variant, seed):
+        if variant == "z" and seed not in (1, 2):
+            return None
+        if variant == "default":
+            return 0.25
+        return 0.3 if seed == 0 else (0.25 if seed == 5 else 0.15)  # day 5: farther than TAMER
+
+    def ret(variant, seed):
+        return -40.0 if seed == 0 else (-24.0 if (variant, seed) == ("y", 3) else -21.0)
+
+    args = make_rule_days(tmp_path, (0, 1, 2, 3, 4, 5), ("default", "x", "y", "z"), distance, ret)
     text = ss.default_rule(args, ss.load(args), ["default", "sham", "bc", "x", "y", "z"])
-    rows = {line.split(" | ")[0][2:]: line.split(" | ")[1:] for line in text.splitlines() if line.startswith("| ")}
+    rows = rule_rows(text)
     assert rows["x"][0] == "5" and "closer on 4" in rows["x"][1] and rows["x"][2] == "5 of 5"
-    assert rows["x"][3] == "yes, if it holds on seeds 6-8 |"
-    assert rows["y"][2] == "4 of 5" and rows["y"][3] == "no |"  # 20% below the oracle on one day
-    assert rows["z"][3] == "open: ran on 2 of 5 days |"
+    assert rows["x"][3] == "yes, if it holds on seeds 6-8"
+    assert rows["y"][2] == "4 of 5" and rows["y"][3] == "no"  # 20% below the oracle on one day
+    assert rows["z"][3] == "open: ran on 2 of 5 days"
     assert rows["x, offline pick"][3] == rows["x"][3]
+    # only the policies that passed on days 1-5 go to the new days, where none has run yet
+    assert set(rule_rows(text, 1)) == {"x", "x, offline pick"}
+    assert rule_rows(text, 1)["x"] == ["0", "-", "-", "open: ran on 0 of 3 days"]
+    assert text.endswith("a new default: none yet (x, x, offline pick still open)")
     day0 = [r for r in ss.load(args) if r["seed"] == 0]
     assert "no day of seeds 1-5" in ss.default_rule(args, day0, ["default", "x"])
+
+
+def test_a_new_default_must_hold_on_days_6_to_8_alone(tmp_path):
+    # x, w and u pass on days 1-5 (closer on 4, farther on day 2). On days 6-8, x is closer on 2 of 3 (one miss is
+    # allowed) and within 15% of the oracle; w is as close but 20% below the oracle on day 7; u is farther on days
+    # 7 and 8. v is closer on days 6-8 only, so it never gets there; the default is farther everywhere.
+    def distance(variant, seed):
+        if variant in ("default", "v"):
+            return 0.25 if variant == "default" or seed <= 5 else 0.15
+        farther = (2, 7, 8) if variant == "u" else (2, 8)
+        return 0.23 if seed in farther else 0.15
+
+    def ret(variant, seed):
+        return -24.0 if (variant, seed) == ("w", 7) else -21.0
+
+    variants = ("default", "x", "w", "u", "v")
+    args = make_rule_days(tmp_path, range(1, 9), variants, distance, ret)
+    text = ss.default_rule(args, ss.load(args), ["sham", "bc", *variants])
+    first, new = rule_rows(text), rule_rows(text, 1)
+    assert first["v"][3] == "no" and first["default"][3] == "no"
+    assert set(new) == {"x", "x, offline pick", "w", "w, offline pick", "u", "u, offline pick"}
+    assert new["x"][0] == "3" and new["x"][1].startswith("closer") and new["x"][1].endswith("closer on 2")
+    assert new["x"][2] == "3 of 3" and new["x"][3] == "yes"
+    assert new["w"][2] == "2 of 3" and new["w"][3] == "no"
+    assert new["u"][1].endswith("closer on 1") and new["u"][3] == "no"
+    assert text.endswith("a new default: x, x, offline pick")
+    # days still to run keep a policy open until they can no longer change its answer
+    rows = ss.load(args)
+    day6 = [r for r in rows if r["seed"] <= 6]
+    assert {label: cells[3] for label, cells in rule_rows(ss.default_rule(args, day6, variants), 1).items()} == {
+        label: "open: ran on 1 of 3 days" for label in new
+    }
+    day7 = [r for r in rows if r["seed"] != 6 and r["seed"] != 8]
+    answers = rule_rows(ss.default_rule(args, day7, variants), 1)
+    assert answers["w"][3] == "no" and answers["x"][3] == answers["u"][3] == "open: ran on 1 of 3 days"
+    failed = [r for r in rows if r["variant"] in ("default", "u")]
+    assert ss.default_rule(args, failed, ["default", "u"]).endswith("a new default: none; the defaults stay")
