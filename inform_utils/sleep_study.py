@@ -443,8 +443,8 @@ def default_rule(args: Args, rows: list[dict], variants: list[str]) -> str:
         cells, answer = rule_test(args, rows, variant, policy, RULE_SEEDS, RULE_CLOSER_DAYS)
         label = variant if policy == "inform" else f"{variant}, offline pick"
         passed += [(variant, policy, label)] if answer == "yes" else []
-        lines.append("| " + " | ".join([label, *cells, f"yes, if it holds on {then}" if answer == "yes" else answer]))
-        lines[-1] += " |"
+        answer = f"yes, if it holds on {then}" if answer == "yes" else answer
+        lines.append("| " + " | ".join([label, *cells, answer]) + " |")
     if not passed:
         return "\n".join([*lines, "", "a new default: none; the defaults stay"])
     lines += ["", f"does it hold on the new days ({then}, closer on at least {CONFIRM_CLOSER_DAYS} of them)?", ""]
