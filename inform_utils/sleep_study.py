@@ -402,8 +402,8 @@ def verdict(rows: list[dict], variants: list[str], columns: tuple, bar: dict, po
 def rule_test(args: Args, rows: list[dict], variant: str, policy: str, seeds: tuple, need: int) -> tuple[list, str]:
     """The rule's tests for one variant's policy on the days of `seeds`: with the boxes closer than TAMER (Welch p <
     RULE_P, episodes pooled) and closer on at least `need` of the days, and on the plain task within RULE_ORACLE_GAP
-    of the oracle's fixed-start return on every day. Returns the table's cells and "yes", "no" or "open" (days to
-    run; "no" as soon as those days cannot change it)."""
+    of the oracle's fixed-start return on every day. Returns the table's cells and "yes", "no", or "open: ran on n of
+    k days" while days are missing ("no" as soon as the missing days cannot change the answer)."""
     rows = [r for r in rows if r.get("seed") in seeds]  # the summary's seed is the day's
     nights = [r for r in rows if r["variant"] == variant]
     if not nights:
