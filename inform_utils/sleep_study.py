@@ -457,8 +457,9 @@ def default_rule(args: Args, rows: list[dict], variants: list[str]) -> str:
     if holds:
         return "\n".join([*lines, "", f"a new default: {', '.join(holds)}"])
     still = [label for label, answer in answers.items() if answer.startswith("open")]
-    verdict_line = f"a new default: none yet ({', '.join(still)} still open)" if still else "a new default: none"
-    return "\n".join([*lines, "", verdict_line if still else f"{verdict_line}; the defaults stay"])
+    if still:
+        return "\n".join([*lines, "", f"a new default: none yet ({', '.join(still)} still open)"])
+    return "\n".join([*lines, "", "a new default: none; the defaults stay"])
 
 
 if __name__ == "__main__":
