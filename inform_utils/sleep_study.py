@@ -301,6 +301,15 @@ def obstacle_p(args: Args, nights: list[dict], policy: str) -> str:
     return f"{'closer' if closer else 'farther'}, p = {p:.2g}; closer on {closer_days} of {days} days"
 
 
+def table_row(cells: list[str]) -> str:
+    return "| " + " | ".join(cells) + " |"
+
+
+def table_head(head: list[str]) -> list[str]:
+    """A Markdown table's header and rule lines."""
+    return [table_row(head), "|" + " --- |" * len(head)]
+
+
 def table(args: Args) -> str:
     """Each variant's INFORM (and the checkpoint the offline criterion picked) against TAMER and the controls: mean +-
     sd over days and sleep seeds; 'beats both controls on' lists the measures where the variant is better than each
@@ -324,13 +333,11 @@ def table(args: Args) -> str:
     head = ["policy", "nights", *(name for name, _, _ in columns)]
     head += ["obstacle vs TAMER"] if study.pusher else []
     head += ["beats both controls on"]
-    lines += ["", "| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
+    lines += ["", *table_head(head)]
     by_day = first_nights(rows)  # TAMER and the oracle: one row per day
     for p in ("oracle", "tamer"):
         cells = [mean_sd([r.get(key.format(p=p)) for r in by_day.values()]) for _, key, _ in columns]
-        lines.append(
-            f"| {p} | {len(by_day)} days | " + " | ".join(cells) + " | -" * (len(head) - len(cells) - 2) + " |"
-        )
+        lines.append(table_row([p, f"{len(by_day)} days", *cells, *["-"] * (len(head) - len(cells) - 2)]))
     ran = [v for v in study.variants if any(r["variant"] == v for r in rows)]
     for variant in ran:
         mine = [r for r in rows if r["variant"] == variant]
@@ -342,7 +349,7 @@ def table(args: Args) -> str:
                 beats = ", ".join(wins) or "none"
             name = variant if p == "inform" else f"{variant}, offline pick"
             row = [name, str(len(mine)), *cells, *([obstacle_p(args, mine, p)] if study.pusher else []), beats]
-            lines.append("| " + " | ".join(row) + " |")
+            lines.append(table_row(row))
     lines += ["", verdict(rows, ran, columns, spread, ("inform", "inform_selected") if study.pusher else ("inform",))]
     lines += ["", default_rule(args, rows, ran)] if study.pusher else []
     for path in unfinished:  # kept for their curves, left out of the table: say so
@@ -373,7 +380,7 @@ def verdict(rows: list[dict], variants: list[str], columns: tuple, bar: dict, po
     head = ["variant", "measure", "days", "vs TAMER (days better, worse)"]
     head += [f"vs {c} (days above the bar)" for c in CONTROLS] + ["bar (seed spread, at least one unit)", "helps"]
     lines = ["verdict (paired by day; gains are in the measure's own direction: positive = better)", ""]
-    lines += ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
+    lines += table_head(head)
     for variant in [v for v in variants if v not in CONTROLS]:
         for policy in policies:
             for name, key, sign in columns:
@@ -395,7 +402,7 @@ def verdict(rows: list[dict], variants: list[str], columns: tuple, bar: dict, po
                     )
                 cells.append(f"{bar[name]:.3g}" if bar[name] is not None else "-")
                 cells.append("yes" if helps(rows, variant, key, sign, bar[name], policy) else "no")
-                lines.append("| " + " | ".join(cells) + " |")
+                lines.append(table_row(cells))
     return "\n".join(lines)
 
 
@@ -428,14 +435,14 @@ def default_rule(args: Args, rows: list[dict], variants: list[str]) -> str:
     day), and then it passes it again on three new days (seeds 6-8) alone, closer on 2 of 3. Only a policy picked
     without the environment can pass: the night's last actor or the offline criterion's pick. The controls are no
     candidates."""
-    first = f"days of seeds {RULE_SEEDS[0]}-{RULE_SEEDS[-1]}"
+    first = f"seeds {RULE_SEEDS[0]}-{RULE_SEEDS[-1]}"
     if not any(r.get("seed") in RULE_SEEDS for r in rows):
-        return f"the rule for a new default: no day of seeds {RULE_SEEDS[0]}-{RULE_SEEDS[-1]} in this campaign"
+        return f"the rule for a new default: no day of {first} in this campaign"
     candidates = [v for v in variants if v not in CONTROLS]
     head = ["variant", "days", "with the boxes vs TAMER", f"within {RULE_ORACLE_GAP:.0%} of the oracle"]
     then = f"seeds {CONFIRM_SEEDS[0]}-{CONFIRM_SEEDS[-1]}"
-    lines = [f"the rule for a new default ({first}; then {then})", ""]
-    lines += ["| " + " | ".join([*head, "a new default?"]) + " |", "|" + " --- |" * (len(head) + 1)]
+    lines = [f"the rule for a new default (days of {first}; then {then})", ""]
+    lines += table_head([*head, "a new default?"])
     passed = []
     for variant, policy in [(v, p) for v in candidates for p in ("inform", "inform_selected")]:
         if not any(r["variant"] == variant and r.get("seed") in RULE_SEEDS for r in rows):
@@ -444,15 +451,15 @@ def default_rule(args: Args, rows: list[dict], variants: list[str]) -> str:
         label = variant if policy == "inform" else f"{variant}, offline pick"
         passed += [(variant, policy, label)] if answer == "yes" else []
         answer = f"yes, if it holds on {then}" if answer == "yes" else answer
-        lines.append("| " + " | ".join([label, *cells, answer]) + " |")
+        lines.append(table_row([label, *cells, answer]))
     if not passed:
         return "\n".join([*lines, "", "a new default: none; the defaults stay"])
     lines += ["", f"does it hold on the new days ({then}, closer on at least {CONFIRM_CLOSER_DAYS} of them)?", ""]
-    lines += ["| " + " | ".join([*head, "holds?"]) + " |", "|" + " --- |" * (len(head) + 1)]
+    lines += table_head([*head, "holds?"])
     answers = {}
     for variant, policy, label in passed:
         cells, answers[label] = rule_test(args, rows, variant, policy, CONFIRM_SEEDS, CONFIRM_CLOSER_DAYS)
-        lines.append("| " + " | ".join([label, *cells, answers[label]]) + " |")
+        lines.append(table_row([label, *cells, answers[label]]))
     holds = [label for label, answer in answers.items() if answer == "yes"]
     if holds:
         return "\n".join([*lines, "", f"a new default: {', '.join(holds)}"])
