@@ -16,6 +16,7 @@ racing jobs still running. A second signal kills the local runs outright.
 """
 
 import contextlib
+import fcntl
 import glob
 import itertools
 import json
@@ -184,6 +185,8 @@ def newest_summary(args: Args, run: Run, completed: bool = True, since: float = 
     for path in sorted(paths, key=os.path.getmtime, reverse=True):
         if os.path.getmtime(path) < since:
             break
+        if os.path.dirname(path).endswith(".tmp"):  # a run half-copied into --results-dir never counts
+            continue
         with open(path) as f:
             summary = json.load(f)
         if (
@@ -304,7 +307,14 @@ def run_local(args: Args, todo: list[Run], stop: Stop) -> dict[Run, Outcome]:
         name = "__".join([args.exp_name, *([run.label.replace("/", "_")] if run.point else []), str(run.seed)])
         log = os.path.join(args.logs_dir, f"{name}.log")
         start = time.time()
-        with open(log, "w") as f:
+        with open(log, "a") as f:
+            try:  # a second campaign of the same name and seed finds the log locked: it leaves this run alone
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                outcomes[run] = Outcome("not started", f"another run_seeds is running it (its log {log} is locked)")
+                print(f"{run}: not started: another run_seeds is running it (log {log})", flush=True)
+                return
+            f.truncate(0)
             f.write(shlex.join(cmd) + "\n")
             f.flush()
             with stop.lock:
@@ -581,7 +591,14 @@ def main(args: Args) -> dict[str, dict]:
     return tables
 
 
+# an experiment name is part of each run's directory name: one path component, short enough for any file system
+EXP_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+=-]{0,99}")
+
+
 def validate(args: Args) -> None:
+    if not EXP_NAME.fullmatch(args.exp_name):
+        raise ValueError(f"--exp-name {args.exp_name[:120]!r}: use 1-100 letters, digits and ._+=- (no / or ..), "
+                         "starting with a letter or digit")  # fmt: skip
     if args.workers < 1 or args.threads < 0 or not args.seeds:
         raise ValueError("--workers must be >= 1, --threads >= 0, and --seeds non-empty")
     if not args.keep_max_mb > 0:

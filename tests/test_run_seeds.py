@@ -238,3 +238,41 @@ def test_one_thread_per_run_by_default(run_script, fake_script):
                         "--workers", "1")  # fmt: skip
     assert result.returncode == 0, result.stdout + result.stderr
     assert "1 workers, 1 thread(s) each" in result.stdout, result.stdout
+
+
+@pytest.mark.parametrize("name", ["a/b", "../x", "..", "x" * 101, ""])
+def test_an_experiment_name_that_would_leave_runs_is_one_line(run_script, fake_script, name):
+    result = run_script("inform_utils/run_seeds.py", "--script", "fake.py", "--exp-name", name, "--seeds", "1")
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert result.stderr.startswith("error: --exp-name") and result.stderr.count("\n") == 1, result.stderr
+    assert not (run_script.cwd / "runs").exists() and not (run_script.cwd / "calls.txt").exists()
+
+
+def test_a_half_copied_run_in_the_results_dir_never_counts(tmp_path, monkeypatch, fake_script):
+    """keep() copies into {run}.tmp, then renames: a copy cut short leaves only the .tmp, which is not a run."""
+    monkeypatch.chdir(tmp_path)
+    half = tmp_path / "results" / "Fake-v0__h__1__5.tmp"
+    half.mkdir(parents=True)
+    summary = {"status": "completed", "script": "fake.py", "seed": 1, "eval/x": 99.0, "args": {"seed": 1}}
+    (half / "summary.json").write_text(json.dumps(summary))
+    args = run_seeds.Args(script="fake.py", exp_name="h", seeds=[1], results_dir="results")
+    assert run_seeds.newest_summary(args, run_seeds.Run(1, ())) is None
+    table = run_seeds.main(args)[""]
+    assert calls(tmp_path) == [(1, 0.0)] and table["eval/x"]["mean"] == 2.0  # the run itself, not the .tmp's 99
+
+
+def test_two_campaigns_of_one_name_never_write_one_log(tmp_path, fake_script):
+    """While one run_seeds runs seed 1, a second with the same name leaves that run alone, and its log untouched."""
+    (tmp_path / "block").write_text("")
+    cmd = [sys.executable, RUN_SEEDS, "--script", "fake.py", "--exp-name", "twice", "--seeds", "1"]
+    first = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             preexec_fn=default_signals)  # fmt: skip
+    log = tmp_path / "runs" / "logs" / "twice__1.log"
+    wait_for(lambda: len(calls(tmp_path)) == 1 and log.exists(), first, 60, "the first campaign's run")
+    second = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    (tmp_path / "block").unlink()
+    out, err = finish(first, 60)
+    assert first.returncode == 0, out + err
+    assert second.returncode == 1 and "another run_seeds is running it" in second.stdout, second.stdout
+    assert calls(tmp_path) == [(1, 0.0)]  # the second campaign started nothing
+    assert log.read_text().count("fake.py") == 1 and "started" in log.read_text()
