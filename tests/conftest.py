@@ -141,3 +141,19 @@ def fake_script(tmp_path):
     path = tmp_path / "fake.py"
     path.write_text(FAKE_SCRIPT)
     return path
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """INFORM_NO_SKIPS=1 (CI's marker steps): a step that skipped a test, or ran none, fails, so that a venv that
+    cannot run what the step is for (Pusher-v4 without mujoco 2.3.7) never passes empty."""
+    if os.environ.get("INFORM_NO_SKIPS") != "1":
+        return
+    reporter = session.config.pluginmanager.get_plugin("terminalreporter")
+    stats = reporter.stats if reporter else {}
+    skipped, passed = len(stats.get("skipped", [])), len(stats.get("passed", []))
+    if skipped or not passed:
+        reasons = sorted(
+            {str(r.longrepr[-1]) if isinstance(r.longrepr, tuple) else "" for r in stats.get("skipped", [])}
+        )
+        print(f"\nINFORM_NO_SKIPS: {passed} passed, {skipped} skipped {reasons}: this step must run its tests")
+        session.exitstatus = 1
