@@ -1,9 +1,17 @@
 """Aggregate the Pusher obstacle robustness test over seeds (paper Sec. VI-B: INFORM closer, p < 0.0001).
 
 Reads `obstacle_distances.npz` (per-episode final object-goal distances) and `summary.json` from each run
-directory written by inform_sac_pusher.py, prints per-seed and pooled means and standard deviations, and a
-Welch t-test (scipy.stats.ttest_ind, equal_var=False) of TAMER against INFORM final distances, on the pooled
-episodes and on the per-seed means.
+directory written by inform_sac_pusher.py, prints per-seed and pooled means and standard deviations, and two tests
+of TAMER against INFORM final distances:
+
+- the headline, over seeds: a paired t-test (scipy.stats.ttest_rel) of the seeds' mean distances, n = the number of
+  seeds. A seed's 100 episodes share one policy and one start, so the seed is the unit that repeats;
+- beside it, on the pooled episodes: Welch's t-test (scipy.stats.ttest_ind, equal_var=False), which counts every
+  episode as independent and so overstates significance.
+
+A margin (TAMER's mean distance minus INFORM's, on a seed or averaged over seeds) smaller than TAMER's own sampling
+spread is "within noise". With one sampling stream per seed, that spread is estimated as twice the standard error of
+TAMER's per-seed mean (2 sd / sqrt(episodes), averaged over the seeds).
 
     python -m inform_utils.pusher_obstacle_stats runs/Pusher-v5__inform_sac_pusher__1__* \
         runs/Pusher-v5__inform_sac_pusher__2__* runs/Pusher-v5__inform_sac_pusher__3__*
@@ -72,14 +80,27 @@ def aggregate(runs: list[dict]) -> dict:
     out["inform_closer_seeds"] = int(closer.sum())
     out["layouts"] = sorted({r["layout"] for r in runs})
     out["min_box_distance_to_path"] = [r["min_box_distance_to_path"] for r in runs]
+    margins = np.array(out["tamer_seed_means"]) - np.array(out["inform_seed_means"])  # positive: INFORM closer
+    out["margins"], out["margin"] = margins.tolist(), float(margins.mean())
+    out["tamer_sampling_spread"] = sampling_spread([r["distances"]["tamer"] for r in runs])
+    out["inform_closer_seeds_beyond_noise"] = int((margins > out["tamer_sampling_spread"]).sum())
+    out["within_noise"] = bool(abs(out["margin"]) < out["tamer_sampling_spread"])
     tamer = np.concatenate([r["distances"]["tamer"] for r in runs])
     inform = np.concatenate([r["distances"]["inform"] for r in runs])
     welch = stats.ttest_ind(tamer, inform, equal_var=False)
     out["welch_t_episodes"], out["welch_p_episodes"] = float(welch.statistic), float(welch.pvalue)
     if len(runs) > 1:
+        paired = stats.ttest_rel(out["tamer_seed_means"], out["inform_seed_means"])
+        out["paired_t_seed_means"], out["paired_p_seed_means"] = float(paired.statistic), float(paired.pvalue)
         welch = stats.ttest_ind(out["tamer_seed_means"], out["inform_seed_means"], equal_var=False)
         out["welch_t_seed_means"], out["welch_p_seed_means"] = float(welch.statistic), float(welch.pvalue)
     return out
+
+
+def sampling_spread(episodes: list[np.ndarray]) -> float:
+    """TAMER's own sampling spread of a seed's mean distance: twice its standard error (2 sd / sqrt(episodes)),
+    averaged over the seeds. A margin smaller than this could come from the sampled actions alone."""
+    return float(np.mean([2 * e.std(ddof=1) / np.sqrt(e.size) if e.size > 1 else 0.0 for e in episodes]))
 
 
 def fig5a(runs: list[dict], path: str) -> None:
@@ -123,16 +144,27 @@ def main(args: Args) -> dict:
                 f"  {p:>6}: final distance {out[f'{p}_mean']:.4f} +- {out[f'{p}_std']:.4f} (pooled episodes) | "
                 f"per-seed means [{per_seed}] | success rate {out[f'{p}_success_rate']:.2f}"
             )
+    side = "closer" if out["margin"] > 0 else "farther"
+    noise = " (within noise)" if out["within_noise"] else ""
     print(
-        f"  Welch t-test TAMER vs INFORM, pooled episodes: t = {out['welch_t_episodes']:.3f}, "
-        f"p = {out['welch_p_episodes']:.3g}"
+        f"  INFORM {side} than TAMER by {abs(out['margin']):.4f} m on average over the seeds{noise}; TAMER's "
+        f"sampling spread (2 standard errors of a seed's mean) {out['tamer_sampling_spread']:.4f} m"
     )
-    if "welch_p_seed_means" in out:
+    if "paired_p_seed_means" in out:
         print(
-            f"  Welch t-test TAMER vs INFORM, per-seed means (n={len(runs)}): t = {out['welch_t_seed_means']:.3f}, "
-            f"p = {out['welch_p_seed_means']:.3g}"
+            f"  per seed (the headline): paired t-test TAMER vs INFORM over the {len(runs)} seeds' means: "
+            f"t = {out['paired_t_seed_means']:.3f}, p = {out['paired_p_seed_means']:.3g}"
         )
-    print(f"  INFORM closer than TAMER on {out['inform_closer_seeds']} of {len(runs)} seeds; layout {out['layouts']}")
+    else:
+        print("  per seed (the headline): one seed, no test")
+    print(
+        f"  pooled episodes (beside it; a seed's episodes share one policy and one start): Welch t-test TAMER vs "
+        f"INFORM, t = {out['welch_t_episodes']:.3f}, p = {out['welch_p_episodes']:.3g}"
+    )
+    print(
+        f"  INFORM closer than TAMER on {out['inform_closer_seeds']} of {len(runs)} seeds "
+        f"({out['inform_closer_seeds_beyond_noise']} beyond the sampling spread); layout {out['layouts']}"
+    )
     if args.fig5a:
         fig5a(runs, args.fig5a)
         print(f"  Fig. 5a: {args.fig5a}")
