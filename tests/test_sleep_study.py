@@ -124,67 +124,180 @@ def rule_rows(text: str, table: int = 0) -> dict:
 
 
 def test_the_rule_for_a_new_default_reads_the_days_of_seeds_1_to_5_only(tmp_path):
-    # x: closer than TAMER with the boxes on 4 of days 1-5 and within 15% of the oracle on each; day 0 (much worse,
-    # and farther with the boxes) is not one of the rule's days. y: as close, but 20% below the oracle on day 3.
-    # z: ran on two days so far, closer on both. The default is farther everywhere.
+    # x: closer than TAMER with the boxes on 4 of days 1-5 (by 0.05 m, farther by 0.05 on day 5) and within 15% of the
+    # oracle on each; day 0 (much worse, and farther with the boxes) is not one of the rule's days. Over the days its
+    # margins are 0.05 x 4 and -0.05: mean 0.03, sd sqrt(0.002), t = 0.03 / (sqrt(0.002) / sqrt(5)) = 1.5, p = 0.21,
+    # so it passes by the pooled test only. q: closer on all five (0.05 x 4, 0.04): t = 24, it passes by both. y: as
+    # close as x, but 20% below the oracle on day 3. z: ran on two days so far, closer on both. The default is farther
+    # everywhere.
     def distance(variant, seed):
         if variant == "z" and seed not in (1, 2):
             return None
         if variant == "default":
             return 0.25
+        if variant == "q":
+            return 0.16 if seed == 5 else 0.15
         return 0.3 if seed == 0 else (0.25 if seed == 5 else 0.15)  # day 5: farther than TAMER
 
     def ret(variant, seed):
         return -40.0 if seed == 0 else (-24.0 if (variant, seed) == ("y", 3) else -21.0)
 
-    args = make_rule_days(tmp_path, (0, 1, 2, 3, 4, 5), ("default", "x", "y", "z"), distance, ret)
-    text = ss.default_rule(args, ss.load(args), ["default", "sham", "bc", "x", "y", "z"])
+    args = make_rule_days(tmp_path, (0, 1, 2, 3, 4, 5), ("default", "x", "q", "y", "z"), distance, ret)
+    text = ss.default_rule(args, ss.load(args), ["default", "sham", "bc", "x", "q", "y", "z"])
     rows = rule_rows(text)
-    assert rows["x"][0] == "5" and "closer on 4" in rows["x"][1] and rows["x"][2] == "5 of 5"
-    assert rows["x"][3] == "yes, if it holds on seeds 6-8"
-    assert rows["y"][2] == "4 of 5" and rows["y"][3] == "no"  # 20% below the oracle on one day
-    assert rows["z"][3] == "open: ran on 2 of 5 days"
-    assert rows["x, offline pick"][3] == rows["x"][3]
-    # only the policies that passed on days 1-5 go to the new days, where none has run yet
-    assert set(rule_rows(text, 1)) == {"x", "x, offline pick"}
-    assert rule_rows(text, 1)["x"] == ["0", "-", "-", "open: ran on 0 of 3 days"]
-    assert text.endswith("a new default: none yet (x, x, offline pick still open)")
+    assert rows["x"][0] == "5" and "closer on 4 of 5 days" in rows["x"][1] and rows["x"][2] == "5 of 5"
+    assert "closer by 0.0300 m; p = 0.21 over 5 days" in rows["x"][1]
+    assert rows["x"][3:] == ["no", "yes, if it holds on seeds 6-8"]  # by the per-day test, then the pooled one
+    assert rows["q"][3:] == ["yes, if it holds on seeds 6-8"] * 2
+    assert rows["y"][2] == "4 of 5" and rows["y"][3:] == ["no", "no"]  # 20% below the oracle on one day
+    assert rows["z"][3:] == ["open: ran on 2 of 5 days"] * 2
+    assert rows["x, offline pick"][3:] == rows["x"][3:]
+    # only the policies that passed on days 1-5, by either test, go to the new days, where none has run yet; one
+    # that passed by one test only is not tried by the other there
+    new = rule_rows(text, 1)
+    assert set(new) == {"x", "x, offline pick", "q", "q, offline pick"}
+    assert new["q"] == ["0", "-", "-", "open: ran on 0 of 3 days", "open: ran on 0 of 3 days"]
+    assert new["x"][3:] == ["- (no on seeds 1-5)", "open: ran on 0 of 3 days"]
+    assert text.endswith(
+        "a new default by the per-day test: none yet (q, q, offline pick still open) (by the pooled test: none yet "
+        "(x, x, offline pick, q, q, offline pick still open))"
+    )
     day0 = [r for r in ss.load(args) if r["seed"] == 0]
     assert "no day of seeds 1-5" in ss.default_rule(args, day0, ["default", "x"])
 
 
 def test_a_new_default_must_hold_on_days_6_to_8_alone(tmp_path):
-    # x, w and u pass on days 1-5 (closer on 4, farther on day 2). On days 6-8, x is closer on 2 of 3 (one miss is
-    # allowed) and within 15% of the oracle; w is as close but 20% below the oracle on day 7; u is farther on days
-    # 7 and 8. v is closer on days 6-8 only, so it never gets there; the default is farther everywhere.
+    # x, w and u pass on days 1-5 by both tests (closer by 0.05 m on four days, 0.04 on day 2). On days 6-8, x is
+    # closer by 0.05, 0.05 and 0.04: t = 0.04667 / (0.005774 / sqrt(3)) = 14, p = 1 - 14 / sqrt(2 + 14^2) = 0.005 (a
+    # t with 2 degrees of freedom), so it holds by both tests; w is as close but 20% below the oracle on day 7; u is
+    # farther on days 7 and 8. t is farther on day 2, so it passes days 1-5 by the pooled test only (margins 0.05,
+    # -0.03, 0.05 x 3: p = 0.10 over the days); on days 6-8 it is farther on day 8 and holds by the pooled test. v is
+    # closer on days 6-8 only, so it never gets there; the default is farther everywhere.
     def distance(variant, seed):
         if variant in ("default", "v"):
             return 0.25 if variant == "default" or seed <= 5 else 0.15
-        farther = (2, 7, 8) if variant == "u" else (2, 8)
-        return 0.23 if seed in farther else 0.15
+        if variant == "t":
+            return 0.23 if seed in (2, 8) else 0.15
+        farther = (7, 8) if variant == "u" else ()
+        return 0.23 if seed in farther else (0.16 if seed in (2, 8) else 0.15)
 
     def ret(variant, seed):
         return -24.0 if (variant, seed) == ("w", 7) else -21.0
 
-    variants = ("default", "x", "w", "u", "v")
+    variants = ("default", "x", "w", "u", "v", "t")
     args = make_rule_days(tmp_path, range(1, 9), variants, distance, ret)
     text = ss.default_rule(args, ss.load(args), ["sham", "bc", *variants])
     first, new = rule_rows(text), rule_rows(text, 1)
-    assert first["v"][3] == "no" and first["default"][3] == "no"
-    assert set(new) == {"x", "x, offline pick", "w", "w, offline pick", "u", "u, offline pick"}
-    assert new["x"][0] == "3" and new["x"][1].startswith("closer") and new["x"][1].endswith("closer on 2")
-    assert new["x"][2] == "3 of 3" and new["x"][3] == "yes"
-    assert new["w"][2] == "2 of 3" and new["w"][3] == "no"
-    assert new["u"][1].endswith("closer on 1") and new["u"][3] == "no"
-    assert text.endswith("a new default: x, x, offline pick")
+    assert first["v"][3:] == ["no", "no"] and first["default"][3:] == ["no", "no"]
+    assert first["t"][3:] == ["no", "yes, if it holds on seeds 6-8"] and "p = 0.1 over 5 days" in first["t"][1]
+    assert set(new) == {f"{v}{pick}" for v in ("x", "w", "u", "t") for pick in ("", ", offline pick")}
+    assert new["x"][0] == "3" and new["x"][1].startswith("closer by 0.0467 m; p = 0.0051 over 3 days")
+    assert new["x"][1].endswith("closer on 3 of 3 days")  # no noise level given: no count beyond it
+    assert new["x"][2] == "3 of 3" and new["x"][3:] == ["yes", "yes"]
+    assert new["w"][2] == "2 of 3" and new["w"][3:] == ["no", "no"]
+    assert "closer on 1 of 3 days" in new["u"][1] and new["u"][3:] == ["no", "no"]
+    assert new["t"][3:] == ["- (no on seeds 1-5)", "yes"]
+    assert text.endswith(
+        "a new default by the per-day test: x, x, offline pick (by the pooled test: x, x, offline pick, t, t, "
+        "offline pick)"
+    )
     # days still to run keep a policy open until they can no longer change its answer
     rows = ss.load(args)
     day6 = [r for r in rows if r["seed"] <= 6]
-    assert {label: cells[3] for label, cells in rule_rows(ss.default_rule(args, day6, variants), 1).items()} == {
+    assert {label: cells[4] for label, cells in rule_rows(ss.default_rule(args, day6, variants), 1).items()} == {
         label: "open: ran on 1 of 3 days" for label in new
     }
     day7 = [r for r in rows if r["seed"] != 6 and r["seed"] != 8]
     answers = rule_rows(ss.default_rule(args, day7, variants), 1)
-    assert answers["w"][3] == "no" and answers["x"][3] == answers["u"][3] == "open: ran on 1 of 3 days"
+    assert answers["w"][3:] == ["no", "no"] and answers["x"][3] == answers["u"][3] == "open: ran on 1 of 3 days"
     failed = [r for r in rows if r["variant"] in ("default", "u")]
-    assert ss.default_rule(args, failed, ["default", "u"]).endswith("a new default: none; the defaults stay")
+    assert ss.default_rule(args, failed, ["default", "u"]).endswith(
+        "a new default by the per-day test: none; the defaults stay (by the pooled test: none)"
+    )
+
+
+def obstacle_day(tmp_path, day, night, tamer, policy):
+    """One night's obstacle distances (TAMER's and the policy's, as the night's last actor and its offline pick)."""
+    path = tmp_path / "study" / day / night
+    path.mkdir(parents=True, exist_ok=True)
+    np.savez(path / "obstacle_distances.npz", tamer=np.array(tamer), inform=np.array(policy),
+             inform_selected=np.array(policy))  # fmt: skip
+    return {"day": day, "dir": night, "variant": night.split("__")[0]}
+
+
+def test_the_obstacle_test_is_over_days_with_tamer_counted_once_in_the_pooled_test(tmp_path):
+    # three days, two nights of x a day; TAMER's episodes are the same in both nights of a day (one stream). TAMER's
+    # day means 0.25, 0.30, 0.35; x's 0.21, 0.25, 0.26 (the mean of its nights): margins 0.04, 0.05, 0.09
+    tamer = {"A": [0.20, 0.30], "B": [0.25, 0.35], "C": [0.30, 0.40]}
+    x = {"A": ([0.18, 0.22], [0.20, 0.24]), "B": ([0.24, 0.28], [0.22, 0.26]), "C": ([0.25, 0.27], [0.24, 0.28])}
+    nights = [obstacle_day(tmp_path, d, f"x__sleep{i + 1}", tamer[d], x[d][i]) for d in tamer for i in range(2)]
+    args = ss.Args(results_dir=str(tmp_path), campaign="study")
+    test = ss.obstacle_test(args, nights, "inform", noise=0.045)
+    assert test["days"] == 3 and np.allclose(test["margins"], [0.04, 0.05, 0.09]) and test["closer_days"] == 3
+    assert test["beyond_noise"] == 2  # 0.05 and 0.09 exceed 0.045; 0.04 does not
+    # the paired t over days: the margins' mean 0.06, sd sqrt(0.0007), so t = 0.06 / (sqrt(0.0007) / sqrt(3)) =
+    # 3.928; with 2 degrees of freedom the two-sided p is 1 - t / sqrt(2 + t^2) = 0.0591
+    t = 0.06 / (0.0007**0.5 / 3**0.5)
+    assert abs(test["p_day"] - (1 - t / (2 + t**2) ** 0.5)) < 1e-9 and abs(test["p_day"] - 0.0591) < 1e-3
+    # the pooled test sees x's 12 episodes against TAMER's 6, not 12: Welch's t by hand
+    mine = np.concatenate([np.concatenate(x[d]) for d in x])
+    once = np.concatenate([tamer[d] for d in tamer])
+    se = (mine.var(ddof=1) / 12 + once.var(ddof=1) / 6) ** 0.5
+    welch_t = (mine.mean() - once.mean()) / se
+    df = se**4 / ((mine.var(ddof=1) / 12) ** 2 / 11 + (once.var(ddof=1) / 6) ** 2 / 5)
+    from scipy.stats import t as student
+
+    assert abs(test["p_pooled"] - 2 * student.sf(abs(welch_t), df)) < 1e-12
+    twice = np.concatenate([tamer[d] for d in tamer for _ in range(2)])
+    assert abs(test["p_pooled"] - ss_welch(mine, twice)) > 1e-3  # counting TAMER in every night would differ
+    text = ss.obstacle_text(test)
+    head = "closer by 0.0600 m; p = 0.059 over 3 days; pooled p = "
+    assert text == f"{head}{test['p_pooled']:.2g}; closer on 3 of 3 days, 2 beyond noise"
+    assert "(within noise)" in ss.obstacle_text(ss.obstacle_test(args, nights, "inform", noise=0.07))
+    one_day = ss.obstacle_test(args, nights[:2], "inform")
+    assert one_day["p_day"] is None and ss.obstacle_text(one_day).startswith("closer by 0.0400 m; one day; pooled p")
+
+
+def ss_welch(a, b):
+    from scipy.stats import ttest_ind
+
+    return float(ttest_ind(a, b, equal_var=False).pvalue)
+
+
+def test_tamers_sampling_spread_is_the_largest_range_between_one_days_streams(tmp_path):
+    # day A: two nights sharing TAMER's stream (mean 0.25) and the day's own run (0.26): range 0.01. Day B: nights in
+    # two streams, 0.30 and 0.32: range 0.02. Day C: one stream only, no spread.
+    rows = [
+        obstacle_day(tmp_path, "A", "default__sleep1", [0.20, 0.30], [0.2, 0.2]),
+        obstacle_day(tmp_path, "A", "sham__sleep1", [0.20, 0.30], [0.2, 0.2]),
+        obstacle_day(tmp_path, "A", "day", [0.21, 0.31], [0.2, 0.2]),
+        obstacle_day(tmp_path, "B", "default__sleep1", [0.25, 0.35], [0.2, 0.2]),
+        obstacle_day(tmp_path, "B", "sham__sleep1", [0.27, 0.37], [0.2, 0.2]),
+        obstacle_day(tmp_path, "C", "default__sleep1", [0.25, 0.35], [0.2, 0.2]),
+    ]
+    args = ss.Args(results_dir=str(tmp_path), campaign="study")
+    nights = [r for r in rows if r["dir"] != "day"]
+    assert abs(ss.tamer_spread(args, nights) - 0.02) < 1e-12
+    assert abs(ss.tamer_spread(args, [r for r in nights if r["day"] == "A"]) - 0.01) < 1e-12
+    assert ss.tamer_spread(args, [r for r in nights if r["day"] == "C"]) is None
+
+
+def test_the_claim_rows_test_over_seeds_with_the_pooled_test_beside_it():
+    from inform_utils import pusher_obstacle_stats as pos
+
+    def run(seed, tamer, inform):
+        distances = {"tamer": np.array(tamer), "inform": np.array(inform)}
+        return {"seed": seed, "distances": distances, "success_distance": 0.08, "layout": "bisector",
+                "min_box_distance_to_path": None}  # fmt: skip
+
+    out = pos.aggregate([run(1, [0.2, 0.4], [0.1, 0.3]), run(2, [0.3, 0.5], [0.4, 0.4])])
+    # margins 0.1 and 0.0: mean 0.05, sd sqrt(0.005), t = 0.05 / (sqrt(0.005) / sqrt(2)) = 1; with 1 degree of
+    # freedom the two-sided p is 1 - 2 atan(t) / pi = 0.5
+    assert np.allclose(out["margins"], [0.1, 0.0]) and abs(out["margin"] - 0.05) < 1e-12
+    assert abs(out["paired_t_seed_means"] - 1) < 1e-9 and abs(out["paired_p_seed_means"] - 0.5) < 1e-9
+    # TAMER's spread: 2 sd / sqrt(2) with sd = sqrt(0.02) on each seed, 0.2; the margin 0.05 is within it
+    assert abs(out["tamer_sampling_spread"] - 0.2) < 1e-12 and out["within_noise"]
+    assert out["inform_closer_seeds"] == 1 and out["inform_closer_seeds_beyond_noise"] == 0
+    pooled = ss_welch([0.2, 0.4, 0.3, 0.5], [0.1, 0.3, 0.4, 0.4])
+    assert abs(out["welch_p_episodes"] - pooled) < 1e-12
+    assert "paired_p_seed_means" not in pos.aggregate([run(1, [0.2, 0.4], [0.1, 0.3])])  # one seed: no test
