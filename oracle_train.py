@@ -1,31 +1,20 @@
 """Train the simulated teacher (the oracle) for INFORM (docs/protocol.md, "Oracles and the expert bar").
 
-Pusher: a SAC agent (Haarnoja et al. 2018, CleanRL's sac_continuous_action.py) trained on the
-environment reward from random initial states, so that it is an expert from any start: step for step the SAC of
-`inform_sac_pusher.py --train-oracle` (a test trains both with one seed and compares the networks). The
-final checkpoint holds state_dicts only (actor and twin critics) plus the arguments to rebuild
-them, the env id, the observation and action shapes, the training steps and a 100-episode
-evaluation; `inform_sac_pusher.py --oracle-path` loads it with torch.load(weights_only=True).
+Pusher and other continuous-action tasks: SAC (Haarnoja et al. 2018, CleanRL's sac_continuous_action.py) on the
+environment reward from random starts, step for step the SAC of `inform_sac_pusher.py --train-oracle` (a test trains
+both with one seed and compares the networks). The checkpoint written is the best periodic evaluation's networks (as
+SB3's EvalCallback keeps the best), judged again on held-out starts: state_dicts (actor, twin critics) plus the
+arguments to rebuild them, the env id and shapes, the training steps and both evaluations, read by
+`inform_sac_pusher.py --oracle-path` with torch.load(weights_only=True). An episode succeeds by its final distance
+|info[--success-info-key]| below --success-distance, or by its return (--success-return). Twin critics are one batched
+module and the replay buffer is preallocated (LeanRL); the training state is saved every --checkpoint-frequency steps
+and `--resume <run_dir>/training_state.pt` continues an interrupted run.
 
-Written for speed on a few CPU cores (LeanRL habits): twin critics are one batched module,
-the replay buffer and the hot-loop tensors are preallocated, there is no .item() in the loop
-and scalars are logged every `log_frequency` steps only. Training state is checkpointed
-atomically every `checkpoint_frequency` steps; `--resume <run_dir>/training_state.pt`
-continues an interrupted run.
-
-Maze (`--env-id KnoxStoneMaze-v0` and the other ids of gridworld_env): `--method value-iteration`
-(the default) saves the exact Q*; `--method q-learning` saves the Q-table of a tabular Q-learner
-after `--maze-episodes` episodes, a less than perfect teacher like the authors' half-trained table;
-`--method dqn` trains a small DQN (CleanRL's dqn.py: an MLP on the one-hot observation, replay buffer,
-target network, linearly decaying epsilon-greedy, Adam) for `--maze-dqn-timesteps` env steps, another
-learned teacher. Every maze checkpoint holds the 30 x 4 `q_table` (for the DQN: the network's Q over the
-30 one-hot states), which `inform_dqn_gridworld.py --oracle-path` loads, plus the env id, the observation
-and action shapes, the training steps and the greedy episode length; the DQN's also holds its state_dict
-and the arguments to rebuild it (`MazeQNetwork(**ckpt["kwargs"])`).
-
-Other continuous-action tasks (`--env-id Reacher-v5`) train the same SAC; an evaluation episode succeeds by its final
-distance |info[--success-info-key]| below --success-distance, or by its return (--success-return), as in
-inform_sac_pusher.py.
+The maze (`--env-id KnoxStoneMaze-v0` and the other ids of gridworld_env): `--method value-iteration` (the default)
+saves the exact Q*; `q-learning` a tabular Q-learner's table after --maze-episodes episodes (an imperfect teacher like
+the authors' half-trained table); `dqn` a small DQN (CleanRL's dqn.py) trained for --maze-dqn-timesteps steps. Each
+checkpoint holds the 30 x 4 `q_table` that `inform_dqn_gridworld.py --oracle-path` loads (the DQN's: its Q over the
+30 one-hot states, plus its state_dict and `MazeQNetwork(**ckpt["kwargs"])`'s kwargs).
 
 Imported by inform_utils/, the only names other code may use (a test holds it to them): Actor.
 
@@ -33,11 +22,12 @@ Examples:
     python oracle_train.py --env-id Pusher-v5 --seed 1 --total-timesteps 200000 \
         --output-path oracles/Pusher-v5__sac_oracle.pt
     python oracle_train.py --env-id Reacher-v5 --success-distance 0.02 --total-timesteps 100000
-    python oracle_train.py --env-id KnoxStoneMaze-v0 --method q-learning --maze-episodes 50
     python oracle_train.py --env-id KnoxStoneMaze-v0 --method dqn --maze-dqn-timesteps 20000
 """
 
+import errno
 import importlib.util
+import io
 import json
 import math
 import os
@@ -45,12 +35,12 @@ import pickle
 import random
 import signal
 import sys
-import tempfile
 import time
+import typing
 import warnings
-import xml.etree.ElementTree as ET
 import zipfile
 from dataclasses import asdict, dataclass
+from typing import Annotated
 
 import gymnasium as gym
 import numpy as np
@@ -67,40 +57,48 @@ MAZE_IDS = tuple(gridworld_env.ENV_IDS)
 METHODS = {"sac": ("sac",), "maze": ("value-iteration", "q-learning", "dqn")}  # SAC: Pusher or any continuous env
 LOG_STD_MIN = -5.0
 LOG_STD_MAX = 2.0
-# Reset seeds of the evaluations. Training seeds its env once (--seed, or --seed + step on --resume) and then
-# draws its starts from the env's own RNG, so these fixed blocks are starts it never trains from. The periodic
-# evaluation uses the same block every time, so its numbers compare across steps and choose best.pt; the final
-# evaluation of the written oracle uses another block, so the choice is not judged on the starts it was chosen on.
+# Reset seeds of the evaluations: training seeds its env once and then draws its starts from the env's own RNG, so
+# these blocks are starts it never trains from. Selection uses one block every time (its numbers compare across steps
+# and choose best.pt); the written oracle is judged on another, not on the starts it was chosen on.
 SELECTION_EVAL_SEED = 1_000_000
+FINAL_EVAL_SEED = 20_000
 # the expert bar (docs/protocol.md): over 100 random starts, success >= 0.95 and, on Pusher, final distance <= 0.06
 EXPERT_SUCCESS_RATE = 0.95
 EXPERT_FINAL_DISTANCE = 0.06
-FINAL_EVAL_SEED = 20_000
-TRAINING_STATE_KEYS = (
-    "actor",
-    "qf",
-    "qf_target",
-    "q_optimizer",
-    "actor_optimizer",
-    "ent_coef_optimizer",
-    "log_ent_coef",
-    "buf_n",
-    "buf_obs",
-    "buf_next_obs",
-    "buf_act",
-    "buf_rew",
-    "buf_term",
-    "global_step",
-    "torch_rng",
-)
+DISK_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES)  # reported in one line
+
+
+@dataclass(frozen=True)
+class Range:
+    """A flag's allowed values, declared beside it (tyro passes the metadata by; check_args reads it): a finite
+    number in [low, high], or (low, high] with `open_low`. None (an unset optional flag) passes."""
+
+    low: float = -math.inf
+    high: float = math.inf
+    open_low: bool = False
+
+    def check(self, flag: str, value) -> None:
+        if value is None or (math.isfinite(value) and value <= self.high and
+                             (value > self.low if self.open_low else value >= self.low)):  # fmt: skip
+            return
+        if self.low == -math.inf:
+            raise InputError(f"{flag} must be a finite number, got {value}")
+        if self.high == math.inf:
+            raise InputError(f"{flag} must be {'>' if self.open_low else '>='} {self.low:g}, got {value}")
+        raise InputError(f"{flag} must be in {'(' if self.open_low else '['}{self.low:g}, {self.high:g}], got {value}")
+
+
+POSITIVE_INT = Range(1)
+POSITIVE = Range(0.0, open_low=True)
+PROBABILITY = Range(0.0, 1.0)
 
 
 @dataclass
 class Args:
     exp_name: str = "oracle_sac"
-    """the name of this experiment"""
-    seed: int = 1
-    """seed of the experiment"""
+    """the name of this experiment (a run directory's name under runs/: no path separators)"""
+    seed: Annotated[int, Range(0, 2**32 - 1)] = 1
+    """seed of the experiment (numpy and torch take [0, 2**32))"""
     torch_deterministic: bool = True
     """if toggled, `torch.backends.cudnn.deterministic=True`"""
     cuda: bool = False
@@ -108,72 +106,72 @@ class Args:
     save_model: bool = True
     """whether to write the oracle checkpoint to `output_path`"""
     track: bool = False
-    """if toggled, mirror the TensorBoard events to Weights & Biases (CleanRL's --track; needs `pip install wandb`,
-    and WANDB_MODE=offline keeps the run on this machine)"""
+    """if toggled, mirror the TensorBoard events to Weights & Biases (needs `pip install wandb`; WANDB_MODE=offline
+    keeps the run on this machine)"""
     wandb_project_name: str = "inform"
     """the Weights & Biases project"""
     wandb_entity: str | None = None
     """the Weights & Biases team or user (None: your default)"""
-    num_threads: int = 1
+    num_threads: Annotated[int, POSITIVE_INT] = 1
     """number of torch CPU threads (1 keeps a second core free; more is faster and changes the numbers)"""
     bf16: bool = False
     """opt-in speed: the SAC updates' forward passes in bfloat16 (CPU autocast); the numbers change, a teacher need
     only be good (recorded in the checkpoint's args)"""
     capture_video: bool = False
-    """film the written Pusher oracle's first three held-out evaluation episodes into runs/{run}/videos/oracle.mp4
+    """film the written oracle's first three held-out evaluation episodes into runs/{run}/videos/oracle.mp4
     (headless MuJoCo: MUJOCO_GL, egl when unset and there is no display)"""
 
     # Oracle (SAC) arguments
     env_id: str = "Pusher-v5"
     """Pusher-v5, Pusher-v4 (where mujoco<3 is installed), any continuous-action Gymnasium env (SAC), or a maze id"""
-    success_distance: float = 0.08
+    success_distance: Annotated[float, POSITIVE] = 0.08
     """an evaluation episode succeeds if its final distance |info[success_info_key]| (Pusher: object to goal) is
     below this"""
     success_info_key: str = "reward_dist"
     """the `info` entry whose absolute value at an episode's end is its final distance (Pusher's, Reacher's)"""
-    success_return: float | None = None
+    success_return: Annotated[float | None, Range()] = None
     """if set, an evaluation episode succeeds if its return is at least this (then the return breaks ties in the
     choice of the best checkpoint, not the distance)"""
-    total_timesteps: int = 200000
+    total_timesteps: Annotated[int, POSITIVE_INT] = 200000
     """total environment steps of SAC training"""
-    buffer_size: int = 1000000
+    buffer_size: Annotated[int, POSITIVE_INT] = 1000000
     """the replay memory buffer size (capped at total_timesteps)"""
-    gamma: float = 0.99
+    gamma: Annotated[float, PROBABILITY] = 0.99
     """the discount factor gamma (SAC, and every maze method)"""
-    tau: float = 0.005
+    tau: Annotated[float, Range(0.0, 1.0, open_low=True)] = 0.005
     """target smoothing coefficient"""
-    batch_size: int = 256
+    batch_size: Annotated[int, POSITIVE_INT] = 256
     """the batch size of sample from the replay memory"""
-    learning_starts: int = 5000
+    learning_starts: Annotated[int, POSITIVE_INT] = 5000
     """timestep to start learning (random actions before)"""
-    policy_lr: float = 3e-4
+    policy_lr: Annotated[float, POSITIVE] = 3e-4
     """the learning rate of the policy network optimizer"""
-    q_lr: float = 1e-3
+    q_lr: Annotated[float, POSITIVE] = 1e-3
     """the learning rate of the Q network optimizer"""
-    policy_frequency: int = 2
+    policy_frequency: Annotated[int, POSITIVE_INT] = 2
     """the frequency of policy and entropy updates (delayed, one update each time)"""
-    hidden_size: int = 256
+    hidden_size: Annotated[int, POSITIVE_INT] = 256
     """width of the two hidden layers of actor and critics"""
     autotune: bool = True
     """automatic tuning of the entropy coefficient"""
-    ent_coef: float = 0.2
+    ent_coef: Annotated[float, POSITIVE] = 0.2
     """the entropy coefficient when it is not autotuned (CleanRL's --alpha)"""
 
     # Evaluation, logging and checkpointing
-    eval_frequency: int = 10000
+    eval_frequency: Annotated[int, POSITIVE_INT] = 10000
     """evaluate the deterministic policy every this many steps; the best evaluation's networks are kept as best.pt"""
-    eval_episodes: int = 100
+    eval_episodes: Annotated[int, POSITIVE_INT] = 100
     """random-start episodes per periodic evaluation (the same reset seeds every time, never used in training)"""
-    final_eval_episodes: int = 100
+    final_eval_episodes: Annotated[int, POSITIVE_INT] = 100
     """random-start episodes of the final, held-out evaluation of the written oracle (other reset seeds again)"""
-    log_frequency: int = 1000
+    log_frequency: Annotated[int, POSITIVE_INT] = 1000
     """log losses and SPS every this many steps"""
-    checkpoint_frequency: int = 10000
+    checkpoint_frequency: Annotated[int, POSITIVE_INT] = 10000
     """write the resumable training state every this many steps"""
     stop_at_expert: bool = False
     """end training at the first periodic evaluation that meets the expert bar (success rate >= 0.95 and, on Pusher,
     final distance <= 0.06 over its episodes); the held-out final evaluation then judges the written oracle"""
-    snapshot_frequency: int = 50000
+    snapshot_frequency: Annotated[int, POSITIVE_INT] = 50000
     """keep a copy of the oracle checkpoint (oracle_step{N}.pt in the run dir) every this many steps"""
     resume: str | None = None
     """path of a training_state.pt to continue from (same run directory)"""
@@ -184,143 +182,34 @@ class Args:
     method: str | None = None
     """sac (Pusher and other continuous envs); value-iteration (exact Q*), q-learning or dqn (imperfect, learned
     teachers) on the maze; default: sac or value-iteration"""
-    maze_episodes: int = 50
+    maze_episodes: Annotated[int, POSITIVE_INT] = 50
     """episodes of the maze's tabular Q-learning (--method q-learning)"""
-    maze_alpha: float = 0.2
+    maze_alpha: Annotated[float, Range(0.0, 1.0, open_low=True)] = 0.2
     """step size of the maze's tabular Q-learning"""
-    maze_epsilon: float = 0.1
+    maze_epsilon: Annotated[float, PROBABILITY] = 0.1
     """exploration rate of the maze's tabular Q-learning"""
-    maze_dqn_timesteps: int = 20000
+    maze_dqn_timesteps: Annotated[int, POSITIVE_INT] = 20000
     """environment steps of the maze DQN (--method dqn)"""
-    maze_dqn_learning_rate: float = 1e-3
+    maze_dqn_learning_rate: Annotated[float, POSITIVE] = 1e-3
     """Adam learning rate of the maze DQN"""
-    maze_dqn_hidden: int = 64
+    maze_dqn_hidden: Annotated[int, POSITIVE_INT] = 64
     """width of the maze DQN's two hidden layers"""
-    maze_dqn_buffer_size: int = 10000
+    maze_dqn_buffer_size: Annotated[int, POSITIVE_INT] = 10000
     """replay memory size of the maze DQN"""
-    maze_dqn_batch_size: int = 128
+    maze_dqn_batch_size: Annotated[int, POSITIVE_INT] = 128
     """batch size of the maze DQN"""
-    maze_dqn_learning_starts: int = 1000
+    maze_dqn_learning_starts: Annotated[int, Range(0)] = 1000
     """environment steps before the maze DQN's first gradient step"""
-    maze_dqn_train_frequency: int = 2
+    maze_dqn_train_frequency: Annotated[int, POSITIVE_INT] = 2
     """environment steps between the maze DQN's gradient steps"""
-    maze_dqn_target_network_frequency: int = 100
+    maze_dqn_target_network_frequency: Annotated[int, POSITIVE_INT] = 100
     """environment steps between copies of the maze DQN into its target network"""
-    maze_dqn_start_e: float = 1.0
+    maze_dqn_start_e: Annotated[float, PROBABILITY] = 1.0
     """starting epsilon of the maze DQN's exploration"""
-    maze_dqn_end_e: float = 0.05
+    maze_dqn_end_e: Annotated[float, PROBABILITY] = 0.05
     """final epsilon of the maze DQN's exploration"""
-    maze_dqn_exploration_fraction: float = 0.5
+    maze_dqn_exploration_fraction: Annotated[float, POSITIVE] = 0.5
     """fraction of --maze-dqn-timesteps over which epsilon decays from start to end"""
-
-
-class InputError(Exception):
-    """Bad input from the user: a flag value, a file. Reported as one line, before anything is written."""
-
-
-def check_args(args: Args) -> None:
-    """What tyro cannot know: the env id, the method, ranges, files. Raises InputError."""
-    if args.track and importlib.util.find_spec("wandb") is None:
-        raise InputError("--track needs Weights & Biases: `pip install wandb`, or run without --track")
-    if args.track and args.env_id in MAZE_IDS:
-        raise InputError("--track mirrors TensorBoard events, which only the SAC training writes")
-    methods = METHODS["maze" if args.env_id in MAZE_IDS else "sac"]
-    if args.method is not None and args.method not in methods:
-        raise InputError(f"--method {args.method} does not apply to {args.env_id}; choose one of {', '.join(methods)}")
-    if not 0 <= args.seed < 2**32:
-        raise InputError(f"--seed must be in [0, 2**32), got {args.seed}")
-    if args.num_threads < 1 or args.hidden_size < 1:
-        raise InputError(f"--num-threads ({args.num_threads}) and --hidden-size ({args.hidden_size}) must be positive")
-    if not (args.policy_lr > 0.0 and args.q_lr > 0.0 and args.ent_coef > 0.0):
-        raise InputError("--policy-lr, --q-lr and --ent-coef must be > 0")
-    if args.output_path is not None and (not args.output_path or os.path.isdir(args.output_path)):
-        raise InputError(f"--output-path {args.output_path!r} must name a file (it is empty or a directory)")
-    if args.resume is not None and args.env_id in MAZE_IDS:
-        raise InputError(
-            "--resume continues a SAC (Pusher) run; the maze methods train in seconds and have no training state"
-        )
-    if args.maze_episodes < 1 or not 0.0 < args.maze_alpha <= 1.0 or not 0.0 <= args.maze_epsilon <= 1.0:
-        raise InputError("--maze-episodes must be >= 1, --maze-alpha in (0, 1] and --maze-epsilon in [0, 1]")
-    check_maze_dqn_args(args)
-    if args.env_id == "Pusher-v4":
-        import mujoco
-
-        if int(mujoco.__version__.split(".")[0]) >= 3:
-            raise InputError(
-                f"Pusher-v4 needs mujoco<3 (installed: {mujoco.__version__}); use --env-id Pusher-v5 "
-                "or `pip install mujoco==2.3.7` in a separate venv"
-            )
-    positive = ["total_timesteps", "batch_size", "eval_frequency", "eval_episodes", "final_eval_episodes"]
-    positive += ["learning_starts", "log_frequency", "checkpoint_frequency", "policy_frequency", "buffer_size"]
-    for name in positive:
-        if getattr(args, name) <= 0:
-            raise InputError(f"--{name.replace('_', '-')} must be positive (got {getattr(args, name)})")
-    if args.batch_size > args.total_timesteps:
-        raise InputError(f"--batch-size {args.batch_size} is larger than --total-timesteps {args.total_timesteps}")
-    if not 0.0 < args.tau <= 1.0:
-        raise InputError(f"--tau must be in (0, 1], got {args.tau}")
-    if not 0.0 <= args.gamma <= 1.0:
-        raise InputError(f"--gamma must be in [0, 1], got {args.gamma}")
-    if args.resume is not None and not os.path.isfile(args.resume):
-        raise InputError(f"--resume {args.resume}: no such file")
-    if not args.success_distance > 0.0:
-        raise InputError(f"--success-distance must be > 0, got {args.success_distance}")
-    if args.env_id not in MAZE_IDS:
-        check_env(args)
-
-
-def check_env(args: Args) -> None:
-    """--env-id for SAC: a Gymnasium env with a flat observation and continuous actions, whose episodes can be judged
-    (one random step shows whether `info` has --success-info-key). Raises InputError."""
-    try:
-        env = gym.make(args.env_id)
-    except Exception as e:  # unknown id, a missing extra (box2d, ...), a version that needs other packages
-        first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
-        mazes = ", ".join(MAZE_IDS)
-        raise InputError(f"--env-id {args.env_id}: Gymnasium cannot make it ({first}); mazes: {mazes}") from None
-    try:
-        obs_space, act_space = env.observation_space, env.action_space
-        if not isinstance(act_space, gym.spaces.Box):
-            raise InputError(
-                f"--env-id {args.env_id}: its actions are {type(act_space).__name__}, not continuous (Box)"
-            )
-        if not isinstance(obs_space, gym.spaces.Box) or len(obs_space.shape) != 1:
-            raise InputError(f"--env-id {args.env_id}: needs a flat Box observation, not {obs_space}")
-        if args.success_return is None:
-            env.reset(seed=0)
-            info = env.step(act_space.sample())[4]
-            if args.success_info_key not in info:
-                keys = ", ".join(sorted(info)) or "none"
-                raise InputError(
-                    f"--env-id {args.env_id}: its info has no {args.success_info_key!r} to measure a final distance "
-                    f"(it has: {keys}); pass --success-info-key KEY, or --success-return R to judge episodes by return"
-                )
-    finally:
-        env.close()
-
-
-def check_maze_dqn_args(args: Args) -> None:
-    """The --maze-dqn-* flags; raises InputError."""
-    for name in ("timesteps", "hidden", "buffer_size", "batch_size", "train_frequency", "target_network_frequency"):
-        value = getattr(args, f"maze_dqn_{name}")
-        if value < 1:
-            raise InputError(f"--maze-dqn-{name.replace('_', '-')} must be a positive integer (got {value})")
-    if args.maze_dqn_learning_starts < 0:
-        raise InputError(f"--maze-dqn-learning-starts must be >= 0 (got {args.maze_dqn_learning_starts})")
-    if not args.maze_dqn_learning_rate > 0.0 or not args.maze_dqn_exploration_fraction > 0.0:
-        raise InputError("--maze-dqn-learning-rate and --maze-dqn-exploration-fraction must be > 0")
-    if not 0.0 <= args.maze_dqn_end_e <= 1.0 or not 0.0 <= args.maze_dqn_start_e <= 1.0:
-        raise InputError("--maze-dqn-start-e and --maze-dqn-end-e must be in [0, 1]")
-    if args.maze_dqn_batch_size > args.maze_dqn_timesteps:
-        raise InputError(
-            f"--maze-dqn-batch-size {args.maze_dqn_batch_size} is larger than --maze-dqn-timesteps "
-            f"{args.maze_dqn_timesteps}"
-        )
-    if args.maze_dqn_learning_starts >= args.maze_dqn_timesteps:
-        raise InputError(
-            f"--maze-dqn-learning-starts ({args.maze_dqn_learning_starts}) must be below "
-            f"--maze-dqn-timesteps ({args.maze_dqn_timesteps}), or the DQN never learns"
-        )
 
 
 def make_env(env_id: str, seed: int) -> gym.Env:
@@ -330,8 +219,7 @@ def make_env(env_id: str, seed: int) -> gym.Env:
     return env
 
 
-# The networks and the soft update are copied verbatim from inform_sac_pusher.py (CleanRL style: repeated across
-# files); tests/test_pusher.py checks that the copies agree and that both scripts train the same oracle.
+# ALGO LOGIC: the networks (copied verbatim from inform_sac_pusher.py, CleanRL style; a test keeps the copies alike)
 class BatchedLinear(nn.Module):
     """`n` independent linear layers in one batched matmul: x [n, B, in] -> [n, B, out]."""
 
@@ -410,7 +298,85 @@ def soft_update(target: nn.Module, source: nn.Module, tau: float) -> None:
             target_param.lerp_(param, tau)
 
 
-# How an episode is judged: copied verbatim from inform_sac_pusher.py (a test keeps the copies identical)
+class ReplayBuffer:
+    """Preallocated float32 transitions, written in a ring; `n` counts every transition added."""
+
+    FIELDS = ("obs", "next_obs", "act", "rew", "term")
+
+    def __init__(self, size: int, obs_dim: int, act_dim: int, device: torch.device):
+        self.size, self.n, self.device = size, 0, device
+        shapes = {"obs": (obs_dim,), "next_obs": (obs_dim,), "act": (act_dim,), "rew": (), "term": ()}
+        self.data = {name: torch.zeros(size, *shapes[name], device=device) for name in self.FIELDS}
+
+    def add(self, obs: torch.Tensor, next_obs: torch.Tensor, action: np.ndarray, reward: float, terminated: bool):
+        i = self.n % self.size
+        values = (obs, next_obs, torch.as_tensor(action, device=self.device), float(reward), float(terminated))
+        for name, value in zip(self.FIELDS, values, strict=True):
+            self.data[name][i] = value
+        self.n += 1
+
+    def sample(self, batch_size: int) -> tuple[torch.Tensor, ...]:
+        idx = torch.randint(0, min(self.n, self.size), (batch_size,), device=self.device)
+        return tuple(self.data[name][idx] for name in self.FIELDS)
+
+
+# ALGO LOGIC: SAC (Haarnoja et al. 2018; CleanRL's sac_continuous_action.py), as inform_sac_pusher.py's train_oracle
+class SAC:
+    """The actor, the twin critics and their target, the entropy coefficient exp(log_ent_coef), their optimizers."""
+
+    MODULES = ("actor", "qf", "qf_target", "q_optimizer", "actor_optimizer", "ent_coef_optimizer")
+
+    def __init__(self, obs_dim, act_dim, low, high, hidden, policy_lr, q_lr, ent_coef, autotune, device):
+        self.obs_dim, self.act_dim, self.low, self.high, self.hidden = obs_dim, act_dim, low, high, hidden
+        self.actor = Actor(obs_dim, act_dim, hidden, low, high).to(device)
+        self.qf = QEnsemble(obs_dim, act_dim, hidden, n=2).to(device)
+        self.qf_target = QEnsemble(obs_dim, act_dim, hidden, n=2).to(device)
+        self.qf_target.load_state_dict(self.qf.state_dict())
+        self.q_optimizer = torch.optim.Adam(self.qf.parameters(), lr=q_lr)
+        self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=policy_lr)
+        self.target_entropy = -float(act_dim)
+        self.log_ent_coef = torch.zeros(1, device=device, requires_grad=True)
+        self.ent_coef_optimizer = torch.optim.Adam([self.log_ent_coef], lr=q_lr)
+        self.autotune = autotune
+        if not autotune:
+            self.log_ent_coef.data.fill_(math.log(ent_coef))
+        zero = torch.zeros((), device=device)
+        self.losses = {"qf_loss": zero, "actor_loss": zero, "ent_coef_loss": zero}  # logged every --log-frequency
+
+    def update(self, batch, gamma: float, tau: float, update_actor: bool, amp) -> None:
+        """One gradient step of the critics; of the actor and the entropy coefficient if `update_actor` (delayed)."""
+        b_obs, b_next, b_act, b_rew, b_term = batch
+        ent_coef = self.log_ent_coef.detach().exp()
+        with amp, torch.no_grad():
+            next_act, next_logp, _ = self.actor.get_action(b_next)
+            min_q_next = self.qf_target(b_next, next_act).min(0).values - ent_coef * next_logp
+            target_q = b_rew + (1.0 - b_term) * gamma * min_q_next
+        with amp:
+            qf_loss = (self.qf(b_obs, b_act) - target_q.unsqueeze(0)).pow(2).mean(-1).sum()  # summed over the twins
+        self.q_optimizer.zero_grad(set_to_none=True)
+        qf_loss.backward()
+        self.q_optimizer.step()
+        self.losses["qf_loss"] = qf_loss
+
+        if update_actor:
+            with amp:
+                pi, logp, _ = self.actor.get_action(b_obs)
+                actor_loss = (ent_coef * logp - self.qf(b_obs, pi).min(0).values).mean()
+            self.actor_optimizer.zero_grad(set_to_none=True)
+            actor_loss.backward()
+            self.actor_optimizer.step()
+            self.qf.zero_grad(set_to_none=True)  # the actor loss left gradients on the critic
+            self.losses["actor_loss"] = actor_loss
+            if self.autotune:
+                ent_coef_loss = (-self.log_ent_coef.exp() * (logp.detach() + self.target_entropy)).mean()
+                self.ent_coef_optimizer.zero_grad(set_to_none=True)
+                ent_coef_loss.backward()
+                self.ent_coef_optimizer.step()
+                self.losses["ent_coef_loss"] = ent_coef_loss
+        soft_update(self.qf_target, self.qf, tau)
+
+
+# ALGO LOGIC: the evaluation protocol. Outcome is copied verbatim from inform_sac_pusher.py (a test keeps it alike)
 @dataclass(frozen=True)
 class Outcome:
     """How an episode is judged, in the day's success tags and in every test: its final distance |info[info_key]| at
@@ -441,127 +407,74 @@ def selection_key(evaluation: dict, outcome: Outcome) -> tuple[float, float]:
     return evaluation["success_rate"], tie
 
 
-class Stop:
-    """The stop signals received (main's handler only records them) and whether stop_check() has acted on them."""
-
-    signals = []
-    raised = False
-
-
-def stop_check() -> None:
-    """KeyboardInterrupt if a stop signal came (once), at the head of every loop: in our own code, never inside a
-    library call (TensorBoard's writer, a checkpoint being written)."""
-    if Stop.signals and not Stop.raised:
-        Stop.raised = True
-        raise KeyboardInterrupt
+def is_expert(evaluation: dict, env_id: str) -> bool:
+    return evaluation["success_rate"] >= EXPERT_SUCCESS_RATE and (
+        env_id not in PUSHER_IDS or evaluation["final_distance"] <= EXPERT_FINAL_DISTANCE
+    )
 
 
 @torch.inference_mode()
+def run_episode(actor: Actor, env: gym.Env, reset_seed: int, generator: torch.Generator, device) -> tuple[float, dict]:
+    """One deterministic (mean-action) episode from env.reset(seed=reset_seed): (its return, the last info). The
+    unused sample comes from `generator`, so evaluating never moves the training RNG."""
+    obs, _ = env.reset(seed=reset_seed)
+    done = False
+    ep_return = 0.0
+    info = {}
+    while not done:
+        _, _, action = actor.get_action(
+            torch.as_tensor(obs, dtype=torch.float32, device=device).unsqueeze(0), generator
+        )
+        obs, reward, terminated, truncated, info = env.step(action[0].cpu().numpy())
+        ep_return += float(reward)
+        done = terminated or truncated
+    return ep_return, info
+
+
 def evaluate(actor: Actor, env_id: str, episodes: int, seed: int, device: torch.device, outcome: Outcome) -> dict:
-    """Deterministic (mean-action) episodes from random starts: return, final distance, success. The unused sample
-    comes from its own generator, so evaluating never moves the training RNG."""
+    """Deterministic episodes from the random starts of reset seeds seed, seed + 1, ...: return, final distance,
+    success."""
     env = gym.make(env_id)
     generator = torch.Generator(device=device).manual_seed(seed)
-    returns = []
-    distances = []
-    successes = []
+    returns, distances, successes = [], [], []
     for ep in range(episodes):
         stop_check()
-        obs, _ = env.reset(seed=seed + ep)
-        done = False
-        ep_return = 0.0
-        info = {}
-        while not done:
-            obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device).unsqueeze(0)
-            _, _, action = actor.get_action(obs_t, generator)
-            obs, reward, terminated, truncated, info = env.step(action[0].cpu().numpy())
-            ep_return += float(reward)
-            done = terminated or truncated
+        ep_return, info = run_episode(actor, env, seed + ep, generator, device)
         distance, success, _ = outcome(info, ep_return)
         returns.append(ep_return)
         distances.append(distance)
         successes.append(success)
     env.close()
-    distances = np.asarray(distances)
     return {
         "return": float(np.mean(returns)),
         "return_std": float(np.std(returns)),
-        "final_distance": float(distances.mean()),
+        "final_distance": float(np.mean(distances)),
         "success_rate": float(np.mean(successes)),
         "episodes": episodes,
     }
 
 
-def atomic_save(obj, path: str) -> None:
-    tmp = path + ".tmp"
-    torch.save(obj, tmp)
-    os.replace(tmp, path)
+class Selection:
+    """The best periodic evaluation so far and its networks in best.pt (a resumed run goes on from its best.pt)."""
 
+    def __init__(self, run_dir: str, outcome: Outcome):
+        self.path, self.outcome = os.path.join(run_dir, "best.pt"), outcome
+        self.key, self.step = (-1.0, -math.inf), None
+        if os.path.isfile(self.path):
+            best = torch.load(self.path, weights_only=True, map_location="cpu")
+            self.key, self.step = selection_key(best["evaluation"], outcome), best["training_steps"]
 
-def oracle_checkpoint(actor, qf, args: Args, obs_dim, act_dim, action_low, action_high, step, evaluation) -> dict:
-    """The deployable oracle: state_dicts plus everything needed to rebuild and check them."""
-    return {
-        "algorithm": "sac",
-        "env_id": args.env_id,
-        "obs_shape": [obs_dim],
-        "act_shape": [act_dim],
-        "kwargs": {"obs_dim": obs_dim, "act_dim": act_dim, "hidden": args.hidden_size},
-        "action_low": torch.as_tensor(action_low, dtype=torch.float32),
-        "action_high": torch.as_tensor(action_high, dtype=torch.float32),
-        "actor_state_dict": {k: v.detach().cpu().clone() for k, v in actor.state_dict().items()},
-        "qf_state_dict": {k: v.detach().cpu().clone() for k, v in qf.state_dict().items()},
-        "training_steps": int(step),
-        "training_seed": args.seed,
-        "random_starts": True,
-        "bf16": bool(args.bf16),  # the opt-in speed flags it was trained with (they change the numbers)
-        "num_threads": int(args.num_threads),
-        "evaluation": {k: float(v) for k, v in evaluation.items()},
-    }
+    def tie(self) -> float:  # the best's return, or its final distance
+        return self.key[1] if self.outcome.min_return is not None else -self.key[1]
 
-
-def read_training_state(path: str) -> dict:
-    """torch.load(path, weights_only=True) of a training_state.pt; every way it can fail is one InputError."""
-    if not zipfile.is_zipfile(path):  # torch.save writes a zip archive; a truncated one has lost its directory
-        raise InputError(f"--resume {path}: not a torch checkpoint, or a truncated one (not a complete zip archive)")
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            state = torch.load(path, weights_only=True, map_location="cpu")
-    except pickle.UnpicklingError as e:
-        unsupported = [line.strip() for line in str(e).splitlines() if "unsupported" in line.lower()]
-        raise InputError(
-            f"--resume {path}: refused, it holds more than tensors and plain values (it could run "
-            f"code): {(unsupported or [type(e).__name__])[0][:160]}"
-        ) from None
-    except Exception as e:  # a damaged archive: torch raises RuntimeError, EOFError, ...
-        first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
-        raise InputError(f"--resume {path}: corrupt checkpoint: {first}") from None
-    for old, new in (("a_optimizer", "ent_coef_optimizer"), ("log_alpha", "log_ent_coef")):  # an older state's names
-        if isinstance(state, dict) and old in state:
-            state[new] = state.pop(old)
-    missing = [k for k in TRAINING_STATE_KEYS if not isinstance(state, dict) or k not in state]
-    if missing:
-        more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
-        raise InputError(
-            f"--resume {path}: not a training_state.pt of oracle_train.py (missing {', '.join(missing[:3])}{more})"
-        )
-    return state
-
-
-def new_run_dir(args: Args) -> str:
-    run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
-    run_dir = os.path.join("runs", run_name)
-    suffix = 0
-    while os.path.exists(run_dir):
-        suffix += 1
-        run_dir = os.path.join("runs", f"{run_name}_{suffix}")
-    os.makedirs(run_dir)
-    return run_dir
+    def offer(self, evaluation: dict, step: int, save) -> None:
+        if selection_key(evaluation, self.outcome) > self.key:
+            self.key, self.step = selection_key(evaluation, self.outcome), step
+            save(step, {**evaluation, "reset_seed": SELECTION_EVAL_SEED}, self.path)
 
 
 def train_sac(args: Args, resume_state: dict | None = None) -> None:
-    """SAC on the env reward (CleanRL's sac_continuous_action.py), step for step the SAC of inform_sac_pusher.py
-    --train-oracle (a test trains both and compares the networks), plus checkpoints, snapshots and --resume."""
+    """SAC on the env reward, with periodic evaluations choosing the checkpoint, training states and --resume."""
     torch.set_num_threads(args.num_threads)
     device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
     random.seed(args.seed)
@@ -573,121 +486,34 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     env = make_env(args.env_id, args.seed)
     obs_dim = int(np.prod(env.observation_space.shape))
     act_dim = int(np.prod(env.action_space.shape))
-    low = env.action_space.low
-    high = env.action_space.high
-
-    actor = Actor(obs_dim, act_dim, args.hidden_size, low, high).to(device)
-    qf = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
-    qf_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
-    qf_target.load_state_dict(qf.state_dict())
+    low, high = env.action_space.low, env.action_space.high
+    sac = SAC(obs_dim, act_dim, low, high, args.hidden_size, args.policy_lr, args.q_lr, args.ent_coef, args.autotune,
+              device)  # fmt: skip
     amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
-    q_optimizer = torch.optim.Adam(qf.parameters(), lr=args.q_lr)
-    actor_optimizer = torch.optim.Adam(actor.parameters(), lr=args.policy_lr)
-    target_entropy = -float(act_dim)
-    log_ent_coef = torch.zeros(1, device=device, requires_grad=True)  # SAC's entropy coefficient, exp(log_ent_coef)
-    ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.q_lr)
-    if not args.autotune:
-        log_ent_coef.data.fill_(math.log(args.ent_coef))
-
-    # preallocated replay buffer (float32; Pusher never terminates but the flag is kept)
-    size = min(args.buffer_size, args.total_timesteps)
-    buf_obs = torch.zeros(size, obs_dim, device=device)
-    buf_next_obs = torch.zeros(size, obs_dim, device=device)
-    buf_act = torch.zeros(size, act_dim, device=device)
-    buf_rew = torch.zeros(size, device=device)
-    buf_term = torch.zeros(size, device=device)
-    buffers = {
-        "buf_obs": buf_obs,
-        "buf_next_obs": buf_next_obs,
-        "buf_act": buf_act,
-        "buf_rew": buf_rew,
-        "buf_term": buf_term,
-    }
-    modules = {
-        "actor": actor,
-        "qf": qf,
-        "qf_target": qf_target,
-        "q_optimizer": q_optimizer,
-        "actor_optimizer": actor_optimizer,
-        "ent_coef_optimizer": ent_coef_optimizer,
-    }
-    buf_n = start_step = 0
+    rb = ReplayBuffer(min(args.buffer_size, args.total_timesteps), obs_dim, act_dim, device)
+    start_step = 0
     if args.resume is not None:
         run_dir = os.path.dirname(os.path.abspath(args.resume))
-        try:
-            for key, module in modules.items():
-                module.load_state_dict(resume_state[key])
-            log_ent_coef.data.copy_(resume_state["log_ent_coef"])
-            buf_n = int(resume_state["buf_n"])
-            for key, buf in buffers.items():
-                buf[: min(buf_n, size)] = resume_state[key][: min(buf_n, size)]
-            start_step = int(resume_state["global_step"])
-            torch.set_rng_state(resume_state["torch_rng"])
-        except (RuntimeError, ValueError, TypeError, KeyError, IndexError) as e:  # nothing is written before this
-            first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
-            raise InputError(f"--resume {args.resume}: does not fit this run ({type(e).__name__}: {first})") from None
+        start_step = load_training_state(resume_state, sac, rb, args)
         np.random.seed(args.seed + start_step)
         env.action_space.seed(args.seed + start_step)
         print(f"resumed from {args.resume} at step {start_step}", flush=True)
     else:
         run_dir = new_run_dir(args)
-    if args.track:  # Weights & Biases mirrors the TensorBoard events (CleanRL's --track); before the writer
-        import wandb
-
-        wandb.init(
-            project=args.wandb_project_name,
-            entity=args.wandb_entity,
-            sync_tensorboard=True,
-            config=vars(args),
-            name=os.path.basename(run_dir),
-            dir=run_dir,
-            save_code=True,
-        )
-    writer = SummaryWriter(run_dir)
-    if args.resume is None:
-        writer.add_text(
-            "hyperparameters",
-            "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
-        )
+    writer = open_writer(args, run_dir)
     print(f"run directory: {run_dir}", flush=True)
 
-    def save_training_state(global_step: int) -> None:
-        n = min(buf_n, size)
-        state = {key: module.state_dict() for key, module in modules.items()}
-        state.update({key: buf[:n].clone() for key, buf in buffers.items()})
-        state.update(
-            log_ent_coef=log_ent_coef.detach().clone(),
-            buf_n=buf_n,
-            global_step=global_step,
-            torch_rng=torch.get_rng_state(),
-        )
-        atomic_save(state, os.path.join(run_dir, "training_state.pt"))
-
     def save_oracle(step: int, evaluation: dict, path: str) -> None:
-        atomic_save(oracle_checkpoint(actor, qf, args, obs_dim, act_dim, low, high, step, evaluation), path)
+        atomic_save(oracle_checkpoint(sac, args, step, evaluation), path)
 
-    # the best evaluation so far (SB3's EvalCallback): success rate first, then final distance; a resumed run goes on
-    # from the best.pt in its run directory
     outcome = Outcome.from_args(args)
-    best_path = os.path.join(run_dir, "best.pt")
-    best_key = (-1.0, -math.inf)
-    best_step = None
-    if os.path.isfile(best_path):
-        best = torch.load(best_path, weights_only=True, map_location="cpu")
-        best_key = selection_key(best["evaluation"], outcome)
-        best_step = best["training_steps"]
-
+    selection = Selection(run_dir, outcome)
     obs, _ = env.reset(seed=args.seed + start_step)  # random starts: seed once, then the env RNG runs on
     obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
-    ep_return = 0.0
-    ep_length = 0
-    t0 = time.time()
-    t_last = time.time()
-    step_last = start_step
-    qf_loss = actor_loss = ent_coef_loss = torch.zeros((), device=device)
+    ep_return, ep_length = 0.0, 0
+    t0 = t_last = time.time()
+    step_last = trained = start_step  # trained: env steps so far (fewer than --total-timesteps after --stop-at-expert)
     last_eval = {}
-    expert_reached = False
-    trained = start_step  # env steps trained so far (fewer than --total-timesteps after --stop-at-expert)
     report_every = max(1, (args.total_timesteps - start_step) // 20)
     for global_step in range(start_step, args.total_timesteps):
         stop_check()
@@ -695,167 +521,90 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
             action = env.action_space.sample()
         else:
             with torch.no_grad():
-                action_t, _, _ = actor.get_action(obs_t.unsqueeze(0))
-            action = action_t[0].cpu().numpy()
+                action = sac.actor.get_action(obs_t.unsqueeze(0))[0][0].cpu().numpy()
         next_obs, reward, terminated, truncated, info = env.step(action)
         next_obs_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
-        i = buf_n % size
-        buf_obs[i] = obs_t
-        buf_next_obs[i] = next_obs_t
-        buf_act[i] = torch.as_tensor(action, device=device)
-        buf_rew[i] = float(reward)
-        buf_term[i] = float(terminated)
-        buf_n += 1
-        ep_return = ep_return + float(reward)
-        ep_length = ep_length + 1
+        rb.add(obs_t, next_obs_t, action, reward, terminated)
+        ep_return, ep_length = ep_return + float(reward), ep_length + 1
         if terminated or truncated:
             writer.add_scalar("charts/episodic_return", ep_return, global_step)
             writer.add_scalar("charts/episodic_length", ep_length, global_step)
             distance = outcome(info, ep_return)[0]
             if not math.isnan(distance):
                 writer.add_scalar("charts/final_distance", distance, global_step)
-            ep_return = 0.0
-            ep_length = 0
+            ep_return, ep_length = 0.0, 0
             next_obs, _ = env.reset()
             next_obs_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
         obs_t = next_obs_t
 
-        # ALGO LOGIC: one SAC update per env step, as inform_sac_pusher.py's train_oracle
+        # ALGO LOGIC: one SAC update per env step, the actor's delayed
         if global_step >= args.learning_starts:
-            idx = torch.randint(0, min(buf_n, size), (args.batch_size,), device=device)
-            b_obs = buf_obs[idx]
-            b_next = buf_next_obs[idx]
-            b_act = buf_act[idx]
-            b_rew = buf_rew[idx]
-            b_term = buf_term[idx]
-            ent_coef = log_ent_coef.detach().exp()
-            with amp, torch.no_grad():
-                next_act, next_logp, _ = actor.get_action(b_next)
-                min_q_next = qf_target(b_next, next_act).min(0).values - ent_coef * next_logp
-                target_q = b_rew + (1.0 - b_term) * args.gamma * min_q_next
-            with amp:
-                qf_loss = (qf(b_obs, b_act) - target_q.unsqueeze(0)).pow(2).mean(-1).sum()  # summed over the twins
-            q_optimizer.zero_grad(set_to_none=True)
-            qf_loss.backward()
-            q_optimizer.step()
+            sac.update(rb.sample(args.batch_size), args.gamma, args.tau, global_step % args.policy_frequency == 0, amp)
 
-            if global_step % args.policy_frequency == 0:
-                with amp:
-                    pi, logp, _ = actor.get_action(b_obs)
-                    actor_loss = (ent_coef * logp - qf(b_obs, pi).min(0).values).mean()
-                actor_optimizer.zero_grad(set_to_none=True)
-                actor_loss.backward()
-                actor_optimizer.step()
-                qf.zero_grad(set_to_none=True)  # the actor loss left gradients on the critic
-                if args.autotune:
-                    ent_coef_loss = (-log_ent_coef.exp() * (logp.detach() + target_entropy)).mean()
-                    ent_coef_optimizer.zero_grad(set_to_none=True)
-                    ent_coef_loss.backward()
-                    ent_coef_optimizer.step()
-            soft_update(qf_target, qf, args.tau)
-
-        # TRY NOT TO MODIFY: logging, evaluation, checkpoints
-        step = global_step + 1
+        # TRY NOT TO MODIFY: logging, the evaluation that chooses the checkpoint, training states
+        step = trained = global_step + 1
         if step % args.log_frequency == 0:
-            sps = (step - step_last) / max(time.time() - t_last, 1e-9)
-            writer.add_scalar("losses/qf_loss", qf_loss.item(), step)
-            writer.add_scalar("losses/actor_loss", actor_loss.item(), step)
-            writer.add_scalar("losses/ent_coef", log_ent_coef.exp().item(), step)
-            writer.add_scalar("losses/ent_coef_loss", ent_coef_loss.item(), step)
-            writer.add_scalar("charts/SPS", sps, step)
-        if step % args.eval_frequency == 0 or step == args.total_timesteps:
-            last_eval = evaluate(actor, args.env_id, args.eval_episodes, SELECTION_EVAL_SEED, device, outcome)
-            writer.add_scalar("eval/oracle_return", last_eval["return"], step)
-            writer.add_scalar("eval/oracle_final_distance", last_eval["final_distance"], step)
-            writer.add_scalar("eval/oracle_success_rate", last_eval["success_rate"], step)
-            if selection_key(last_eval, outcome) > best_key:
-                best_key = selection_key(last_eval, outcome)
-                best_step = step
-                save_oracle(step, {**last_eval, "reset_seed": SELECTION_EVAL_SEED}, best_path)
-            writer.add_scalar("eval/best_success_rate", best_key[0], step)
-            writer.add_scalar("eval/best_return" if outcome.min_return is not None else "eval/best_final_distance",
-                              best_key[1] if outcome.min_return is not None else -best_key[1], step)  # fmt: skip
-            with open(os.path.join(run_dir, "eval_curve.csv"), "a") as f:  # the selection curve, one row per evaluation
-                if f.tell() == 0:
-                    f.write("step,success_rate,final_distance,return\n")
-                f.write(f"{step},{last_eval['success_rate']},{last_eval['final_distance']},{last_eval['return']}\n")
-            expert_reached = args.stop_at_expert and (
-                last_eval["success_rate"] >= EXPERT_SUCCESS_RATE
-                and (args.env_id not in PUSHER_IDS or last_eval["final_distance"] <= EXPERT_FINAL_DISTANCE)
-            )
-        if step % report_every == 0 or step % args.eval_frequency == 0 or step == args.total_timesteps:
-            sps = (step - start_step) / max(time.time() - t0, 1e-9)
-            eta = (args.total_timesteps - step) / max(sps, 1e-9)
-            ev = ""
-            best_tie = best_key[1] if outcome.min_return is not None else -best_key[1]  # its return, or distance
-            if last_eval:
-                ev = (
-                    f" | eval return {last_eval['return']:.1f} dist {last_eval['final_distance']:.3f} success "
-                    f"{last_eval['success_rate']:.2f} | best {best_key[0]:.2f} / {best_tie:.3f} at {best_step}"
-                )
-            print(
-                f"[oracle] {step}/{args.total_timesteps} {100 * step // args.total_timesteps}% | {sps:.0f} SPS"
-                f" | ETA {int(eta // 60)}m{int(eta % 60):02d}s{ev}",
-                flush=True,
-            )
+            for name, loss in sac.losses.items():
+                writer.add_scalar(f"losses/{name}", loss.item(), step)
+            writer.add_scalar("losses/ent_coef", sac.log_ent_coef.exp().item(), step)
+            writer.add_scalar("charts/SPS", (step - step_last) / max(time.time() - t_last, 1e-9), step)
+        evaluated = step % args.eval_frequency == 0 or step == args.total_timesteps
+        if evaluated:
+            last_eval = evaluate(sac.actor, args.env_id, args.eval_episodes, SELECTION_EVAL_SEED, device, outcome)
+            selection.offer(last_eval, step, save_oracle)
+            log_evaluation(writer, run_dir, step, last_eval, selection)
+        if step % report_every == 0 or evaluated:
+            print_progress(step, start_step, args.total_timesteps, t0, last_eval, selection)
         if step % args.checkpoint_frequency == 0 or step == args.total_timesteps:
-            save_training_state(step)
+            save_training_state(os.path.join(run_dir, "training_state.pt"), sac, rb, step)
             save_oracle(step, last_eval or {}, os.path.join(run_dir, "oracle_latest.pt"))
             if step % args.snapshot_frequency == 0:  # kept, so the teacher can be chosen by a longer evaluation later
                 save_oracle(step, last_eval or {}, os.path.join(run_dir, f"oracle_step{step:07d}.pt"))
         t_last, step_last = (time.time(), step) if step % args.log_frequency == 0 else (t_last, step_last)
-        trained = step
-        if expert_reached:
+        if args.stop_at_expert and evaluated and is_expert(last_eval, args.env_id):
             print(
                 f"[oracle] step {step}: the evaluation meets the expert bar (--stop-at-expert), training ends",
                 flush=True,
             )
-            save_training_state(step)
+            save_training_state(os.path.join(run_dir, "training_state.pt"), sac, rb, step)
             break
-
-    train_time = time.time() - t0
     env.close()
-    # the oracle written is the best evaluation's networks (the last ones stay in oracle_latest.pt), judged again on
-    # held-out starts
-    best = torch.load(best_path, weights_only=True, map_location="cpu")
-    actor.load_state_dict(best["actor_state_dict"])
-    qf.load_state_dict(best["qf_state_dict"])
-    final_eval = evaluate(actor, args.env_id, args.final_eval_episodes, FINAL_EVAL_SEED, device, outcome)
-    print(
-        f"[oracle] best evaluation at step {best['training_steps']}: success rate "
-        f"{best['evaluation']['success_rate']:.2f}, final distance {best['evaluation']['final_distance']:.4f} over "
-        f"{best['evaluation']['episodes']:.0f} episodes; held-out eval over {args.final_eval_episodes} other starts: "
-        f"return {final_eval['return']:.2f} +- {final_eval['return_std']:.2f} | final distance "
-        f"{final_eval['final_distance']:.4f} | success rate {final_eval['success_rate']:.2f} | train time "
-        f"{train_time:.0f}s (this session)",
-        flush=True,
-    )
-    steps = best["training_steps"]
-    if args.save_model:
-        ckpt = oracle_checkpoint(actor, qf, args, obs_dim, act_dim, low, high, steps, final_eval)
-        ckpt["train_time_s_this_session"] = float(train_time)
-        ckpt["selection_evaluation"] = best["evaluation"]
-        ckpt["total_timesteps"] = trained
-        os.makedirs(os.path.dirname(os.path.abspath(args.output_path)), exist_ok=True)
-        atomic_save(ckpt, args.output_path)
-        with open(os.path.join(run_dir, "oracle_eval.json"), "w") as f:
-            json.dump(
-                {
-                    "eval": final_eval,
-                    "selection_eval": best["evaluation"],
-                    "steps": steps,
-                    "train_time_s": train_time,
-                    "args": asdict(args),
-                },
-                f,
-                indent=1,
-            )
-        print(f"oracle written to {args.output_path}", flush=True)
-    if args.capture_video:
-        record_teacher(args, actor, run_dir, device)
+    write_oracle(args, sac, selection, run_dir, device, trained, time.time() - t0)
     writer.close()
 
 
+def write_oracle(args: Args, sac: SAC, selection: Selection, run_dir: str, device, trained: int, train_time: float):
+    """The oracle written is the best evaluation's networks (the last ones stay in oracle_latest.pt), judged again on
+    held-out starts; oracle_eval.json keeps both evaluations."""
+    best = torch.load(selection.path, weights_only=True, map_location="cpu")
+    sac.actor.load_state_dict(best["actor_state_dict"])
+    sac.qf.load_state_dict(best["qf_state_dict"])
+    outcome = selection.outcome
+    final_eval = evaluate(sac.actor, args.env_id, args.final_eval_episodes, FINAL_EVAL_SEED, device, outcome)
+    chosen = best["evaluation"]
+    print(
+        f"[oracle] best evaluation at step {best['training_steps']}: success rate {chosen['success_rate']:.2f}, final "
+        f"distance {chosen['final_distance']:.4f} over {chosen['episodes']:.0f} episodes; held-out eval over "
+        f"{args.final_eval_episodes} other starts: return {final_eval['return']:.2f} +- {final_eval['return_std']:.2f}"
+        f" | final distance {final_eval['final_distance']:.4f} | success rate {final_eval['success_rate']:.2f} | "
+        f"train time {train_time:.0f}s (this session)",
+        flush=True,
+    )
+    if args.save_model:
+        ckpt = oracle_checkpoint(sac, args, best["training_steps"], final_eval)
+        ckpt.update(train_time_s_this_session=float(train_time), selection_evaluation=chosen, total_timesteps=trained)
+        os.makedirs(os.path.dirname(os.path.abspath(args.output_path)), exist_ok=True)
+        atomic_save(ckpt, args.output_path)
+        report = {"eval": final_eval, "selection_eval": chosen, "steps": best["training_steps"]}
+        atomic_write(
+            os.path.join(run_dir, "oracle_eval.json"), {**report, "train_time_s": train_time, "args": asdict(args)}
+        )
+        print(f"oracle written to {args.output_path}", flush=True)
+    if args.capture_video:
+        record_teacher(args, sac.actor, run_dir, device)
+
+
+# ALGO LOGIC: the maze's teachers
 def maze_q_learning(env: gym.Env, args: Args) -> tuple[np.ndarray, int]:
     """Tabular Q-learning on the maze's own reward; ties broken at random. Returns (Q table, env steps)."""
     rng = np.random.default_rng(args.seed)
@@ -868,11 +617,8 @@ def maze_q_learning(env: gym.Env, args: Args) -> tuple[np.ndarray, int]:
         done = False
         while not done:
             best = np.flatnonzero(q[s] == q[s].max())
-            a = (
-                int(rng.integers(gridworld_env.N_ACTIONS))
-                if rng.random() < args.maze_epsilon
-                else int(rng.choice(best))
-            )
+            explore = rng.random() < args.maze_epsilon
+            a = int(rng.integers(gridworld_env.N_ACTIONS)) if explore else int(rng.choice(best))
             obs, reward, terminated, truncated, _ = env.step(a)
             s_next = int(obs.argmax())
             q[s, a] += args.maze_alpha * (reward + args.gamma * (1.0 - terminated) * q[s_next].max() - q[s, a])
@@ -896,36 +642,24 @@ class MazeQNetwork(nn.Module):
         return self.network(x)
 
 
-def maze_q_table(q_network: MazeQNetwork) -> np.ndarray:
-    """The network's Q over every one-hot state: a (30, 4) table, row s = Q(one_hot(s), .)."""
-    with torch.no_grad():
-        return q_network(torch.eye(gridworld_env.N_CELLS)).double().numpy()
-
-
 def linear_schedule(start_e: float, end_e: float, duration: int, t: int) -> float:
     return start_e + (end_e - start_e) * min(t / duration, 1.0)
 
 
-def maze_dqn(env: gym.Env, args: Args) -> tuple[MazeQNetwork, int]:
-    """DQN (CleanRL's dqn.py) on the maze's own reward; truncation bootstraps. Returns (Q network, env steps)."""
+def maze_dqn(env: gym.Env, args: Args) -> MazeQNetwork:
+    """DQN (CleanRL's dqn.py) on the maze's own reward for --maze-dqn-timesteps steps; truncation bootstraps."""
     torch.set_num_threads(args.num_threads)
     random.seed(args.seed)
     np.random.seed(args.seed)
     torch.manual_seed(args.seed)
-    obs_dim = gridworld_env.N_CELLS
-    n_actions = gridworld_env.N_ACTIONS
-    q_network = MazeQNetwork(obs_dim, n_actions, args.maze_dqn_hidden)
-    target_network = MazeQNetwork(obs_dim, n_actions, args.maze_dqn_hidden)
+    eye = torch.eye(gridworld_env.N_CELLS)  # one-hot observations are stored as cell indices: eye[s] is s's
+    q_network = MazeQNetwork(gridworld_env.N_CELLS, gridworld_env.N_ACTIONS, args.maze_dqn_hidden)
+    target_network = MazeQNetwork(gridworld_env.N_CELLS, gridworld_env.N_ACTIONS, args.maze_dqn_hidden)
     target_network.load_state_dict(q_network.state_dict())
     optimizer = torch.optim.Adam(q_network.parameters(), lr=args.maze_dqn_learning_rate, fused=True)
     size = min(args.maze_dqn_buffer_size, args.maze_dqn_timesteps)
-    # one-hot observations are stored as cell indices; torch.eye turns a batch back into observations
-    buf_s = torch.zeros(size, dtype=torch.long)
-    buf_a = torch.zeros(size, dtype=torch.long)
-    buf_r = torch.zeros(size)
-    buf_s_next = torch.zeros(size, dtype=torch.long)
-    buf_term = torch.zeros(size)
-    eye = torch.eye(obs_dim)
+    buf_s, buf_a, buf_s_next = (torch.zeros(size, dtype=torch.long) for _ in range(3))
+    buf_r, buf_term = torch.zeros(size), torch.zeros(size)
     rng = np.random.default_rng(args.seed)
     env.action_space.seed(args.seed)
     obs, _ = env.reset(seed=args.seed)
@@ -942,11 +676,7 @@ def maze_dqn(env: gym.Env, args: Args) -> tuple[MazeQNetwork, int]:
         obs, reward, terminated, truncated, _ = env.step(action)
         s_next = int(obs.argmax())
         i = global_step % size
-        buf_s[i] = s
-        buf_a[i] = action
-        buf_r[i] = float(reward)
-        buf_s_next[i] = s_next
-        buf_term[i] = float(terminated)
+        buf_s[i], buf_a[i], buf_r[i], buf_s_next[i], buf_term[i] = s, action, float(reward), s_next, float(terminated)
         s = s_next
         if terminated or truncated:
             obs, _ = env.reset()
@@ -964,7 +694,7 @@ def maze_dqn(env: gym.Env, args: Args) -> tuple[MazeQNetwork, int]:
             optimizer.step()
         if global_step % args.maze_dqn_target_network_frequency == 0:
             target_network.load_state_dict(q_network.state_dict())
-    return q_network, args.maze_dqn_timesteps
+    return q_network
 
 
 def train_maze(args: Args) -> None:
@@ -977,19 +707,20 @@ def train_maze(args: Args) -> None:
     if args.method == "q-learning":
         q, steps = maze_q_learning(env, args)
     elif args.method == "dqn":
-        q_network, steps = maze_dqn(env, args)
-        q = maze_q_table(q_network)
+        q_network, steps = maze_dqn(env, args), args.maze_dqn_timesteps
+        with torch.no_grad():  # the network's Q over every one-hot state: row s = Q(one_hot(s), .)
+            q = q_network(torch.eye(gridworld_env.N_CELLS)).double().numpy()
+        kwargs = {
+            "obs_dim": gridworld_env.N_CELLS,
+            "n_actions": gridworld_env.N_ACTIONS,
+            "hidden": args.maze_dqn_hidden,
+        }
         extra = {
-            "kwargs": {
-                "obs_dim": gridworld_env.N_CELLS,
-                "n_actions": gridworld_env.N_ACTIONS,
-                "hidden": args.maze_dqn_hidden,
-            },
+            "kwargs": kwargs,
             "state_dict": {k: v.detach().cpu().clone() for k, v in q_network.state_dict().items()},
         }
     else:
-        q = gridworld_env.optimal_q(variant, args.gamma)
-        steps = 0
+        q, steps = gridworld_env.optimal_q(variant, args.gamma), 0
     env.close()
     length = gridworld_env.greedy_episode_length(q.argmax(1), variant)
     ckpt = {
@@ -1005,74 +736,322 @@ def train_maze(args: Args) -> None:
         "evaluation": {"episode_length": float(length)},
         **extra,
     }
-    print(
-        f"[oracle] {args.method} on {args.env_id}: {steps} env steps, greedy episode length {length} "
-        f"({time.time() - start:.1f}s)",
-        flush=True,
-    )
+    print(f"[oracle] {args.method} on {args.env_id}: {steps} env steps, greedy episode length {length} "
+          f"({time.time() - start:.1f}s)", flush=True)  # fmt: skip
     if args.save_model:
         os.makedirs(os.path.dirname(os.path.abspath(args.output_path)), exist_ok=True)
         atomic_save(ckpt, args.output_path)
         print(f"oracle written to {args.output_path}", flush=True)
 
 
-# --capture-video: as inform_sac_pusher.py films its policies (video_camera and write_video are copied verbatim; a test
-# keeps them identical): headless MuJoCo (MUJOCO_GL), a fixed camera added to the model, mp4 by imageio-ffmpeg.
+def main() -> None:
+    # Ctrl-C, SIGTERM (Slurm's cancel and time limit, kill) and SIGHUP (a closed terminal) stop training: recorded
+    # here, acted on by stop_check() at the next loop head. An ignored signal stays ignored (nohup, `&`).
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        if signal.getsignal(sig) is not signal.SIG_IGN:
+            signal.signal(sig, lambda signum, frame: Stop.signals.append(signal.Signals(signum).name))
+    args = tyro.cli(Args)
+    is_sac = args.env_id not in MAZE_IDS
+    try:
+        check_args(args)
+        if args.capture_video:
+            check_video(args.env_id)
+        args.method = args.method or ("sac" if is_sac else "value-iteration")
+        args.output_path = args.output_path or os.path.join("oracles", f"{args.env_id}__{args.method}_oracle.pt")
+        if is_sac:
+            train_sac(args, read_training_state(args.resume) if args.resume is not None else None)
+        else:
+            train_maze(args)
+    except InputError as e:
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(2)
+    except OSError as e:  # a full or read-only disk: one line, what could not be written; nothing partial is left
+        if e.errno not in DISK_ERRORS:
+            raise
+        resume = " (--resume <run dir>/training_state.pt continues from the last one saved)" if is_sac else ""
+        print(f"failed: cannot write {e.filename}: {e.strerror}; no partial file is left{resume}", file=sys.stderr)
+        sys.exit(1)
+    except KeyboardInterrupt:  # nothing half-written: every file is saved atomically
+        reason = (Stop.signals or ["SIGINT"])[0]
+        print(f"interrupted ({reason}); no oracle checkpoint was written. SAC training continues from its last saved "
+              "state with --resume <run dir>/training_state.pt", file=sys.stderr)  # fmt: skip
+        sys.exit(128 + signal.Signals[reason].value)  # 130 SIGINT, 143 SIGTERM, 129 SIGHUP
+    if Stop.signals:  # after the last loop: the oracle is complete, and the caller (a shell loop too) asked to stop
+        print(f"{Stop.signals[0]} received after training finished; the oracle checkpoint is complete", file=sys.stderr)
+        sys.exit(128 + signal.Signals[Stop.signals[0]].value)
+
+
+# TRY NOT TO MODIFY: the flags' checks, stops, files, logging and videos
+class InputError(Exception):
+    """Bad input from the user: a flag value, a file. Reported as one line, before anything is written."""
+
+
+def check_args(args: Args) -> None:
+    """What tyro cannot know: each flag's Range (declared in Args), the env id, the method, files, the run name.
+    Raises InputError."""
+    for name, hint in typing.get_type_hints(Args, include_extras=True).items():
+        for rule in getattr(hint, "__metadata__", ()):
+            rule.check(f"--{name.replace('_', '-')}", getattr(args, name))
+    maze = args.env_id in MAZE_IDS
+    if args.track and importlib.util.find_spec("wandb") is None:
+        raise InputError("--track needs Weights & Biases: `pip install wandb`, or run without --track")
+    if args.track and maze:
+        raise InputError("--track mirrors TensorBoard events, which only the SAC training writes")
+    methods = METHODS["maze" if maze else "sac"]
+    if args.method is not None and args.method not in methods:
+        raise InputError(f"--method {args.method} does not apply to {args.env_id}; choose one of {', '.join(methods)}")
+    if args.output_path is not None and (not args.output_path or os.path.isdir(args.output_path)):
+        raise InputError(f"--output-path {args.output_path!r} must name a file (it is empty or a directory)")
+    if args.resume is not None and maze:
+        raise InputError("--resume continues a SAC run; the maze methods train in seconds and have no training state")
+    if args.resume is not None and not os.path.isfile(args.resume):
+        raise InputError(f"--resume {args.resume}: no such file")
+    if args.batch_size > args.total_timesteps:
+        raise InputError(f"--batch-size {args.batch_size} is larger than --total-timesteps {args.total_timesteps}")
+    if args.maze_dqn_batch_size > args.maze_dqn_timesteps:
+        raise InputError(f"--maze-dqn-batch-size {args.maze_dqn_batch_size} is larger than --maze-dqn-timesteps "
+                         f"{args.maze_dqn_timesteps}")  # fmt: skip
+    if args.maze_dqn_learning_starts >= args.maze_dqn_timesteps:
+        raise InputError(f"--maze-dqn-learning-starts ({args.maze_dqn_learning_starts}) must be below "
+                         f"--maze-dqn-timesteps ({args.maze_dqn_timesteps}), or the DQN never learns")  # fmt: skip
+    if not args.exp_name or any(c in args.exp_name for c in "/\\\0") or args.exp_name in (".", ".."):
+        raise InputError(f"--exp-name {args.exp_name!r} must name one directory under runs/ (no '/', not '..')")
+    if len(run_name(args).encode()) > 240:  # a file name has at most 255 bytes; room for new_run_dir's suffix
+        raise InputError(f"--exp-name is too long: the run directory's name would be {len(run_name(args))} characters")
+    if args.env_id == "Pusher-v4":
+        import mujoco
+
+        if int(mujoco.__version__.split(".")[0]) >= 3:
+            raise InputError(f"Pusher-v4 needs mujoco<3 (installed: {mujoco.__version__}); use --env-id Pusher-v5 "
+                             "or `pip install mujoco==2.3.7` in a separate venv")  # fmt: skip
+    if not maze:
+        check_env(args)
+
+
+def check_env(args: Args) -> None:
+    """--env-id for SAC: a Gymnasium env with a flat observation and continuous actions, whose episodes can be judged
+    (one random step shows whether `info` has --success-info-key). Raises InputError."""
+    try:
+        env = gym.make(args.env_id)
+    except Exception as e:  # unknown id, a missing extra (box2d, ...), a version that needs other packages
+        first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
+        mazes = ", ".join(MAZE_IDS)
+        raise InputError(f"--env-id {args.env_id}: Gymnasium cannot make it ({first}); mazes: {mazes}") from None
+    try:
+        obs_space, act_space = env.observation_space, env.action_space
+        if not isinstance(act_space, gym.spaces.Box):
+            raise InputError(
+                f"--env-id {args.env_id}: its actions are {type(act_space).__name__}, not continuous (Box)"
+            )
+        if not isinstance(obs_space, gym.spaces.Box) or len(obs_space.shape) != 1:
+            raise InputError(f"--env-id {args.env_id}: needs a flat Box observation, not {obs_space}")
+        if args.success_return is None:
+            env.reset(seed=0)
+            info = env.step(act_space.sample())[4]
+            if args.success_info_key not in info:
+                keys = ", ".join(sorted(info)) or "none"
+                raise InputError(
+                    f"--env-id {args.env_id}: its info has no {args.success_info_key!r} to measure a final distance "
+                    f"(it has: {keys}); pass --success-info-key KEY, or --success-return R to judge episodes by return"
+                )
+    finally:
+        env.close()
+
+
+class Stop:
+    """The stop signals received (main's handler only records them) and whether stop_check() has acted on them."""
+
+    signals = []
+    raised = False
+
+
+def stop_check() -> None:
+    """KeyboardInterrupt if a stop signal came (once), at the head of every loop: in our own code, never inside a
+    library call (TensorBoard's writer, a checkpoint being written)."""
+    if Stop.signals and not Stop.raised:
+        Stop.raised = True
+        raise KeyboardInterrupt
+
+
+def atomic_save(obj, path: str) -> None:
+    """torch.save through a temporary file and a rename: a reader sees the old file or the whole new one."""
+    buffer = io.BytesIO()
+    torch.save(obj, buffer)  # serialized in memory first, so a full disk is an OSError of the write below
+    atomic_write(path, buffer.getbuffer())
+
+
+def atomic_write(path: str, data) -> None:
+    """Bytes, or a dict as JSON, to path.tmp, then renamed. If that fails (a full disk), path.tmp is removed and the
+    OSError names path."""
+    tmp = path + ".tmp"
+    try:
+        with open(tmp, "wb") as f:
+            f.write(json.dumps(data, indent=1).encode() if isinstance(data, dict) else data)
+        os.replace(tmp, path)
+    except OSError as e:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise OSError(e.errno, e.strerror, path) from None
+
+
+def oracle_checkpoint(sac: SAC, args: Args, step: int, evaluation: dict) -> dict:
+    """The deployable oracle: state_dicts plus everything needed to rebuild and check them."""
+    return {
+        "algorithm": "sac",
+        "env_id": args.env_id,
+        "obs_shape": [sac.obs_dim],
+        "act_shape": [sac.act_dim],
+        "kwargs": {"obs_dim": sac.obs_dim, "act_dim": sac.act_dim, "hidden": sac.hidden},
+        "action_low": torch.as_tensor(sac.low, dtype=torch.float32),
+        "action_high": torch.as_tensor(sac.high, dtype=torch.float32),
+        "actor_state_dict": {k: v.detach().cpu().clone() for k, v in sac.actor.state_dict().items()},
+        "qf_state_dict": {k: v.detach().cpu().clone() for k, v in sac.qf.state_dict().items()},
+        "training_steps": int(step),
+        "training_seed": args.seed,
+        "random_starts": True,
+        "bf16": bool(args.bf16),  # the opt-in speed flags it was trained with (they change the numbers)
+        "num_threads": int(args.num_threads),
+        "evaluation": {k: float(v) for k, v in evaluation.items()},
+    }
+
+
+TRAINING_STATE_KEYS = (*SAC.MODULES, "log_ent_coef", "buf_n", *(f"buf_{f}" for f in ReplayBuffer.FIELDS))
+TRAINING_STATE_KEYS += ("global_step", "torch_rng")
+
+
+def save_training_state(path: str, sac: SAC, rb: ReplayBuffer, step: int) -> None:
+    n = min(rb.n, rb.size)
+    state = {key: getattr(sac, key).state_dict() for key in SAC.MODULES}
+    state.update({f"buf_{name}": buf[:n].clone() for name, buf in rb.data.items()})
+    state.update(log_ent_coef=sac.log_ent_coef.detach().clone(), buf_n=rb.n, global_step=step,
+                 torch_rng=torch.get_rng_state())  # fmt: skip
+    atomic_save(state, path)
+
+
+def read_training_state(path: str) -> dict:
+    """torch.load(path, weights_only=True) of a training_state.pt; every way it can fail is one InputError."""
+    if not zipfile.is_zipfile(path):  # torch.save writes a zip archive; a truncated one has lost its directory
+        raise InputError(f"--resume {path}: not a torch checkpoint, or a truncated one (not a complete zip archive)")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            state = torch.load(path, weights_only=True, map_location="cpu")
+    except pickle.UnpicklingError as e:
+        unsupported = [line.strip() for line in str(e).splitlines() if "unsupported" in line.lower()]
+        raise InputError(f"--resume {path}: refused, it holds more than tensors and plain values (it could run code): "
+                         f"{(unsupported or [type(e).__name__])[0][:160]}") from None  # fmt: skip
+    except Exception as e:  # a damaged archive: torch raises RuntimeError, EOFError, ...
+        first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
+        raise InputError(f"--resume {path}: corrupt checkpoint: {first}") from None
+    for old, new in (("a_optimizer", "ent_coef_optimizer"), ("log_alpha", "log_ent_coef")):  # an older state's names
+        if isinstance(state, dict) and old in state:
+            state[new] = state.pop(old)
+    missing = [k for k in TRAINING_STATE_KEYS if not isinstance(state, dict) or k not in state]
+    if missing:
+        more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
+        raise InputError(f"--resume {path}: not a training_state.pt of oracle_train.py (missing "
+                         f"{', '.join(missing[:3])}{more})")  # fmt: skip
+    return state
+
+
+def load_training_state(state: dict, sac: SAC, rb: ReplayBuffer, args: Args) -> int:
+    """Networks, optimizers, replay buffer and torch RNG from a read_training_state; returns its step."""
+    try:
+        for key in SAC.MODULES:
+            getattr(sac, key).load_state_dict(state[key])
+        sac.log_ent_coef.data.copy_(state["log_ent_coef"])
+        rb.n = int(state["buf_n"])
+        n = min(rb.n, rb.size)
+        for name, buf in rb.data.items():
+            buf[:n] = state[f"buf_{name}"][:n]
+        step = int(state["global_step"])
+        torch.set_rng_state(state["torch_rng"])
+    except (RuntimeError, ValueError, TypeError, KeyError, IndexError) as e:  # nothing is written before this
+        first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
+        raise InputError(f"--resume {args.resume}: does not fit this run ({type(e).__name__}: {first})") from None
+    if args.seed + step >= 2**32:  # the resumed run seeds numpy with seed + step
+        raise InputError(f"--resume at step {step} needs --seed + step < 2**32 (numpy's seeds), got --seed {args.seed}")
+    return step
+
+
+def run_name(args: Args) -> str:
+    return f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
+
+
+def new_run_dir(args: Args) -> str:
+    """runs/{run_name}, never an existing directory (a suffix _1, _2, ... when one run started in the same second)."""
+    name = run_name(args)
+    run_dir, suffix = os.path.join("runs", name), 0
+    while os.path.exists(run_dir):
+        suffix += 1
+        run_dir = os.path.join("runs", f"{name}_{suffix}")
+    os.makedirs(run_dir)
+    return run_dir
+
+
+def open_writer(args: Args, run_dir: str) -> SummaryWriter:
+    """TensorBoard's writer (and the hyperparameter table, once per run); with --track, Weights & Biases first."""
+    if args.track:
+        import wandb
+
+        wandb.init(project=args.wandb_project_name, entity=args.wandb_entity, sync_tensorboard=True, config=vars(args),
+                   name=os.path.basename(run_dir), dir=run_dir, save_code=True)  # fmt: skip
+    writer = SummaryWriter(run_dir)
+    if args.resume is None:
+        table = "\n".join(f"|{key}|{value}|" for key, value in vars(args).items())
+        writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + table)
+    return writer
+
+
+def log_evaluation(writer: SummaryWriter, run_dir: str, step: int, evaluation: dict, selection: Selection) -> None:
+    """A periodic evaluation and the best so far, in TensorBoard and as a row of eval_curve.csv."""
+    for name in ("return", "final_distance", "success_rate"):
+        writer.add_scalar(f"eval/oracle_{name}", evaluation[name], step)
+    writer.add_scalar("eval/best_success_rate", selection.key[0], step)
+    by_return = selection.outcome.min_return is not None
+    writer.add_scalar("eval/best_return" if by_return else "eval/best_final_distance", selection.tie(), step)
+    with open(os.path.join(run_dir, "eval_curve.csv"), "a") as f:  # the selection curve, one row per evaluation
+        if f.tell() == 0:
+            f.write("step,success_rate,final_distance,return\n")
+        f.write(f"{step},{evaluation['success_rate']},{evaluation['final_distance']},{evaluation['return']}\n")
+
+
+def print_progress(step: int, start_step: int, total: int, t0: float, evaluation: dict, selection: Selection) -> None:
+    sps = (step - start_step) / max(time.time() - t0, 1e-9)
+    eta = (total - step) / max(sps, 1e-9)
+    ev = ""
+    if evaluation:
+        ev = (f" | eval return {evaluation['return']:.1f} dist {evaluation['final_distance']:.3f} success "
+              f"{evaluation['success_rate']:.2f} | best {selection.key[0]:.2f} / {selection.tie():.3f} at "
+              f"{selection.step}")  # fmt: skip
+    print(f"[oracle] {step}/{total} {100 * step // total}% | {sps:.0f} SPS | ETA {int(eta // 60)}m{int(eta % 60):02d}s"
+          f"{ev}", flush=True)  # fmt: skip
+
+
+# --capture-video: the oracle's episodes rendered headless (MUJOCO_GL) into a list by Gymnasium's RenderCollection;
+# Pusher seen from above (its free camera set to VIDEO_CAMERA, as inform_sac_pusher.py films), mp4 by imageio-ffmpeg
 VIDEO_CAMERA = {"lookat": (0.42, -0.2, -0.3), "distance": 1.0, "elevation": -75.0}  # metres, degrees
 VIDEO_SIZE = 480  # pixels, square; a multiple of 16, as H.264 wants
 VIDEO_EPISODES = 3
 
 
-def video_camera() -> dict:
-    """The camera's MJCF attributes: VIDEO_CAMERA's distance from its lookat, seen from +x (image up is -x)."""
-    x, y, z = VIDEO_CAMERA["lookat"]
-    d = VIDEO_CAMERA["distance"]
-    el = math.radians(VIDEO_CAMERA["elevation"])
-    pos = f"{x + d * math.cos(el):.4f} {y} {z - d * math.sin(el):.4f}"
-    xyaxes = f"0 1 0 {math.sin(el):.4f} 0 {math.cos(el):.4f}"
-    return {"name": "inform_video", "mode": "fixed", "pos": pos, "xyaxes": xyaxes}
-
-
 def video_env(env_id: str, size: int = VIDEO_SIZE) -> gym.Env:
-    """Pusher from its own model plus the videos' camera (and no shadows: they triple the time of a frame in software
-    OpenGL), or another env with its own camera, rendering every reset and step into a list (Gymnasium's
-    RenderCollection)."""
-    import gymnasium.envs.mujoco as gym_mujoco
-
-    if env_id not in PUSHER_IDS:
-        return gym.wrappers.RenderCollection(gym.make(env_id, render_mode="rgb_array", width=size, height=size))
-
-    name = "pusher_v5.xml" if env_id == "Pusher-v5" else "pusher.xml"
-    tree = ET.parse(os.path.join(os.path.dirname(gym_mujoco.__file__), "assets", name))
-    ET.SubElement(tree.getroot().find("worldbody"), "camera", video_camera())
-    ET.SubElement(ET.SubElement(tree.getroot(), "visual"), "quality", {"shadowsize": "0"})
-    render = {"render_mode": "rgb_array", "width": size, "height": size, "camera_name": "inform_video"}
-    with tempfile.TemporaryDirectory(prefix="oracle_video_") as tmp:  # MuJoCo reads the model once, at construction
-        xml = os.path.join(tmp, name)
-        tree.write(xml)
-        if env_id == "Pusher-v5":
-            env = gym.make(env_id, xml_file=xml, **render)
-        else:  # Pusher-v4 has no xml_file argument: same class, model file swapped at construction
-            from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
-            from gymnasium.envs.mujoco.pusher_v4 import PusherEnv
-
-            class PusherVideoV4(PusherEnv):
-                def __init__(self, **kwargs):
-                    space = gym.spaces.Box(-np.inf, np.inf, (23,), np.float64)
-                    MujocoEnv.__init__(self, xml, 5, observation_space=space, **kwargs)
-
-            env = gym.wrappers.TimeLimit(PusherVideoV4(**render), max_episode_steps=100)
+    """The env rendering every reset and step into a list; Pusher from above, without shadows (they triple the time
+    of a frame in software OpenGL)."""
+    env = gym.make(env_id, render_mode="rgb_array", width=size, height=size)
+    if env_id in PUSHER_IDS:  # read when the first frame creates the renderer's context
+        camera = {**VIDEO_CAMERA, "lookat": np.array(VIDEO_CAMERA["lookat"]), "azimuth": 180.0, "trackbodyid": -1}
+        env.unwrapped.mujoco_renderer.default_cam_config = camera
+        env.unwrapped.model.vis.quality.shadowsize = 0
     return gym.wrappers.RenderCollection(env)
 
 
 def check_video(env_id: str) -> None:
     """Before anything is written: pick the headless GL backend (egl when MUJOCO_GL is unset and there is no display),
-    render one frame, and find ffmpeg. InputError, one line, if either is missing."""
+    find ffmpeg and render one frame. InputError, one line, if either is missing."""
     if env_id in MAZE_IDS:
-        raise InputError(
-            f"--capture-video films a SAC teacher; the maze's are drawn by inform_dqn_gridworld.py "
-            f"--capture-video, not for {env_id}"
-        )
+        raise InputError(f"--capture-video films a SAC teacher; the maze's are drawn by inform_dqn_gridworld.py "
+                         f"--capture-video, not for {env_id}")  # fmt: skip
     if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
         os.environ["MUJOCO_GL"] = "egl"
     try:
@@ -1080,10 +1059,8 @@ def check_video(env_id: str) -> None:
 
         imageio_ffmpeg.get_ffmpeg_exe()
     except Exception as e:
-        raise InputError(
-            f"--capture-video writes mp4 with imageio-ffmpeg, which is missing ({type(e).__name__}): "
-            "pip install imageio-ffmpeg==0.8.1"
-        ) from None
+        raise InputError(f"--capture-video writes mp4 with imageio-ffmpeg, which is missing ({type(e).__name__}): "
+                         "pip install imageio-ffmpeg==0.8.1") from None  # fmt: skip
     try:
         with warnings.catch_warnings():  # a failing backend warns before it raises: one line is enough
             warnings.simplefilter("ignore")
@@ -1107,15 +1084,8 @@ def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
 
     tmp = path[: -len(".mp4")] + ".tmp.mp4"  # ffmpeg reads the container from the extension
     try:
-        writer = imageio_ffmpeg.write_frames(
-            tmp,
-            frames[0].shape[1::-1],
-            fps=fps,
-            codec="libx264",
-            quality=6,
-            macro_block_size=16,
-            ffmpeg_log_level="error",
-        )
+        writer = imageio_ffmpeg.write_frames(tmp, frames[0].shape[1::-1], fps=fps, codec="libx264", quality=6,
+                                             macro_block_size=16, ffmpeg_log_level="error")  # fmt: skip
         writer.send(None)
         for frame in frames:
             writer.send(np.ascontiguousarray(frame))
@@ -1126,86 +1096,29 @@ def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
             os.remove(tmp)
 
 
-@torch.inference_mode()
 def record_teacher(args: Args, actor: Actor, run_dir: str, device: torch.device) -> dict:
-    """--capture-video: the written oracle's first VIDEO_EPISODES held-out evaluation episodes, deterministic and from
-    the reset seeds `evaluate` gives them, back to back in videos/oracle.mp4; videos/videos.json has each episode's
-    reset seed, frames and final distance."""
+    """The written oracle's first VIDEO_EPISODES held-out evaluation episodes (the same reset seeds and generator as
+    `evaluate` gives them), back to back in videos/oracle.mp4; videos/videos.json has each episode's reset seed,
+    frames and final distance."""
     os.makedirs(os.path.join(run_dir, "videos"), exist_ok=True)
     env = video_env(args.env_id)
     outcome = Outcome.from_args(args)
     generator = torch.Generator(device=device).manual_seed(FINAL_EVAL_SEED)
-    frames = []
-    record = {}
-    t0 = time.time()
+    frames, record, t0 = [], {}, time.time()
     for ep in range(VIDEO_EPISODES):
         stop_check()
-        obs, _ = env.reset(seed=FINAL_EVAL_SEED + ep)
-        done = False
-        info = {}
-        ep_return = 0.0
-        while not done:
-            _, _, action = actor.get_action(
-                torch.as_tensor(obs, dtype=torch.float32, device=device).unsqueeze(0), generator
-            )
-            obs, reward, terminated, truncated, info = env.step(action[0].cpu().numpy())
-            ep_return += float(reward)
-            done = terminated or truncated
+        ep_return, info = run_episode(actor, env, FINAL_EVAL_SEED + ep, generator, device)
         episode = env.render()
         frames += episode
-        record[f"episode_{ep}"] = {
-            "reset_seed": FINAL_EVAL_SEED + ep,
-            "frames": len(episode),
-            "final_distance": outcome(info, ep_return)[0],
-        }
-    write_video(os.path.join(run_dir, "videos", "oracle.mp4"), frames, env.metadata["render_fps"])
+        record[f"episode_{ep}"] = {"reset_seed": FINAL_EVAL_SEED + ep, "frames": len(episode),
+                                   "final_distance": outcome(info, ep_return)[0]}  # fmt: skip
+    path = os.path.join(run_dir, "videos", "oracle.mp4")
+    write_video(path, frames, env.metadata["render_fps"])
     env.close()
-    with open(os.path.join(run_dir, "videos", "videos.json"), "w") as f:
-        json.dump({"file": "oracle.mp4", "size": list(frames[0].shape), "episodes": record}, f, indent=1)
-    print(
-        f"[video] {VIDEO_EPISODES} episodes of the oracle filmed in {time.time() - t0:.1f}s: "
-        f"{os.path.join(run_dir, 'videos', 'oracle.mp4')}",
-        flush=True,
-    )
+    atomic_write(os.path.join(run_dir, "videos", "videos.json"),
+                 {"file": "oracle.mp4", "size": list(frames[0].shape), "episodes": record})  # fmt: skip
+    print(f"[video] {VIDEO_EPISODES} episodes of the oracle filmed in {time.time() - t0:.1f}s: {path}", flush=True)
     return record
-
-
-def main() -> None:
-    # Ctrl-C, SIGTERM (Slurm's cancel and time limit, kill) and SIGHUP (a closed terminal) stop training: recorded
-    # here, acted on by stop_check() at the next loop head. An ignored signal stays ignored (nohup, `&`).
-    def stop(signum, frame):
-        Stop.signals.append(signal.Signals(signum).name)
-
-    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-        if signal.getsignal(sig) is not signal.SIG_IGN:
-            signal.signal(sig, stop)
-    args = tyro.cli(Args)
-    try:
-        check_args(args)
-        is_sac = args.env_id not in MAZE_IDS
-        if args.capture_video:
-            check_video(args.env_id)
-        args.method = args.method or ("sac" if is_sac else "value-iteration")
-        args.output_path = args.output_path or os.path.join("oracles", f"{args.env_id}__{args.method}_oracle.pt")
-        if is_sac:
-            train_sac(args, read_training_state(args.resume) if args.resume is not None else None)
-        else:
-            train_maze(args)
-    except InputError as e:
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
-    except KeyboardInterrupt:
-        # nothing half-written: every file is saved atomically; SAC's state is saved every --checkpoint-frequency steps
-        reason = (Stop.signals or ["SIGINT"])[0]
-        print(
-            f"interrupted ({reason}); no oracle checkpoint was written. SAC training continues "
-            "from its last saved state with --resume <run dir>/training_state.pt",
-            file=sys.stderr,
-        )
-        sys.exit(128 + signal.Signals[reason].value)  # 130 SIGINT, 143 SIGTERM, 129 SIGHUP
-    if Stop.signals:  # after the last loop: the oracle is complete, and the caller (a shell loop too) asked to stop
-        print(f"{Stop.signals[0]} received after training finished; the oracle checkpoint is complete", file=sys.stderr)
-        sys.exit(128 + signal.Signals[Stop.signals[0]].value)
 
 
 if __name__ == "__main__":
