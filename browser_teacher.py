@@ -1,0 +1,870 @@
+"""A person teaches INFORM through a web page (`--teacher browser`): the page shows the agent, the person answers Yes or
+No to what it does (button or key: y, n; space for no answer), and "End the day" starts the night, whose outcome the
+page then shows. A script imports this module only under `--teacher browser`.
+
+One local page, served by the standard library's HTTP server in a daemon thread; one inline HTML page, no build step.
+Safe by default: it listens on 127.0.0.1 unless told otherwise; the printed address carries a random token and a
+request without it gets 403; only the routes below exist (any other path: 404) and no part of a request reaches the
+file system. One person per run: the first browser session to load the page teaches (a session cookie), any later
+one watches read-only.
+
+    GET  /            the page
+    GET  /state       the page's state as JSON; ?since=VERSION waits (up to 10 s) until it changes (long polling)
+    GET  /frame.png   the newest frame as PNG (its sequence number in the X-Frame-Seq header); ?outcome=1: the night's
+    POST /answer      {"nonce", "answer": "yes" | "no" | "none", "question": id | null, "seq": frame, "waited_ms"}
+    POST /end         the person ends the day
+    POST /bye         the page is being closed or reloaded: the day ends unless it is back within `close_grace` s
+
+Two ways to teach. `ask` waits for the person's answer about one move (the maze; the Pusher at the person's pace).
+`show` streams steps at `pace` steps a second without waiting, and `answers` hands over what the person answered
+since, each with the time it was given and the step on the screen; `credit` spreads an answer over the recent steps
+as Deep TAMER does (Warnell et al. 2018: a delay uniform over 0.2-4 s).
+
+    with BrowserTeacher(run_dir, task="maze", participant="P01") as page:
+        h = page.ask(step, action, state_text=gridworld_env.draw_maze(agent=cell, arrows={cell: action}))
+        if page.ended:  # the person ended the day, or closed the page
+            ...
+        page.show_outcome("TAMER: 19 steps from S; INFORM: 19", image=rgb)
+
+Every answer is one line of `answers.jsonl` in the run directory (flushed at once): its time, the step, the action,
+the answer and the frame shown (sequence number and SHA-256; a maze's drawing itself). The page keeps an answer in
+the browser's storage until the server has it, so a reload or a dropped connection loses none and the page resumes.
+"""
+
+import hashlib
+import http.cookies
+import json
+import os
+import re
+import secrets
+import socket
+import struct
+import threading
+import time
+import zlib
+from collections import deque
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from urllib.parse import parse_qs
+
+import numpy as np
+
+TASKS = ("maze", "pusher")
+LABELS = {"yes": 1.0, "no": 0.0, "none": None}  # the person's answers and the label each gives
+DEEP_TAMER_DELAY = (0.2, 4.0)  # seconds between what a person sees and their answer (Warnell et al. 2018)
+LONG_POLL_S = 10.0  # a GET /state?since= waits at most this long for a change
+MAX_BODY = 4096  # bytes of a POST body
+NONCE = re.compile(r"[A-Za-z0-9_-]{1,64}")
+
+
+@dataclass(frozen=True)
+class Answer:
+    """One answer of the person."""
+
+    value: float | None
+    """1.0 (yes), 0.0 (no) or None (no answer)"""
+    label: str
+    """"yes", "no" or "none\""""
+    time: float
+    """when it was given, on this process's time.monotonic() clock (its arrival less the time the page held it)"""
+    step: int | None
+    """the step on the person's screen when they answered (the question's step under `ask`)"""
+    step_at_arrival: int | None
+    """the newest step when the answer arrived"""
+    question: int | None
+    """the question it answers (`ask`), None for a streamed answer (`show`)"""
+
+
+def credit_weights(
+    answer_time: float, shown: list[tuple[int, float]], delay: tuple[float, float] = DEEP_TAMER_DELAY
+) -> dict[int, float]:
+    """Deep TAMER's credit window: an answer given at `answer_time` is about what was on the screen d seconds before,
+    d ~ uniform(delay). `shown` lists (step, time it appeared), oldest first; a step stays on the screen until the
+    next one appears. Returns {step: P(d lands in the time that step was on the screen)} for the steps with weight
+    above zero (the weights sum to at most 1)."""
+    low, high = delay
+    weights: dict[int, float] = {}
+    for i in range(len(shown) - 1, -1, -1):
+        step, start = shown[i]
+        end = min(shown[i + 1][1] if i + 1 < len(shown) else answer_time, answer_time)
+        if end <= answer_time - high:
+            break
+        overlap = min(answer_time - start, high) - max(answer_time - end, low)
+        if overlap > 0:
+            weights[step] = weights.get(step, 0.0) + overlap / (high - low)
+    return weights
+
+
+def png_bytes(image: np.ndarray) -> bytes:
+    """An RGB (H, W, 3), RGBA or grey (H, W) uint8 array as PNG, with zlib alone."""
+    image = np.ascontiguousarray(image, dtype=np.uint8)
+    if image.ndim == 2:
+        image = image[:, :, None]
+    height, width, channels = image.shape
+    color_type = {1: 0, 3: 2, 4: 6}[channels]
+    rows = np.concatenate([np.zeros((height, 1), np.uint8), image.reshape(height, width * channels)], axis=1)
+
+    def chunk(tag: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data))
+
+    header = struct.pack(">IIBBBBB", width, height, 8, color_type, 0, 0, 0)
+    idat = zlib.compress(rows.tobytes(), 3)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", idat) + chunk(b"IEND", b"")
+
+
+def as_json(value):
+    """Actions and info values (numpy scalars and arrays included) as plain JSON values."""
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    if isinstance(value, dict):
+        return {str(k): as_json(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [as_json(v) for v in value]
+    if value is None or isinstance(value, bool | int | float | str):
+        return value
+    return str(value)
+
+
+class BrowserTeacher:
+    """The page and what a training loop calls: `ask` (wait for an answer), `show` and `answers` (stream at a pace),
+    `credit`, `message`, `show_outcome`, `close`. `ended` is None while the day goes on, else why it ended: "end of
+    day" (the button), "page closed", "interrupted" (Ctrl-C in the script while it waited) or "closed" (close())."""
+
+    def __init__(
+        self,
+        run_dir: str,
+        task: str = "maze",
+        host: str = "127.0.0.1",
+        port: int = 0,
+        participant: str | None = None,
+        budget: int | None = None,
+        pace: float | None = None,
+        delay: tuple[float, float] = DEEP_TAMER_DELAY,
+        close_grace: float = 5.0,
+        quiet: bool = False,
+    ):
+        if task not in TASKS:
+            raise ValueError(f"task must be one of {TASKS}, got {task!r}")
+        if pace is not None and pace <= 0:
+            raise ValueError(f"pace must be above 0 steps a second, got {pace}")
+        if not 0 <= delay[0] < delay[1]:
+            raise ValueError(f"delay must be (low, high) seconds with 0 <= low < high, got {delay}")
+        self.task = task
+        self.participant = participant
+        self.budget = budget
+        self.pace = pace
+        self.delay = (float(delay[0]), float(delay[1]))
+        self.close_grace = close_grace
+        self.token = secrets.token_urlsafe(24)
+        self.run_id = hashlib.sha256(self.token.encode()).hexdigest()[:12]  # names the cookie and the page's storage
+        self.cookie = f"inform_{self.run_id}"
+        self.ended: str | None = None
+        self._cond = threading.Condition()  # guards everything below; notified at each change
+        self._version = 0
+        self._started = time.monotonic()
+        self._closed = False
+        self._sessions: set[str] = set()
+        self._owner: str | None = None
+        self._owner_seen = 0.0
+        self._bye_at: float | None = None
+        self._step: int | None = None
+        self._counts = dict.fromkeys(LABELS, 0)
+        self._nonces: set[str] = set()
+        self._question: dict | None = None  # the move `ask` waits on
+        self._question_answer: Answer | None = None
+        self._questions = 0
+        self._mode = "wait"  # ask | wait | stream | ended | outcome | closed
+        self._frame_seq = 0
+        self._frame: np.ndarray | bytes | None = None  # the newest frame, and its PNG once asked for
+        self._frame_png: tuple[int, bytes] | None = None
+        self._frames: deque = deque(maxlen=4096)  # (seq, step, action, sha256, state_text) of recent frames
+        self._shown: deque = deque(maxlen=4096)  # (step, time) as `show` and `ask` put them on the screen
+        self._state_text: str | None = None
+        self._info: dict = {}
+        self._streamed: list[Answer] = []
+        self._next_show = 0.0
+        self._message = ""
+        self._outcome: dict | None = None
+        self._outcome_png: bytes | None = None
+        os.makedirs(run_dir, exist_ok=True)
+        self.answers_path = os.path.join(run_dir, "answers.jsonl")
+        self._log = open(self.answers_path, "a", encoding="utf-8")
+        self._record({"event": "start", "task": task, "participant": participant, "budget": budget, "pace": pace})
+
+        handler = type("Handler", (_Handler,), {"teacher": self})
+        server_class = _Server6 if ":" in host else _Server
+        self._server = server_class((host, port), handler)
+        self.host, self.port = host, self._server.server_address[1]
+        shown_host = socket.gethostname() if host in ("", "0.0.0.0", "::") else host
+        shown_host = f"[{shown_host}]" if ":" in shown_host else shown_host
+        self.url = f"http://{shown_host}:{self.port}/?token={self.token}"
+        self._thread = threading.Thread(
+            target=self._server.serve_forever, kwargs={"poll_interval": 0.1}, name="browser-teacher", daemon=True
+        )
+        self._thread.start()
+        if not quiet:
+            print(f"[teacher] open the teaching page in a browser: {self.url}", flush=True)
+
+    # ---- what a training loop calls
+
+    def ask(self, step: int, action, state_text: str | None = None, frame=None, info: dict | None = None):
+        """Show the agent's proposed move (a maze drawn as text, and/or an RGB frame) and wait for the person: 1.0
+        (yes), 0.0 (no), or None: no answer, or the day ended (then `ended` says why). Ctrl-C (KeyboardInterrupt)
+        while it waits ends the day as "interrupted" and is raised again, for the script to stop as it always does."""
+        with self._cond:
+            if self.ended is not None:
+                return None
+            self._questions += 1
+            self._put_frame(step, action, state_text, frame)
+            self._shown.append((step, time.monotonic()))
+            self._question = {
+                "id": self._questions,
+                "step": step,
+                "action": as_json(action),
+                "frame_seq": self._frame_seq,
+                "info": as_json(info or {}),
+                "answered": None,
+            }
+            self._question_answer = None
+            self._mode = "ask"
+            self._changed()
+            try:
+                while self._question_answer is None and self.ended is None:
+                    self._cond.wait(0.2)  # short waits: a signal handler runs, and a closed page is noticed
+                    self._check_page_closed()
+            except KeyboardInterrupt:
+                self._end("interrupted")
+                raise
+            answer = self._question_answer
+            self._mode = "wait" if self.ended is None else self._mode
+            self._changed()
+            return None if answer is None else answer.value
+
+    def show(self, step: int, frame=None, action=None, state_text: str | None = None, info: dict | None = None):
+        """Put a step on the screen without waiting for an answer (the Pusher streamed at a person's pace): at most
+        `pace` steps a second (it sleeps for the rest), answers arriving meanwhile wait in `answers()`."""
+        if self.pace is not None:
+            now = time.monotonic()
+            if now < self._next_show:
+                time.sleep(self._next_show - now)
+            self._next_show = max(now, self._next_show) + 1.0 / self.pace
+        with self._cond:
+            self._check_page_closed()
+            if self.ended is not None:
+                return
+            self._put_frame(step, action, state_text, frame)
+            self._shown.append((step, time.monotonic()))
+            self._info = as_json(info or {})
+            self._question = None
+            self._mode = "stream"
+            self._changed()
+
+    def answers(self) -> list[Answer]:
+        """The streamed answers that came since the last call, oldest first."""
+        with self._cond:
+            self._check_page_closed()
+            answers, self._streamed = self._streamed, []
+            return answers
+
+    def credit(self, answer: Answer, delay: tuple[float, float] | None = None) -> dict[int, float]:
+        """{step: weight} of the steps an answer is about: Deep TAMER's window over what was on the screen."""
+        with self._cond:
+            shown = [(step, t) for step, t in self._shown if t < answer.time]
+        return credit_weights(answer.time, shown, delay or self.delay)
+
+    def end_day(self, why: str = "day done") -> None:
+        """The script ends the day itself (its steps or the budget are spent): the page says so."""
+        with self._cond:
+            self._end(why)
+
+    def message(self, text: str) -> None:
+        """A line under the progress, e.g. how the night goes."""
+        with self._cond:
+            self._message = str(text)
+            self._changed()
+
+    def show_outcome(self, text: str, image=None) -> None:
+        """After the night: the numbers (`text`, monospaced) and a picture (an RGB array or PNG bytes), if any."""
+        png = None
+        if image is not None:
+            png = bytes(image) if isinstance(image, bytes | bytearray) else png_bytes(image)
+        with self._cond:
+            if self.ended is None:
+                self._end("day done")
+            self._outcome = {"text": str(text), "image": png is not None}
+            self._outcome_png = png
+            self._mode = "outcome"
+            self._changed()
+
+    def close(self) -> None:
+        """Stop serving (the day ends as "closed" if it had not ended); the page shows that the run is over."""
+        with self._cond:
+            if self._closed:
+                return
+            if self.ended is None:
+                self._end("closed")
+            self._closed = True
+            self._changed()  # waiting long polls answer with the final state before the server stops
+        self._server.shutdown()
+        self._server.server_close()
+        self._thread.join(5)
+        with self._cond:
+            self._log.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is KeyboardInterrupt and self.ended is None:
+            with self._cond:
+                self._end("interrupted")
+        self.close()
+
+    # ---- inside (the caller holds self._cond)
+
+    def _changed(self) -> None:
+        self._version += 1
+        self._cond.notify_all()
+
+    def _elapsed(self) -> float:
+        return round(time.monotonic() - self._started, 3)
+
+    def _record(self, line: dict) -> None:
+        if self._log.closed:
+            return
+        now = datetime.now(UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+        self._log.write(json.dumps({"time": now, "t": self._elapsed(), **line}) + "\n")
+        self._log.flush()
+
+    def _end(self, why: str) -> None:
+        if self.ended is not None:
+            return
+        self.ended = why
+        self._mode = "ended"
+        self._record({"event": "end", "why": why, "step": self._step, "answers": sum(self._counts.values())})
+        self._changed()
+
+    def _check_page_closed(self) -> None:
+        """The page said goodbye (closed or reloaded) and has not come back within close_grace: it was closed."""
+        if self._bye_at is not None and time.monotonic() - self._bye_at > self.close_grace:
+            if self._owner_seen <= self._bye_at:
+                self._end("page closed")
+            self._bye_at = None
+
+    def _put_frame(self, step, action, state_text, frame) -> None:
+        self._step = step
+        self._frame_seq += 1
+        if frame is not None:
+            frame = np.asarray(frame, dtype=np.uint8)
+            digest = hashlib.sha256(frame.tobytes()).hexdigest()[:16]
+        else:
+            digest = hashlib.sha256((state_text or "").encode()).hexdigest()[:16]
+        self._frame = frame
+        self._frame_png = None
+        self._state_text = state_text
+        self._frames.append((self._frame_seq, step, as_json(action), digest, state_text))
+
+    def _frame_record(self, seq: int | None):
+        """(seq, step, action, sha256, state_text) of frame `seq` if still known, else of the newest."""
+        for record in reversed(self._frames):
+            if not seq or record[0] <= seq:
+                return record
+        return self._frames[0] if self._frames else (None, self._step, None, None, None)
+
+    # ---- the routes' logic (called by the handler threads)
+
+    def _state(self, role: str) -> dict:
+        return {
+            "version": self._version,
+            "mode": "closed" if self._closed else self._mode,
+            "role": role,
+            "task": self.task,
+            "participant": self.participant,
+            "step": self._step,
+            "answers": sum(self._counts.values()),
+            "yes": self._counts["yes"],
+            "no": self._counts["no"],
+            "none": self._counts["none"],
+            "budget": self.budget,
+            "elapsed": self._elapsed(),
+            "question": self._question,
+            "frame_seq": self._frame_seq,
+            "has_frame": self._frame is not None,
+            "state_text": self._state_text,
+            "info": self._info,
+            "message": self._message,
+            "ended": self.ended,
+            "outcome": self._outcome,
+            "delay": self.delay,
+            "pace": self.pace,
+        }
+
+    def _wait_state(self, since: int | None, role: str) -> dict:
+        with self._cond:
+            if since is not None:
+                self._cond.wait_for(lambda: self._version != since or self._closed, LONG_POLL_S)
+            return self._state(role)
+
+    def _png(self, outcome: bool) -> tuple[int | None, bytes | None]:
+        with self._cond:
+            if outcome:
+                return None, self._outcome_png
+            if self._frame is None:
+                return None, None
+            if self._frame_png is None or self._frame_png[0] != self._frame_seq:
+                self._frame_png = (self._frame_seq, png_bytes(self._frame))
+            return self._frame_png
+
+    def _take_answer(self, body: dict) -> tuple[int, dict]:
+        """A POSTed answer: (HTTP status, reply). A nonce seen before is a retry, and taken once only."""
+        nonce, label, question = body.get("nonce"), body.get("answer"), body.get("question")
+        seq, waited_ms = body.get("seq"), body.get("waited_ms", 0)
+        if not (isinstance(nonce, str) and NONCE.fullmatch(nonce)) or label not in LABELS:
+            return 400, {"error": "an answer needs a nonce and one of yes, no, none"}
+        if question is not None and not isinstance(question, int) or seq is not None and not isinstance(seq, int):
+            return 400, {"error": "question and seq are integers"}
+        if not isinstance(waited_ms, int | float) or not 0 <= waited_ms < 3.6e6:
+            waited_ms = 0
+        with self._cond:
+            if nonce in self._nonces:
+                return 200, {"taken": False, "why": "already taken"}
+            if self.ended is not None:
+                return 409, {"taken": False, "why": "the day is over"}
+            if question is None and self._mode != "stream":
+                return 409, {"taken": False, "why": "the agent is not streaming now"}
+            if question is not None and (
+                self._question is None or self._question["id"] != question or self._question["answered"]
+            ):
+                return 409, {"taken": False, "why": "that question is not open"}
+            self._nonces.add(nonce)
+            arrived = time.monotonic()
+            given = max(arrived - waited_ms / 1000.0, self._started)
+            if question is not None:
+                frame = self._frame_record(self._question["frame_seq"])
+                step = self._question["step"]
+            else:
+                frame = self._frame_record(seq)
+                step = frame[1]
+            answer = Answer(LABELS[label], label, given, step, self._step, question)
+            self._counts[label] += 1
+            record = {"event": "answer", "participant": self.participant, "mode": "ask" if question else "stream"}
+            record |= {"question": question, "step": step, "step_at_arrival": self._step, "action": frame[2]}
+            record |= {"answer": label, "value": answer.value, "given_s": round(given - self._started, 3)}
+            record |= {"frame": {"seq": frame[0], "sha256": frame[3]}}
+            if frame[4] is not None:
+                record["state_text"] = frame[4]
+            self._record(record)
+            if question is not None:
+                self._question["answered"] = label
+                self._question_answer = answer
+            else:
+                self._streamed.append(answer)
+            self._changed()
+            return 200, {"taken": True}
+
+    def _session(self, cookie_header: str | None, make: bool) -> tuple[str | None, str | None]:
+        """(the request's session, a new session id to set as a cookie) for one request."""
+        session = None
+        if cookie_header:
+            try:
+                morsel = http.cookies.SimpleCookie(cookie_header).get(self.cookie)
+            except http.cookies.CookieError:
+                morsel = None
+            session = morsel.value if morsel is not None else None
+        with self._cond:
+            if session in self._sessions:
+                return session, None
+            if not make:
+                return None, None
+            session = secrets.token_urlsafe(18)
+            self._sessions.add(session)
+            if self._owner is None:
+                self._owner = session
+            return session, session
+
+    def _role(self, session: str | None) -> str:
+        with self._cond:
+            if session is not None and session == self._owner:
+                self._owner_seen = time.monotonic()
+                return "teacher"
+            return "watcher"
+
+
+class _Server(ThreadingHTTPServer):
+    daemon_threads = True  # a waiting long poll never holds up the process's exit
+    block_on_close = False
+
+    def handle_error(self, request, client_address):  # a browser that went away mid-reply is no error of ours
+        pass
+
+
+class _Server6(_Server):
+    address_family = socket.AF_INET6
+
+
+class _Handler(BaseHTTPRequestHandler):
+    teacher: BrowserTeacher
+    server_version = "inform"
+    sys_version = ""
+    timeout = 60  # a silent client does not hold a thread for ever
+
+    def log_message(self, format, *args):  # the script's terminal stays the script's
+        pass
+
+    def do_GET(self):
+        self.route("GET")
+
+    def do_POST(self):
+        self.route("POST")
+
+    def route(self, method: str):
+        path, _, query = self.path.partition("?")  # as sent: no parser's idea of a host or of dots
+        query = parse_qs(query.partition("#")[0], max_num_fields=8)
+        token = query.get("token", [""])[0]
+        if not secrets.compare_digest(token.encode(), self.teacher.token.encode()):
+            return self.reply(403, b"403: this address needs the token the script printed\n", "text/plain")
+        routes = {
+            "/": ("GET", self.page),
+            "/state": ("GET", self.state),
+            "/frame.png": ("GET", self.frame),
+            "/answer": ("POST", self.answer),
+            "/end": ("POST", self.end),
+            "/bye": ("POST", self.bye),
+        }
+        if path not in routes:
+            return self.reply(404, b"404: not a page of this run\n", "text/plain")
+        allowed, handle = routes[path]
+        if method != allowed:
+            return self.reply(405, b"405\n", "text/plain", {"Allow": allowed})
+        session, new = self.teacher._session(self.headers.get("Cookie"), make=path == "/")
+        role = self.teacher._role(session)
+        handle(query, role, new)
+
+    def reply(self, status: int, body: bytes, content_type: str, headers: dict | None = None):
+        try:
+            self.send_response(status)
+            self.send_header("Content-Type", content_type)
+            self.send_header("Content-Length", str(len(body)))
+            self.send_header("Cache-Control", "no-store")
+            self.send_header("X-Content-Type-Options", "nosniff")
+            self.send_header("Referrer-Policy", "no-referrer")
+            self.send_header("X-Frame-Options", "DENY")
+            for name, value in (headers or {}).items():
+                self.send_header(name, value)
+            self.end_headers()
+            self.wfile.write(body)
+        except (BrokenPipeError, ConnectionResetError):
+            pass
+
+    def reply_json(self, status: int, value: dict):
+        self.reply(status, json.dumps(value).encode(), "application/json")
+
+    def body(self) -> dict | None:
+        try:
+            length = int(self.headers.get("Content-Length", ""))
+        except ValueError:
+            return None
+        if not 0 <= length <= MAX_BODY:
+            return None
+        try:
+            value = json.loads(self.rfile.read(length) or b"{}")
+        except (ValueError, UnicodeDecodeError):
+            return None
+        return value if isinstance(value, dict) else None
+
+    def page(self, query, role, new_session):
+        headers = {"Content-Security-Policy": CSP}
+        if new_session:
+            headers["Set-Cookie"] = f"{self.teacher.cookie}={new_session}; Path=/; HttpOnly; SameSite=Strict"
+        body = PAGE.replace("__RUN_ID__", self.teacher.run_id).encode()
+        self.reply(200, body, "text/html; charset=utf-8", headers)
+
+    def state(self, query, role, new_session):
+        since = query.get("since", [""])[0]
+        since = int(since) if since.lstrip("-").isdigit() and len(since) < 12 else None
+        self.reply_json(200, self.teacher._wait_state(since, role))
+
+    def frame(self, query, role, new_session):
+        seq, png = self.teacher._png(outcome=query.get("outcome", [""])[0] == "1")
+        if png is None:
+            return self.reply(404, b"404: no frame yet\n", "text/plain")
+        self.reply(200, png, "image/png", {"X-Frame-Seq": str(seq or 0)})
+
+    def answer(self, query, role, new_session):
+        body = self.body()
+        if body is None:
+            return self.reply_json(400, {"error": "the body must be a JSON object of at most 4096 bytes"})
+        if role != "teacher":
+            return self.reply_json(403, {"error": "read-only: another page teaches this run"})
+        self.reply_json(*self.teacher._take_answer(body))
+
+    def end(self, query, role, new_session):
+        if role != "teacher":
+            return self.reply_json(403, {"error": "read-only: another page teaches this run"})
+        with self.teacher._cond:
+            self.teacher._end("end of day")
+        self.reply_json(200, {"ended": self.teacher.ended})
+
+    def bye(self, query, role, new_session):
+        if role == "teacher":
+            with self.teacher._cond:
+                self.teacher._bye_at = time.monotonic()
+        self.reply(204, b"", "text/plain")
+
+
+CSP = (
+    "default-src 'none'; script-src 'unsafe-inline'; style-src 'unsafe-inline'; img-src blob:; connect-src 'self'; "
+    "base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
+)
+
+PAGE = r"""<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><title>INFORM: teach the agent</title>
+<meta name="viewport" content="width=device-width, initial-scale=1"><link rel="icon" href="data:,">
+<style>
+body{font-family:system-ui,sans-serif;margin:1.2rem auto;max-width:54rem;padding:0 1rem;color:#1d1d1d}
+h1{font-size:1.35rem;margin:0 0 .4rem} h2{font-size:1.1rem;margin:.4rem 0}
+#progress{font-variant-numeric:tabular-nums;color:#333;background:#f1f3f5;padding:.35rem .6rem;border-radius:5px}
+#message{color:#555;margin:.3rem 0;min-height:1.2em}
+.banner{padding:.45rem .7rem;border-radius:5px;margin:.4rem 0}
+.watch{background:#fff3cd} .offline{background:#f8d7da} .over{background:#e7f1ff}
+#question{font-size:1.2rem;margin:.5rem 0;min-height:1.5em}
+#view{display:flex;gap:1.2rem;align-items:flex-start;flex-wrap:wrap}
+pre{font-size:22px;line-height:1.12;background:#f6f8fa;padding:.6rem .9rem;border-radius:6px;margin:0}
+#outcome-text{font-size:15px;line-height:1.3}
+.agent{color:#c62828;font-weight:bold} .goal{color:#2e7d32;font-weight:bold}
+.move{color:#fff;background:#c62828;font-weight:bold}
+img{max-width:100%;border-radius:6px}
+#info{color:#444;margin:.5rem 0;font-variant-numeric:tabular-nums}
+button{font-size:1.05rem;padding:.55rem 1.1rem;margin:.3rem .3rem .3rem 0;border-radius:6px;border:1px solid #777;
+  background:#fff;cursor:pointer}
+button.yes{background:#e8f5e9;border-color:#2e7d32} button.no{background:#ffebee;border-color:#c62828}
+button:disabled{opacity:.4;cursor:default} #end{margin-left:1.2rem}
+kbd{border:1px solid #aaa;border-radius:3px;padding:0 .25rem;font-size:.85em;background:#fafafa}
+#hint{color:#555;font-size:.95rem}
+</style></head>
+<body>
+<h1>INFORM: teach the agent</h1>
+<div id="progress">connecting…</div>
+<div id="message"></div>
+<div id="banner" hidden></div>
+<div id="day">
+<div id="question"></div>
+<div id="view"><pre id="maze" hidden></pre><img id="frame" alt="the agent" hidden></div>
+<div id="info"></div>
+<div id="buttons">
+<button id="yes" class="yes" disabled>Yes <kbd>y</kbd></button>
+<button id="no" class="no" disabled>No <kbd>n</kbd></button>
+<button id="none" disabled>No answer <kbd>space</kbd></button>
+<button id="end" disabled>End the day</button>
+</div>
+<div id="hint"></div>
+</div>
+<div id="outcome" hidden><h2>What came of it</h2><pre id="outcome-text"></pre>
+<img id="outcome-img" alt="the outcome" hidden></div>
+<script>
+"use strict";
+const TOKEN = new URLSearchParams(location.search).get("token") || "";
+const QUEUE = "inform_pending___RUN_ID__";  // answers the server has not confirmed yet: they survive a reload
+const $ = (id) => document.getElementById(id);
+let state = null, receivedAt = 0, shownSeq = 0, offline = false, endArmed = 0, gone = false;
+
+function url(path, extra) { return path + "?" + new URLSearchParams({token: TOKEN, ...(extra || {})}); }
+function sleep(ms) { return new Promise((r) => setTimeout(r, ms)); }
+function pending() { try { return JSON.parse(localStorage.getItem(QUEUE) || "[]"); } catch (e) { return []; } }
+function setPending(list) { localStorage.setItem(QUEUE, JSON.stringify(list)); }
+function clock(s) { s = Math.max(0, Math.floor(s)); return Math.floor(s / 60) + ":" + String(s % 60).padStart(2, "0"); }
+function nonce() {
+  const bytes = new Uint8Array(16);
+  crypto.getRandomValues(bytes);
+  return Array.from(bytes, (b) => b.toString(16).padStart(2, "0")).join("");
+}
+
+function drawMaze(pre, text) {  // a maze's rows (the lines that start with |): the agent, moves and goal in colour
+  pre.textContent = "";
+  for (const line of text.split(/(?<=\n)/)) {
+    if (!line.startsWith("|")) { pre.appendChild(document.createTextNode(line)); continue; }
+    for (const c of line) {
+      const cls = c === "A" ? "agent" : c === "G" ? "goal" : "^v<>".includes(c) ? "move" : null;
+      if (!cls) { pre.appendChild(document.createTextNode(c)); continue; }
+      const span = document.createElement("span");
+      span.className = cls;
+      span.textContent = c;
+      pre.appendChild(span);
+    }
+  }
+}
+
+function openQuestion() {  // what the person may answer now: a question's id, "stream", or null
+  const s = state;
+  if (!s || s.role !== "teacher" || s.ended || gone) return null;
+  if (s.mode === "stream") return "stream";
+  if (s.mode !== "ask" || !s.question || s.question.answered) return null;
+  if (pending().some((a) => a.question === s.question.id)) return null;
+  if (s.has_frame && shownSeq < s.question.frame_seq) return null;  // its frame is not on the screen yet
+  return s.question.id;
+}
+
+function answer(label) {
+  const q = openQuestion();
+  if (q === null) return;
+  const list = pending();
+  list.push({nonce: nonce(), answer: label, question: q === "stream" ? null : q, seq: shownSeq, pressed: Date.now()});
+  setPending(list);
+  render();
+  flush();
+}
+
+let flushing = false;
+async function flush() {  // send the kept answers, oldest first, until the server has each
+  if (flushing) return;
+  flushing = true;
+  try {
+    for (let list = pending(); list.length; list = pending()) {
+      const a = list[0];
+      const waited = Math.max(0, Date.now() - a.pressed);
+      const body = JSON.stringify({...a, pressed: undefined, waited_ms: waited});
+      let r;
+      try {
+        r = await fetch(url("/answer"), {method: "POST", headers: {"Content-Type": "application/json"}, body});
+      } catch (e) { setOffline(true); setTimeout(flush, 1000); return; }
+      if (r.status >= 500) { setTimeout(flush, 1000); return; }
+      setPending(pending().filter((x) => x.nonce !== a.nonce));  // taken, a retry of one taken, or refused: done
+    }
+  } finally { flushing = false; render(); }
+}
+
+function setOffline(on) { if (offline !== on) { offline = on; render(); } }
+
+function describe(info) {
+  const value = (v) => Array.isArray(v) ? v.map((x) => typeof x === "number" ? x.toFixed(2) : x).join(", ") : v;
+  return Object.entries(info || {}).map(([k, v]) => `${k}: ${value(v)}`).join(" · ");
+}
+
+function render() {
+  const s = state;
+  if (!s) return;
+  const elapsed = s.elapsed + (gone ? 0 : (Date.now() - receivedAt) / 1000);
+  const budget = s.budget == null ? "no budget" : `budget ${s.yes} of ${s.budget} yes`;
+  const who = s.participant ? ` · participant ${s.participant}` : "";
+  const counts = `answers ${s.answers} (yes ${s.yes}, no ${s.no}, no answer ${s.none})`;
+  $("progress").textContent = `${counts} · step ${s.step ?? "–"} · ${budget} · time ${clock(elapsed)}${who}`;
+  $("message").textContent = s.message || "";
+  let note = null, cls = "";
+  if (gone) { note = "The run has finished: this page is no longer served."; cls = "over"; }
+  else if (offline) { note = "Reconnecting… your answers are kept, and sent once it is back."; cls = "offline"; }
+  else if (s.role !== "teacher") { note = "You are watching read-only: another page teaches this run."; cls = "watch"; }
+  const banner = $("banner");
+  banner.hidden = !note;
+  banner.className = "banner " + cls;
+  banner.textContent = note || "";
+  const maze = $("maze"), text = s.state_text;
+  maze.hidden = !text;
+  if (text && maze.dataset.text !== text) { drawMaze(maze, text); maze.dataset.text = text; }
+  if (text && !s.has_frame) shownSeq = s.frame_seq;
+  $("frame").hidden = !s.has_frame;
+  const q = openQuestion();
+  const asked = s.task === "maze" ? "is this a good move?" : "is the arm doing well?";
+  const taken = "Answer taken: the agent learns, and its next move comes next.";
+  const mine = s.role === "teacher" && s.question && (s.question.answered || pending().length);
+  let line = "The agent is getting ready…";
+  if (s.ended && s.mode === "outcome") line = "The day is over, and the night has run.";
+  else if (s.ended) line = `The day is over (${s.ended}). The agent sleeps on it now…`;
+  else if (s.mode === "stream") line = "Answer whenever the arm does well (y) or badly (n).";
+  else if (s.mode === "ask" && q !== null) line = `Step ${s.question.step}: ${asked}`;
+  else if (s.mode === "ask" && mine) line = taken;
+  else if (s.mode === "ask" && s.question) line = `Step ${s.question.step}: ${asked} (the person is thinking)`;
+  else if (s.question) line = taken;
+  $("question").textContent = line;
+  $("info").textContent = describe(s.mode === "ask" && s.question ? s.question.info : s.info);
+  for (const id of ["yes", "no", "none"]) $(id).disabled = q === null;
+  $("end").disabled = !(s.role === "teacher" && !s.ended && !gone);
+  $("end").textContent = endArmed > Date.now() ? "Click again to end the day" : "End the day";
+  const window = `Your answer applies to what happened ${s.delay[0]}–${s.delay[1]} s before it.`;
+  $("hint").textContent = s.mode === "stream" ? window : "";
+  const day = $("day").dataset;  // for a test (or a study's screen recorder) to read
+  day.question = s.question && s.mode === "ask" ? s.question.id : "";
+  day.open = q === null ? "0" : "1";
+  day.mode = gone ? "closed" : s.mode;
+  day.answers = s.answers;
+  if (s.outcome) {
+    $("outcome").hidden = false;
+    if ($("outcome-text").dataset.text !== s.outcome.text) {
+      drawMaze($("outcome-text"), s.outcome.text);
+      $("outcome-text").dataset.text = s.outcome.text;
+    }
+    if (s.outcome.image && $("outcome-img").hidden) loadImage($("outcome-img"), url("/frame.png", {outcome: 1}));
+  }
+}
+
+async function loadImage(img, address) {
+  const r = await fetch(address, {cache: "no-store"});
+  if (!r.ok) return null;
+  const old = img.src;
+  img.src = URL.createObjectURL(await r.blob());
+  img.hidden = false;
+  if (old.startsWith("blob:")) URL.revokeObjectURL(old);
+  return Number(r.headers.get("X-Frame-Seq"));
+}
+
+async function frames() {  // the newest frame, a few a second at most
+  while (!gone) {
+    if (state && state.has_frame && state.frame_seq > shownSeq) {
+      const started = Date.now();
+      try {
+        const seq = await loadImage($("frame"), url("/frame.png", {seq: state.frame_seq}));
+        if (seq) { shownSeq = seq; render(); }
+      } catch (e) {}
+      await sleep(Math.max(0, 200 - (Date.now() - started)));
+    } else await sleep(50);
+  }
+}
+
+async function poll() {  // the state, long-polled: each reply comes when something changed (or after 10 s)
+  let version = null;
+  while (true) {
+    let r;
+    try {
+      r = await fetch(url("/state", version === null ? {} : {since: version}), {cache: "no-store"});
+    } catch (e) {
+      if (state && state.mode === "outcome") { gone = true; render(); return; }
+      setOffline(true);
+      await sleep(1000);
+      continue;
+    }
+    if (r.status === 403) { $("progress").textContent = "Not this run's address: use the one printed."; return; }
+    if (!r.ok) { setOffline(true); await sleep(1000); continue; }
+    state = await r.json();
+    receivedAt = Date.now();
+    version = state.version;
+    setOffline(false);
+    gone = state.mode === "closed";
+    render();
+    if (gone) return;
+    if (pending().length) flush();
+    if (state.mode === "stream") await sleep(150);  // a streamed day changes every step: a few updates a second
+  }
+}
+
+for (const id of ["yes", "no", "none"]) $(id).addEventListener("click", (e) => { e.currentTarget.blur(); answer(id); });
+$("end").addEventListener("click", async (e) => {
+  e.currentTarget.blur();
+  if (endArmed < Date.now()) { endArmed = Date.now() + 4000; render(); setTimeout(render, 4100); return; }
+  endArmed = 0;
+  try { await fetch(url("/end"), {method: "POST"}); } catch (err) { setOffline(true); }
+});
+document.addEventListener("keydown", (e) => {
+  if (e.repeat || e.ctrlKey || e.metaKey || e.altKey) return;
+  const label = {y: "yes", Y: "yes", n: "no", N: "no", " ": "none"}[e.key];
+  if (label) { e.preventDefault(); answer(label); }
+});
+window.addEventListener("pagehide", () => {  // closed or reloaded: the server waits a few seconds to see which
+  if (state && state.role === "teacher" && !state.ended) navigator.sendBeacon(url("/bye"));
+});
+setInterval(render, 1000);  // the clock
+poll();
+frames();
+flush();
+</script>
+</body></html>
+"""

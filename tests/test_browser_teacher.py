@@ -1,0 +1,540 @@
+"""The teaching page (browser_teacher.py): the server without a browser (the token, the routes, answers.jsonl, one
+person per run, a reload or a retry loses nothing, the end of the day, Ctrl-C, no thread left behind), then a real
+browser: Playwright driving Debian's chromium headless, where a scripted person reads the maze off the page and
+answers as the oracle would (y when the move is optimal under Q*, else n; space once), through a dropped connection
+and a reload; a watcher in a second session; the Pusher's stream with its credit window.
+
+The browser tests skip, saying why, without /usr/bin/chromium (apt-get install chromium) or the pinned playwright;
+INFORM_REQUIRE_BROWSER=1 makes them fail instead. INFORM_WRITE_SCREENSHOT=1 saves the page's screenshot to
+docs/figures/browser_teacher.png (the README's), else it goes to the test's temporary directory.
+"""
+
+import http.client
+import io
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+import urllib.error
+import urllib.parse
+import urllib.request
+from http.cookiejar import CookieJar
+
+import numpy as np
+import pytest
+from conftest import REPO, default_signals
+
+import gridworld_env
+from browser_teacher import BrowserTeacher, credit_weights, png_bytes
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = ["--no-sandbox", "--headless", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync", "--no-first-run"]  # fmt: skip
+SCREENSHOT = os.path.join(REPO, "docs", "figures", "browser_teacher.png")
+WAIT_S = 10.0  # the bound on every wait for a condition
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# helpers: a browser session as urllib sees it, a training loop in a thread, the answers file
+
+
+class Session:
+    """One browser session without a browser: its own cookies (the page's session cookie among them)."""
+
+    def __init__(self, teacher: BrowserTeacher, token: str | None = None):
+        self.base = f"http://127.0.0.1:{teacher.port}"
+        self.token = teacher.token if token is None else token
+        self.opener = urllib.request.build_opener(urllib.request.HTTPCookieProcessor(CookieJar()))
+
+    def request(self, method: str, path: str, body: dict | None = None, **query) -> tuple[int, bytes, dict]:
+        params = {"token": self.token, **query} if self.token else query
+        address = self.base + path + ("?" + urllib.parse.urlencode(params) if params else "")
+        data = None if body is None else json.dumps(body).encode()
+        req = urllib.request.Request(address, data=data, method=method, headers={"Content-Type": "application/json"})
+        try:
+            with self.opener.open(req, timeout=WAIT_S + 5) as reply:
+                return reply.status, reply.read(), dict(reply.headers)
+        except urllib.error.HTTPError as error:
+            return error.code, error.read(), dict(error.headers)
+
+    def load(self) -> int:
+        return self.request("GET", "/")[0]
+
+    def state(self, since: int | None = None) -> dict:
+        status, body, _ = self.request("GET", "/state", **({} if since is None else {"since": since}))
+        assert status == 200, body
+        return json.loads(body)
+
+    def open_question(self, number: int) -> dict:
+        """Wait (long polls, bounded) until question `number` is open and unanswered."""
+        deadline = time.monotonic() + WAIT_S
+        state = self.state()
+        while not (state["mode"] == "ask" and state["question"]["id"] == number and not state["question"]["answered"]):
+            assert time.monotonic() < deadline, f"question {number} never opened: {state}"
+            state = self.state(since=state["version"])
+        return state
+
+    def answer(self, label: str, question: int | None, nonce: str, seq: int | None = None) -> tuple[int, dict]:
+        status, body, _ = self.request(
+            "POST", "/answer", {"nonce": nonce, "answer": label, "question": question, "seq": seq}
+        )
+        return status, json.loads(body) if body.startswith(b"{") else {"text": body.decode()}
+
+
+class Loop:
+    """A training loop's side in a thread: `ask` for each move of a walk in the maze, the answers kept."""
+
+    def __init__(self, teacher: BrowserTeacher, moves: int, seed: int = 0, frames: bool = False):
+        self.teacher, self.moves, self.seed, self.frames = teacher, moves, seed, frames
+        self.q = gridworld_env.optimal_q()
+        self.asked = []  # (step, cell, action, drawing)
+        self.returned = []
+        self.error = None
+        self.thread = threading.Thread(target=self.run, daemon=True)
+        self.thread.start()
+
+    def run(self):
+        try:
+            env = gridworld_env.KnoxStoneMazeEnv(render_mode="rgb_array")
+            rng = np.random.default_rng(self.seed)
+            _, info = env.reset(seed=self.seed)
+            cell = info["cell"]
+            for step in range(1, self.moves + 1):
+                # the agent's proposal: the best move half the time, a random one otherwise, so both answers come
+                action = int(self.q[cell].argmax()) if rng.random() < 0.5 else int(rng.integers(4))
+                drawing = gridworld_env.draw_maze(agent=cell, arrows={cell: action})
+                self.asked.append((step, cell, action, drawing))
+                frame = env.render() if self.frames else None
+                info = {"move": gridworld_env.ACTION_NAMES[action]}
+                self.returned.append(self.teacher.ask(step, action, state_text=drawing, frame=frame, info=info))
+                if self.teacher.ended:
+                    return
+                _, _, terminated, _, info = env.step(action)
+                cell = info["cell"]
+                if terminated:
+                    _, info = env.reset()
+                    cell = info["cell"]
+        except BaseException as error:  # the test reports it
+            self.error = error
+
+    def join(self):
+        self.thread.join(WAIT_S)
+        assert not self.thread.is_alive(), "the loop still waits in ask"
+        assert self.error is None, repr(self.error)
+
+    def optimal(self, step: int) -> bool:
+        _, cell, action, _ = self.asked[step - 1]
+        return bool(self.q[cell, action] >= self.q[cell].max() - 1e-9)
+
+
+def lines(teacher: BrowserTeacher, event: str = "answer") -> list[dict]:
+    with open(teacher.answers_path) as f:
+        return [row for row in map(json.loads, f) if row["event"] == event]
+
+
+def wait_until(condition, what: str, timeout: float = WAIT_S):
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, f"timed out waiting for {what}"
+        time.sleep(0.01)
+
+
+@pytest.fixture
+def teacher(tmp_path):
+    with BrowserTeacher(str(tmp_path / "run"), participant="P07", budget=5, quiet=True, close_grace=0.3) as page:
+        yield page
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# the server, without a browser
+
+
+def test_a_request_without_the_token_is_refused(teacher):
+    loop = Loop(teacher, moves=1)
+    for token in ("", "wrong", teacher.token[:-1]):
+        anyone = Session(teacher, token=token)
+        for method, path in [("GET", "/"), ("GET", "/state"), ("GET", "/frame.png"), ("POST", "/end"),
+                             ("POST", "/bye"), ("GET", "/nowhere"), ("GET", "/../etc/passwd")]:  # fmt: skip
+            status, body, _ = anyone.request(method, path, body={} if method == "POST" else None)
+            assert status == 403, (token, path)
+            assert b"token" in body and b"<html" not in body
+        assert anyone.answer("yes", 1, "n1")[0] == 403
+    assert teacher.ended is None and not lines(teacher)
+    person = Session(teacher)
+    assert person.load() == 200
+    person.open_question(1)
+    assert person.answer("yes", 1, "n1") == (200, {"taken": True})
+    loop.join()
+
+
+def test_only_its_own_routes_and_nothing_from_the_file_system(teacher):
+    person = Session(teacher)
+    assert person.load() == 200
+    for path in ["/index.html", "/answers.jsonl", "/run/answers.jsonl", "/favicon.ico", "/static/page.js",
+                 "//etc/passwd", "//x/state", "/state/", "/frame.png/..", "/../answers.jsonl",
+                 "/%2e%2e/%2e%2e/etc/passwd", "/..%2f..%2fetc%2fpasswd", "/state/../../../../etc/passwd", "/%00",
+                 "/./state"]:  # fmt: skip
+        # raw, as the client wrote it: http.client does not tidy a path
+        connection = http.client.HTTPConnection("127.0.0.1", teacher.port, timeout=WAIT_S)
+        connection.request("GET", f"{path}?token={teacher.token}")
+        reply = connection.getresponse()
+        body = reply.read()
+        connection.close()
+        assert reply.status == 404, path
+        assert b"root:" not in body and b'"event"' not in body
+    assert person.request("GET", "/answer")[0] == 405  # a route of its own, the wrong method
+    assert person.request("POST", "/state", body={})[0] == 405
+    assert person.request("GET", "/frame.png")[0] == 404  # no frame yet
+    status, body, headers = person.request("GET", "/")
+    assert status == 200 and b"End the day" in body and "default-src 'none'" in headers["Content-Security-Policy"]
+    assert headers["Referrer-Policy"] == "no-referrer"  # the token stays out of other sites' logs
+
+
+def test_answers_reach_the_loop_and_answers_jsonl(teacher):
+    loop = Loop(teacher, moves=3, frames=True)
+    person = Session(teacher)
+    person.load()
+    for number, label in enumerate(["yes", "no", "none"], start=1):
+        state = person.open_question(number)
+        status, png, headers = person.request("GET", "/frame.png", seq=state["question"]["frame_seq"])
+        assert status == 200 and png.startswith(b"\x89PNG") and int(headers["X-Frame-Seq"]) == state["frame_seq"]
+        assert state["state_text"] == loop.asked[number - 1][3] and state["role"] == "teacher"
+        assert person.answer(label, number, f"nonce-{number}") == (200, {"taken": True})
+        rows = lines(teacher)  # flushed at once: readable while the run goes on
+        assert len(rows) == number and rows[-1]["answer"] == label
+    loop.join()
+    assert loop.returned == [1.0, 0.0, None]
+    rows = lines(teacher)
+    assert [row["step"] for row in rows] == [1, 2, 3]
+    assert [row["action"] for row in rows] == [action for _, _, action, _ in loop.asked]
+    assert [row["state_text"] for row in rows] == [drawing for *_, drawing in loop.asked]
+    assert all(
+        row["participant"] == "P07" and row["mode"] == "ask" and len(row["frame"]["sha256"]) == 16 for row in rows
+    )
+    assert [row["frame"]["seq"] for row in rows] == [1, 2, 3]
+    assert {"time", "t", "given_s", "value"} <= set(rows[0])
+    start = lines(teacher, "start")
+    assert start[0]["participant"] == "P07" and start[0]["budget"] == 5 and start[0]["task"] == "maze"
+    state = person.state()
+    assert (state["answers"], state["yes"], state["no"], state["none"], state["budget"]) == (3, 1, 1, 1, 5)
+
+
+def test_a_second_session_watches_read_only(teacher):
+    loop = Loop(teacher, moves=1)
+    person, watcher, stranger = Session(teacher), Session(teacher), Session(teacher)
+    assert person.load() == 200 and watcher.load() == 200  # the first session to load the page teaches
+    assert person.state()["role"] == "teacher"
+    assert watcher.open_question(1)["role"] == "watcher" and stranger.state()["role"] == "watcher"
+    assert watcher.answer("yes", 1, "w1")[0] == 403
+    assert stranger.answer("yes", 1, "s1")[0] == 403  # no cookie at all
+    assert watcher.request("POST", "/end", body={})[0] == 403 and teacher.ended is None
+    assert not lines(teacher)
+    assert person.answer("no", 1, "p1") == (200, {"taken": True})
+    loop.join()
+    assert loop.returned == [0.0] and watcher.state()["answers"] == 1
+
+
+def test_a_reload_or_a_retried_answer_loses_nothing(teacher):
+    loop = Loop(teacher, moves=3)
+    person = Session(teacher)
+    person.load()
+    person.open_question(1)
+    assert person.answer("yes", 1, "a1") == (200, {"taken": True})
+    assert person.load() == 200  # the reload: the same session, still the teacher
+    state = person.open_question(2)
+    assert state["role"] == "teacher" and state["answers"] == 1 and state["yes"] == 1
+    assert person.answer("yes", 1, "a1") == (
+        200,
+        {"taken": False, "why": "already taken"},
+    )  # a retry after a lost reply
+    assert person.answer("no", 1, "late")[0] == 409  # an answer to a question no longer open
+    assert person.answer("no", 2, "a2") == (200, {"taken": True})
+    assert person.answer("no", 2, "a2")[1]["taken"] is False
+    state = person.open_question(3)
+    assert state["answers"] == 2 and state["no"] == 1
+    assert person.answer("yes", 3, "a3")[0] == 200
+    loop.join()
+    assert loop.returned == [1.0, 0.0, 1.0] and len(lines(teacher)) == 3
+    for bad in ({"nonce": "x", "answer": "maybe", "question": 1}, {"answer": "yes"}, {"nonce": "a b", "answer": "yes"}):
+        assert person.request("POST", "/answer", body=bad)[0] == 400
+    assert person.request("POST", "/answer", body={"nonce": "x" * 5000, "answer": "yes"})[0] == 400  # too long
+
+
+def test_the_day_ends_by_the_button_or_a_closed_page(tmp_path):
+    with BrowserTeacher(str(tmp_path / "a"), quiet=True) as page:
+        loop = Loop(page, moves=5)
+        person = Session(page)
+        person.load()
+        person.open_question(1)
+        assert person.request("POST", "/end", body={})[0] == 200
+        loop.join()
+        assert loop.returned == [None] and page.ended == "end of day"
+        assert page.ask(2, 0) is None  # no more questions once the day is over
+        assert person.answer("yes", 1, "after")[0] == 409
+    with BrowserTeacher(str(tmp_path / "b"), quiet=True, close_grace=0.3) as page:
+        loop = Loop(page, moves=5)
+        person = Session(page)
+        person.load()
+        person.open_question(1)
+        person.request("POST", "/bye", body={})  # a reload says goodbye too, then comes back in time
+        person.load()
+        person.answer("yes", 1, "b1")
+        person.open_question(2)
+        person.request("POST", "/bye", body={})  # closed: it does not come back
+        loop.join()
+        assert loop.returned == [1.0, None] and page.ended == "page closed"
+    assert [row["why"] for row in lines(page, "end")] == ["page closed"]
+
+
+def test_streamed_answers_carry_their_time_and_step_and_the_credit_window(teacher):
+    person = Session(teacher)
+    person.load()
+    frame = np.zeros((8, 8, 3), np.uint8)
+    for step in range(10):
+        teacher.show(step, frame=frame + step, action=[0.1 * step, -0.5])
+    state = person.state()
+    assert state["mode"] == "stream" and state["step"] == 9
+    before = time.monotonic()
+    status, reply = person.answer("yes", None, "s1", seq=4)  # the person saw step 3 (the 4th frame)
+    assert (status, reply) == (200, {"taken": True})
+    (answer,) = teacher.answers()
+    assert answer.value == 1.0 and answer.step == 3 and answer.step_at_arrival == 9 and answer.question is None
+    assert before - 1.0 < answer.time <= time.monotonic()
+    assert teacher.answers() == []  # each answer is handed over once
+    (row,) = lines(teacher)
+    assert row["mode"] == "stream" and row["step"] == 3 and row["frame"]["seq"] == 4
+    assert row["action"] == pytest.approx([0.3, -0.5])
+    assert person.answer("no", 1, "s2")[0] == 409  # no question is open while streaming
+    # the window: the steps shown 0.2-4 s before the answer, each weighed by its time on the screen
+    shown = [(step, 10.0 + step) for step in range(10)]  # one step a second, from t = 10
+    weights = credit_weights(18.5, shown, (0.2, 4.0))
+    assert sorted(weights) == [4, 5, 6, 7, 8]
+    assert weights[8] == pytest.approx(0.3 / 3.8) and weights[5] == pytest.approx(1 / 3.8)
+    assert weights[4] == pytest.approx(0.5 / 3.8) and sum(weights.values()) == pytest.approx(1.0)
+    assert credit_weights(10.1, shown) == {}  # too soon after the first step for anyone to have seen it
+    assert set(teacher.credit(answer, delay=(0.0, 4.0))) == set(range(10))  # all shown within 4 s before it
+    assert teacher.credit(answer) == {}  # it came < 0.2 s after them: quicker than a person, about none of them
+
+
+def test_png_frames_decode_to_the_array():
+    from PIL import Image
+
+    rgb = np.random.default_rng(0).integers(0, 256, (7, 5, 3), dtype=np.uint8)
+    assert np.array_equal(np.asarray(Image.open(io.BytesIO(png_bytes(rgb)))), rgb)
+
+
+CHILD = """
+import sys, time
+sys.path.insert(0, {repo!r})
+from browser_teacher import BrowserTeacher
+page = BrowserTeacher({run!r}, quiet=True)
+{body}
+"""
+
+
+def run_child(tmp_path, body: str, **popen) -> subprocess.Popen:
+    code = CHILD.format(repo=REPO, run=str(tmp_path / "run"), body=body)
+    return subprocess.Popen(
+        [sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, preexec_fn=default_signals, **popen
+    )
+
+
+def test_no_thread_holds_up_the_exit(tmp_path):
+    """A script that never calls close(), with a long poll waiting, exits at once."""
+    body = "import urllib.request, threading\n"
+    body += "poll = lambda: urllib.request.urlopen(page.url.replace('/?', '/state?') + '&since=0').read()\n"
+    body += "threading.Thread(target=poll, daemon=True).start()\ntime.sleep(0.2)\nprint('done', flush=True)"
+    child = run_child(tmp_path, body)
+    assert child.stdout.readline().strip() == "done"
+    done = time.monotonic()
+    assert child.wait(timeout=30) == 0
+    assert time.monotonic() - done < 5  # not the long poll's 10 s
+
+
+def test_ctrl_c_while_waiting_ends_the_day_as_interrupted(tmp_path):
+    body = "with page:\n    print('asking', flush=True)\n    page.ask(1, 0, state_text='|A> |')\n"
+    child = run_child(tmp_path, body, stderr=subprocess.PIPE)
+    assert child.stdout.readline().strip() == "asking"
+    child.send_signal(signal.SIGINT)
+    _, err = child.communicate(timeout=30)
+    assert child.returncode != 0 and "KeyboardInterrupt" in err  # raised again: the script stops as it always does
+    with open(tmp_path / "run" / "answers.jsonl") as f:
+        ends = [row for row in map(json.loads, f) if row["event"] == "end"]
+    assert [row["why"] for row in ends] == ["interrupted"]
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# a real browser: Playwright driving Debian's chromium, headless
+
+
+def browser_missing() -> str | None:
+    if not os.path.exists(CHROMIUM):
+        return f"no {CHROMIUM}: apt-get install chromium"
+    try:
+        import playwright.sync_api  # noqa: F401
+    except ImportError:
+        return "no playwright: pip install the pin in requirements.txt"
+    return None
+
+
+@pytest.fixture(scope="module")
+def browser():
+    why = browser_missing()
+    if why:
+        if os.environ.get("INFORM_REQUIRE_BROWSER") == "1":
+            pytest.fail(f"INFORM_REQUIRE_BROWSER=1 but {why}")
+        pytest.skip(why)
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as playwright:
+        chromium = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield chromium
+        chromium.close()
+
+
+def new_page(browser, url: str, width: int = 900):
+    context = browser.new_context(viewport={"width": width, "height": 720})
+    page = context.new_page()
+    page.set_default_timeout(WAIT_S * 1000)
+    page.goto(url)
+    return page
+
+
+def maze_on_the_page(text: str) -> tuple[int, int]:
+    """(cell, move) read off the drawing as a person reads it: where A stands, and its arrow."""
+    rows = text.split("\n")
+    for r in range(gridworld_env.ROWS):
+        for c in range(gridworld_env.COLS):
+            content = rows[1 + 2 * r][1 + 4 * c : 4 + 4 * c]
+            if content[1] == "A":
+                return gridworld_env.CELL_INDEX[(r, c)], gridworld_env.ARROWS.index(content[2])
+    raise AssertionError(f"no agent on the page:\n{text}")
+
+
+def wait_for_question(page, number: int):
+    page.wait_for_selector(f'#day[data-open="1"][data-question="{number}"]')
+
+
+def test_a_scripted_person_teaches_the_maze_through_the_page(browser, tmp_path):
+    """Twelve moves: y/n by key or button as the oracle would answer, one space, a dropped connection and a
+    reload in the middle, then "End the day"; nothing is lost and the loop gets each answer."""
+    q = gridworld_env.optimal_q()
+    with BrowserTeacher(str(tmp_path / "run"), participant="scripted", budget=10, quiet=True) as teacher:
+        loop = Loop(teacher, moves=100, seed=3, frames=True)
+        page = new_page(browser, teacher.url)
+        expected = []
+        for number in range(1, 13):
+            wait_for_question(page, number)
+            cell, move = maze_on_the_page(page.text_content("#maze"))
+            assert (cell, move) == loop.asked[number - 1][1:3]  # the page shows the move the loop proposes
+            good = q[cell, move] >= q[cell].max() - 1e-9
+            if number == 5:
+                page.keyboard.press(" ")
+                expected.append(None)
+                continue
+            expected.append(1.0 if good else 0.0)
+            if number == 7:  # the connection drops as the answer goes: the page keeps it and says so
+                page.route("**/answer?*", lambda route: route.abort())
+                page.keyboard.press("y" if good else "n")
+                page.wait_for_selector(".banner.offline")
+                assert teacher._question_answer is None  # it has not arrived
+                page.unroute("**/answer?*")
+                page.reload()  # ... and the reloaded page sends it
+            elif number in (3, 8):
+                page.click("#yes" if good else "#no")
+            else:
+                page.keyboard.press("y" if good else "n")
+            if number == 9:
+                wait_for_question(page, 10)
+                page.reload()  # a plain reload: the page resumes at the open question
+        wait_for_question(page, 13)
+        assert page.text_content("#progress").startswith("answers 12 (")
+        assert "participant scripted" in page.text_content("#progress")
+        screenshot = SCREENSHOT if os.environ.get("INFORM_WRITE_SCREENSHOT") == "1" else str(tmp_path / "page.png")
+        page.screenshot(path=screenshot, full_page=True)
+        page.click("#end")
+        page.wait_for_selector("#end:text('Click again')")
+        page.click("#end")
+        loop.join()
+        assert teacher.ended == "end of day"
+        page.wait_for_selector('#day[data-mode="ended"]')
+        path = gridworld_env.draw_maze(agent=gridworld_env.START, arrows={4: 2, 3: 2})
+        teacher.show_outcome("TAMER, greedy from S:\n" + path + "reaches G in 19 steps", image=np.full((4, 4, 3), 9))
+        page.wait_for_selector("#outcome-img:visible")
+        assert "reaches G in 19 steps" in page.text_content("#outcome-text")
+    page.wait_for_selector('#day[data-mode="closed"]')  # close(): the page says the run is over
+    assert loop.returned[:12] == expected and loop.returned[12] is None
+    rows = lines(teacher)
+    assert [row["step"] for row in rows] == list(range(1, 13))  # each answer once, none lost
+    assert [row["value"] for row in rows] == expected
+    assert all(row["participant"] == "scripted" and row["frame"]["seq"] == row["step"] for row in rows)
+    with open(screenshot, "rb") as f:
+        assert f.read(8) == b"\x89PNG\r\n\x1a\n"
+
+
+def test_keys_a_watcher_and_a_closed_page(browser, tmp_path):
+    with BrowserTeacher(str(tmp_path / "run"), quiet=True, close_grace=0.5) as teacher:
+        loop = Loop(teacher, moves=10)
+        person = new_page(browser, teacher.url)
+        wait_for_question(person, 1)
+        watcher = new_page(browser, teacher.url)  # another browser session
+        watcher.wait_for_selector('#day[data-question="1"]')
+        assert "read-only" in watcher.text_content("#banner") and watcher.is_disabled("#yes")
+        assert watcher.is_disabled("#end")
+        watcher.keyboard.press("y")
+        person.keyboard.press("n")
+        wait_for_question(person, 2)
+        person.keyboard.press("y")
+        wait_for_question(person, 3)
+        person.keyboard.press(" ")
+        wait_for_question(person, 4)
+        watcher.wait_for_selector('#day[data-answers="3"]')  # the watcher follows
+        # two presses before any reply can come: the second is about the same question, and counts not
+        person.evaluate(
+            "() => { for (const key of ['y', 'y']) document.dispatchEvent(new KeyboardEvent('keydown', {key})); }"
+        )
+        wait_for_question(person, 5)
+        assert loop.returned == [0.0, 1.0, None, 1.0]
+        person.close()  # closing the page ends the day
+        loop.join()
+        assert teacher.ended == "page closed" and loop.returned[-1] is None
+        watcher.wait_for_selector('#day[data-mode="ended"]')
+    assert [row["answer"] for row in lines(teacher)] == ["no", "yes", "none", "yes"]
+
+
+def test_the_pusher_streams_and_answers_arrive_with_their_step(browser, tmp_path):
+    """Frames at a person's pace (20 steps a second, shown at most 5 a second); a y while the arm moves comes back
+    with the step then on the screen, and the credit window spreads it over the steps before."""
+    with BrowserTeacher(str(tmp_path / "run"), task="pusher", pace=20.0, quiet=True) as teacher:
+        got = []
+
+        def simulation():
+            for step in range(400):
+                frame = np.zeros((48, 64, 3), np.uint8)
+                frame[:, (step % 64) :] = (30, 90, 200)
+                teacher.show(step, frame=frame, action=np.array([0.1, -0.2]))
+                got.extend(teacher.answers())
+                if teacher.ended or len(got) == 2:
+                    return
+
+        thread = threading.Thread(target=simulation, daemon=True)
+        thread.start()
+        page = new_page(browser, teacher.url)
+        page.wait_for_selector('#day[data-mode="stream"][data-open="1"]')
+        page.wait_for_selector("#frame:visible")
+        page.wait_for_function("() => document.querySelector('#frame').complete")
+        assert "is the arm" not in page.text_content("#question") and "0.2–4" in page.text_content("#hint")
+        page.keyboard.press("y")
+        page.wait_for_selector('#day[data-answers="1"]')
+        page.click("#no")
+        thread.join(WAIT_S)
+        assert not thread.is_alive()
+        first, second = got
+        assert (first.label, second.label) == ("yes", "no") and first.time <= second.time
+        assert first.step is not None and first.step <= first.step_at_arrival
+        assert teacher.credit(first, delay=(0.0, 4.0))  # the steps on the screen before it
+    rows = lines(teacher)
+    assert [row["mode"] for row in rows] == ["stream", "stream"] and rows[0]["step"] == first.step
