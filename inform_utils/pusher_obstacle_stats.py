@@ -36,6 +36,9 @@ class Args:
     fig5a: str | None = None
     """optional path of a PNG: the object's xy paths of TAMER and INFORM with and without the boxes (paper Fig. 5a),
     one panel per run directory (deterministic actions, from the run's obstacle_paths.npz)"""
+    per_seed_table: bool = False
+    """also print each run's final evaluation as a Markdown table (returns, how far below the oracle, distances,
+    successes, the authors' sampled test, the obstacle test, the buffer's successful episodes, wall time)"""
 
 
 def load_run(run_dir: str) -> dict:
@@ -62,6 +65,7 @@ def load_run(run_dir: str) -> dict:
         "success_distance": summary["args"]["success_distance"],
         "layout": summary["args"].get("obstacle_layout", "paper"),
         "min_box_distance_to_path": summary.get("obstacle/min_box_distance_to_path"),
+        "summary": summary,
     }
 
 
@@ -101,6 +105,40 @@ def sampling_spread(episodes: list[np.ndarray]) -> float:
     """TAMER's own sampling spread of a seed's mean distance: twice its standard error (2 sd / sqrt(episodes)),
     averaged over the seeds. A margin smaller than this could come from the sampled actions alone."""
     return float(np.mean([2 * e.std(ddof=1) / np.sqrt(e.size) if e.size > 1 else 0.0 for e in episodes]))
+
+
+def per_seed_table(runs: list[dict]) -> str:
+    """One row per run of its summary's final evaluation (deterministic actions), then the returns' mean and sd."""
+
+    def successes(values: list[float]) -> str:  # one fixed-start episode gives 0 or 1; random starts give a rate
+        whole = all(float(v).is_integer() for v in values)
+        return " / ".join(f"{v:.0f}" if whole else f"{v:.2f}" for v in values)
+
+    head = ["seed", "oracle return", "TAMER return", "INFORM return", "INFORM below the oracle", "TAMER below"]
+    head += ["final distance O / T / I", "success O / T / I", "authors' test (100 sampled), success T / I"]
+    head += ["obstacle distance T / I", "successful episodes in the buffer", "wall time"]
+    lines = ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
+    returns = {p: [] for p in ("oracle", "tamer", "inform")}
+    for run in runs:
+        s = run["summary"]
+        ret = {p: s[f"eval/{p}_return"] for p in returns}
+        for p in returns:
+            returns[p].append(ret[p])
+        below = [(ret["oracle"] - ret[p]) / abs(ret["oracle"]) for p in ("inform", "tamer")]
+        cells = [str(run["seed"]), *(f"{ret[p]:.2f}" for p in returns), *(f"{b:.1%}" for b in below)]
+        cells.append(" / ".join(f"{s[f'eval/{p}_final_distance']:.3f}" for p in returns))
+        cells.append(successes([s[f"eval/{p}_success_rate"] for p in returns]))
+        cells.append(
+            " / ".join(f"{s.get(f'eval/authors_test/{p}_success_rate', float('nan')):.2f}" for p in ("tamer", "inform"))
+        )
+        cells.append(" / ".join(f"{run['distances'][p].mean():.3f}" for p in ("tamer", "inform")))
+        cells.append(f"{s.get('sleep/success_episodes', 0):,} of {s.get('sleep/episodes', 0):,}")
+        cells.append(f"{s['wall_time_s']:,.0f} s" if "wall_time_s" in s else "-")
+        lines.append("| " + " | ".join(cells) + " |")
+    sd = (lambda v: float(np.std(v, ddof=1))) if len(runs) > 1 else (lambda v: 0.0)
+    means = [f"{np.mean(returns[p]):.2f} ± {sd(returns[p]):.2f}" for p in returns]
+    lines.append("| " + " | ".join(["mean ± std", *means, *[""] * (len(head) - 4)]) + " |")
+    return "\n".join(lines)
 
 
 def fig5a(runs: list[dict], path: str) -> None:
@@ -165,6 +203,8 @@ def main(args: Args) -> dict:
         f"  INFORM closer than TAMER on {out['inform_closer_seeds']} of {len(runs)} seeds "
         f"({out['inform_closer_seeds_beyond_noise']} beyond the sampling spread); layout {out['layouts']}"
     )
+    if args.per_seed_table:
+        print(per_seed_table(runs))
     if args.fig5a:
         fig5a(runs, args.fig5a)
         print(f"  Fig. 5a: {args.fig5a}")

@@ -301,3 +301,27 @@ def test_the_claim_rows_test_over_seeds_with_the_pooled_test_beside_it():
     pooled = ss_welch([0.2, 0.4, 0.3, 0.5], [0.1, 0.3, 0.4, 0.4])
     assert abs(out["welch_p_episodes"] - pooled) < 1e-12
     assert "paired_p_seed_means" not in pos.aggregate([run(1, [0.2, 0.4], [0.1, 0.3])])  # one seed: no test
+
+
+def test_the_per_seed_table_reads_each_runs_summary():
+    from inform_utils import pusher_obstacle_stats as pos
+
+    def run(seed, oracle, tamer, inform):
+        summary = {"wall_time_s": 3095.9, "sleep/success_episodes": 137, "sleep/episodes": 2000}
+        for p, (ret, dist, succ) in (("oracle", oracle), ("tamer", tamer), ("inform", inform)):
+            summary |= {f"eval/{p}_return": ret, f"eval/{p}_final_distance": dist, f"eval/{p}_success_rate": succ}
+            summary[f"eval/authors_test/{p}_success_rate"] = succ / 2
+        distances = {"tamer": np.array([0.1, 0.2]), "inform": np.array([0.3, 0.3])}
+        return {"seed": seed, "summary": summary, "distances": distances}
+
+    first = run(1, (-20.0, 0.05, 1.0), (-25.0, 0.09, 0.0), (-30.0, 0.2, 0.0))
+    text = pos.per_seed_table([first, run(2, (-20.0, 0.05, 1.0), (-21.0, 0.06, 0.5), (-22.0, 0.07, 0.9))])
+    rows = text.splitlines()
+    # seed 1: INFORM (-30) is 50.0% below the oracle (-20), TAMER (-25) 25.0%; obstacle means 0.150 and 0.300
+    assert rows[2] == (
+        "| 1 | -20.00 | -25.00 | -30.00 | 50.0% | 25.0% | 0.050 / 0.090 / 0.200 | 1 / 0 / 0 | 0.00 / 0.00 | "
+        "0.150 / 0.300 | 137 of 2,000 | 3,096 s |"
+    )
+    assert "| 1.00 / 0.50 / 0.90 |" in rows[3]  # a rate that is not 0 or 1: every success of the row as a rate
+    # the returns' mean and sd over the seeds: TAMER -23 ± sqrt(8) = 2.83, INFORM -26 ± sqrt(32) = 5.66
+    assert rows[4].startswith("| mean ± std | -20.00 ± 0.00 | -23.00 ± 2.83 | -26.00 ± 5.66 |")
