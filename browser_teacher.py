@@ -18,7 +18,8 @@ one watches read-only.
 Two ways to teach. `ask` waits for the person's answer about one move (the maze; the Pusher at the person's pace).
 `show` streams steps at `pace` steps a second without waiting, and `answers` hands over what the person answered
 since, each with the time it was given and the step on the screen; `credit` spreads an answer over the recent steps
-as Deep TAMER does (Warnell et al. 2018: a delay uniform over 0.2-4 s).
+as Deep TAMER does (Warnell et al. 2018: a delay uniform over 0.2-4 s), and `labels` turns answers into
+{step: label}.
 
     with BrowserTeacher(run_dir, task="maze", participant="P01") as page:
         h = page.ask(step, action, state_text=gridworld_env.draw_maze(agent=cell, arrows={cell: action}))
@@ -272,6 +273,16 @@ class BrowserTeacher:
         with self._cond:
             shown = [(step, t) for step, t in self._shown if t < answer.time]
         return credit_weights(answer.time, shown, delay or self.delay)
+
+    def labels(self, answers: list[Answer], delay: tuple[float, float] | None = None) -> dict[int, float]:
+        """{step: label} from streamed answers: each yes (1.0) or no (0.0) on every step of its credit window (a
+        weighted loss would use `credit`'s weights instead); no answer labels nothing; a later answer wins on a step
+        that two windows cover."""
+        labels: dict[int, float] = {}
+        for answer in answers:
+            if answer.value is not None:
+                labels.update(dict.fromkeys(self.credit(answer, delay), answer.value))
+        return labels
 
     def end_day(self, why: str = "day done") -> None:
         """The script ends the day itself (its steps or the budget are spent): the page says so."""

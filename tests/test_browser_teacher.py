@@ -9,6 +9,7 @@ INFORM_REQUIRE_BROWSER=1 makes them fail instead. INFORM_WRITE_SCREENSHOT=1 save
 docs/figures/browser_teacher.png (the README's), else it goes to the test's temporary directory.
 """
 
+import dataclasses
 import http.client
 import io
 import json
@@ -317,6 +318,10 @@ def test_streamed_answers_carry_their_time_and_step_and_the_credit_window(teache
     assert credit_weights(10.1, shown) == {}  # too soon after the first step for anyone to have seen it
     assert set(teacher.credit(answer, delay=(0.0, 4.0))) == set(range(10))  # all shown within 4 s before it
     assert teacher.credit(answer) == {}  # it came < 0.2 s after them: quicker than a person, about none of them
+    assert teacher.labels([answer], delay=(0.0, 4.0)) == dict.fromkeys(range(10), 1.0)
+    no = dataclasses.replace(answer, value=0.0, label="no", time=answer.time + 0.001)
+    skipped = dataclasses.replace(answer, value=None, label="none", time=answer.time + 0.002)
+    assert teacher.labels([answer, no, skipped], delay=(0.0, 4.0)) == dict.fromkeys(range(10), 0.0)  # the later wins
 
 
 def test_png_frames_decode_to_the_array():
