@@ -10,7 +10,8 @@ one watches read-only.
 
     GET  /            the page
     GET  /state       the page's state as JSON; ?since=VERSION waits (up to 10 s) until it changes (long polling)
-    GET  /frame.png   the newest frame as PNG (its sequence number in the X-Frame-Seq header); ?outcome=1: the night's
+    GET  /frame.png   the newest frame as PNG (its sequence number in the X-Frame-Seq header)
+    GET  /outcome     the picture of what came of the night (PNG, or an animated GIF)
     POST /answer      {"nonce", "answer": "yes" | "no" | "none", "question": id | null, "seq": frame, "waited_ms"}
     POST /end         the person ends the day
     POST /bye         the page is being closed or reloaded: the day ends unless it is back within `close_grace` s
@@ -34,6 +35,7 @@ the browser's storage until the server has it, so a reload or a dropped connecti
 
 import hashlib
 import http.cookies
+import io
 import json
 import os
 import re
@@ -114,6 +116,18 @@ def png_bytes(image: np.ndarray) -> bytes:
     return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", idat) + chunk(b"IEND", b"")
 
 
+def gif_bytes(frames, fps: float = 10.0) -> bytes:
+    """RGB uint8 frames as an animated GIF (Pillow, imported only here), looping."""
+    from PIL import Image
+
+    images = [Image.fromarray(np.ascontiguousarray(frame, dtype=np.uint8)) for frame in frames]
+    if not images:
+        raise ValueError("a video needs at least one frame")
+    out = io.BytesIO()
+    images[0].save(out, format="GIF", save_all=True, append_images=images[1:], duration=int(1000 / fps), loop=0)
+    return out.getvalue()
+
+
 def as_json(value):
     """Actions and info values (numpy scalars and arrays included) as plain JSON values."""
     if hasattr(value, "tolist"):
@@ -177,7 +191,7 @@ class BrowserTeacher:
         self._questions = 0
         self._mode = "wait"  # ask | wait | stream | ended | outcome | closed
         self._frame_seq = 0
-        self._frame: np.ndarray | bytes | None = None  # the newest frame, and its PNG once asked for
+        self._frame: np.ndarray | None = None  # the newest frame (RGB uint8), and its PNG once asked for
         self._frame_png: tuple[int, bytes] | None = None
         self._frames: deque = deque(maxlen=4096)  # (seq, step, action, sha256, state_text) of recent frames
         self._shown: deque = deque(maxlen=4096)  # (step, time) as `show` and `ask` put them on the screen
@@ -187,16 +201,16 @@ class BrowserTeacher:
         self._next_show = 0.0
         self._message = ""
         self._outcome: dict | None = None
-        self._outcome_png: bytes | None = None
+        self._outcome_image: tuple[bytes, str] | None = None  # (bytes, content type)
+        handler = type("Handler", (_Handler,), {"teacher": self})
+        server_class = _Server6 if ":" in host else _Server
+        self._server = server_class((host, port), handler)  # first: a port in use is an OSError before any file
+        self.host, self.port = host, self._server.server_address[1]
         os.makedirs(run_dir, exist_ok=True)
         self.answers_path = os.path.join(run_dir, "answers.jsonl")
         self._log = open(self.answers_path, "a", encoding="utf-8")
-        self._record({"event": "start", "task": task, "participant": participant, "budget": budget, "pace": pace})
-
-        handler = type("Handler", (_Handler,), {"teacher": self})
-        server_class = _Server6 if ":" in host else _Server
-        self._server = server_class((host, port), handler)
-        self.host, self.port = host, self._server.server_address[1]
+        start = {"event": "start", "task": task, "participant": participant, "budget": budget, "pace": pace}
+        self._record(start | {"delay": self.delay, "host": host, "port": self.port})
         shown_host = socket.gethostname() if host in ("", "0.0.0.0", "::") else host
         shown_host = f"[{shown_host}]" if ":" in shown_host else shown_host
         self.url = f"http://{shown_host}:{self.port}/?token={self.token}"
@@ -210,7 +224,7 @@ class BrowserTeacher:
     # ---- what a training loop calls
 
     def ask(self, step: int, action, state_text: str | None = None, frame=None, info: dict | None = None):
-        """Show the agent's proposed move (a maze drawn as text, and/or an RGB frame) and wait for the person: 1.0
+        """Show the agent's proposed move (a maze drawn as text, and/or an RGB uint8 frame) and wait for the person: 1.0
         (yes), 0.0 (no), or None: no answer, or the day ended (then `ended` says why). Ctrl-C (KeyboardInterrupt)
         while it waits ends the day as "interrupted" and is raised again, for the script to stop as it always does."""
         with self._cond:
@@ -295,16 +309,24 @@ class BrowserTeacher:
             self._message = str(text)
             self._changed()
 
-    def show_outcome(self, text: str, image=None) -> None:
-        """After the night: the numbers (`text`, monospaced) and a picture (an RGB array or PNG bytes), if any."""
-        png = None
-        if image is not None:
-            png = bytes(image) if isinstance(image, bytes | bytearray) else png_bytes(image)
+    def show_outcome(self, text: str, image=None, fps: float = 10.0) -> None:
+        """After the night: the numbers (`text`, monospaced; a maze's drawn paths in colour) and a picture, if any:
+        an RGB array, a list of them (a short video, shown as an animated GIF at `fps`), or PNG or GIF bytes."""
+        picture = None
+        if isinstance(image, bytes | bytearray):
+            kind = "image/gif" if image[:4] == b"GIF8" else "image/png" if image[:4] == b"\x89PNG" else None
+            if kind is None:
+                raise ValueError("image bytes must be a PNG or a GIF")
+            picture = (bytes(image), kind)
+        elif isinstance(image, list | tuple):
+            picture = (gif_bytes(image, fps), "image/gif")
+        elif image is not None:
+            picture = (png_bytes(image), "image/png")
         with self._cond:
             if self.ended is None:
                 self._end("day done")
-            self._outcome = {"text": str(text), "image": png is not None}
-            self._outcome_png = png
+            self._outcome = {"text": str(text), "image": picture is not None}
+            self._outcome_image = picture
             self._mode = "outcome"
             self._changed()
 
@@ -417,10 +439,12 @@ class BrowserTeacher:
                 self._cond.wait_for(lambda: self._version != since or self._closed, LONG_POLL_S)
             return self._state(role)
 
-    def _png(self, outcome: bool) -> tuple[int | None, bytes | None]:
+    def _outcome_picture(self) -> tuple[bytes, str] | None:
         with self._cond:
-            if outcome:
-                return None, self._outcome_png
+            return self._outcome_image
+
+    def _png(self) -> tuple[int | None, bytes | None]:
+        with self._cond:
             if self._frame is None:
                 return None, None
             if self._frame_png is None or self._frame_png[0] != self._frame_seq:
@@ -539,6 +563,7 @@ class _Handler(BaseHTTPRequestHandler):
             "/": ("GET", self.page),
             "/state": ("GET", self.state),
             "/frame.png": ("GET", self.frame),
+            "/outcome": ("GET", self.outcome),
             "/answer": ("POST", self.answer),
             "/end": ("POST", self.end),
             "/bye": ("POST", self.bye),
@@ -597,10 +622,16 @@ class _Handler(BaseHTTPRequestHandler):
         self.reply_json(200, self.teacher._wait_state(since, role))
 
     def frame(self, query, role, new_session):
-        seq, png = self.teacher._png(outcome=query.get("outcome", [""])[0] == "1")
+        seq, png = self.teacher._png()
         if png is None:
             return self.reply(404, b"404: no frame yet\n", "text/plain")
-        self.reply(200, png, "image/png", {"X-Frame-Seq": str(seq or 0)})
+        self.reply(200, png, "image/png", {"X-Frame-Seq": str(seq)})
+
+    def outcome(self, query, role, new_session):
+        picture = self.teacher._outcome_picture()
+        if picture is None:
+            return self.reply(404, b"404: no outcome yet\n", "text/plain")
+        self.reply(200, *picture)
 
     def answer(self, query, role, new_session):
         body = self.body()
@@ -804,7 +835,7 @@ function render() {
       drawMaze($("outcome-text"), s.outcome.text);
       $("outcome-text").dataset.text = s.outcome.text;
     }
-    if (s.outcome.image && $("outcome-img").hidden) loadImage($("outcome-img"), url("/frame.png", {outcome: 1}));
+    if (s.outcome.image && $("outcome-img").hidden) loadImage($("outcome-img"), url("/outcome"));
   }
 }
 

@@ -329,6 +329,25 @@ def test_png_frames_decode_to_the_array():
 
     rgb = np.random.default_rng(0).integers(0, 256, (7, 5, 3), dtype=np.uint8)
     assert np.array_equal(np.asarray(Image.open(io.BytesIO(png_bytes(rgb)))), rgb)
+    grey = rgb[:, :, 0]
+    assert np.array_equal(np.asarray(Image.open(io.BytesIO(png_bytes(grey)))), grey)
+
+
+def test_the_outcome_a_picture_or_a_short_video(teacher):
+    person = Session(teacher)
+    person.load()
+    assert person.request("GET", "/outcome")[0] == 404  # none before the night
+    frames = [np.full((6, 6, 3), 40 * i, np.uint8) for i in range(3)]
+    teacher.show_outcome("TAMER 19 steps, INFORM 19", image=frames)
+    status, body, headers = person.request("GET", "/outcome")
+    assert status == 200 and headers["Content-Type"] == "image/gif" and body.startswith(b"GIF8")
+    state = person.state()
+    assert state["mode"] == "outcome" and state["outcome"] == {"text": "TAMER 19 steps, INFORM 19", "image": True}
+    assert teacher.ended == "day done"  # the script's own end of the day, said on the page
+    teacher.show_outcome("a frame", image=frames[0])
+    assert person.request("GET", "/outcome")[2]["Content-Type"] == "image/png"
+    with pytest.raises(ValueError):
+        teacher.show_outcome("?", image=b"not an image")
 
 
 CHILD = """
