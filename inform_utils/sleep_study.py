@@ -2,7 +2,8 @@
 inform_dqn_gridworld.py --save-buffer, then --sleep-from), each variant of the sleep and both controls, then one
 table.
 
-Each night runs `inform_sac_pusher.py --sleep-from DAY` with the variant's flags, a 15% hold-out (so every night
+Each night runs `python -m inform_utils.sleep_variants_pusher --sleep-from DAY` (the core script's night plus the
+study's switches) with the variant's flags, a 15% hold-out (so every night
 logs the offline criterion on the same held-out episodes), any flags given after `--`, and a sleep seed; then its
 INFORM actor (and the one the offline criterion picked) is tested on 50 random starts with `--evaluate`. What a
 night leaves is copied to {results_dir}/{campaign}/{day}/{variant}__sleep{seed}/ (summary.json,
@@ -78,9 +79,11 @@ RESOLUTION = {
 
 @dataclass(frozen=True)
 class Study:
-    """What the study needs to know of a script: its variants, the flags every night gets, the variants with all the
-    sleep seeds, the table's columns ((name, summary key, +1 if higher is better)) and the Pusher-only extras."""
+    """What the study needs to know of a script: the module that runs its nights (the core script's night plus the
+    study's switches), its variants, the flags every night gets, the variants with all the sleep seeds, the table's
+    columns ((name, summary key, +1 if higher is better)) and the Pusher-only extras."""
 
+    runner: str
     variants: dict
     common: tuple
     all_seeds: tuple
@@ -90,6 +93,7 @@ class Study:
 
 STUDIES = {
     "inform_sac_pusher.py": Study(
+        "inform_utils.sleep_variants_pusher",
         PUSHER_VARIANTS,
         ("--sleep-holdout-fraction", "0.15"),  # every night logs the offline criterion on the same held-out episodes
         ("default", "sham", "bc", "authors"),
@@ -102,6 +106,7 @@ STUDIES = {
         pusher=True,
     ),
     "inform_dqn_gridworld.py": Study(
+        "inform_utils.sleep_variants_maze",
         MAZE_VARIANTS,
         (),
         ("default", "sham", "bc"),
@@ -182,11 +187,12 @@ def run_night(args: Args, day: str, variant: str, seed: int, extra: list[str]) -
     if completed(dest):
         return
     study = STUDIES[args.script]
-    cmd = [sys.executable, os.path.join(REPO, args.script), "--sleep-from", day, "--exp-name", f"night_{variant}"]
+    cmd = [sys.executable, "-m", study.runner, "--sleep-from", day, "--exp-name", f"night_{variant}"]
     cmd += ["--sleep-seed", str(seed), *study.common, *extra, *study.variants[variant]]
     t0 = time.time()
     print(f"[study] {day_name} {variant} sleep seed {seed}: {' '.join(cmd[1:])}", flush=True)
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [REPO, os.environ.get("PYTHONPATH")]))}
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
     line = next((x for x in proc.stdout.splitlines() if x.startswith("run directory:")), None)
     if proc.returncode != 0 or line is None:
         print(f"[study] failed ({proc.returncode}): {proc.stderr.strip()[-500:]}", flush=True)
@@ -518,7 +524,10 @@ def default_rule(args: Args, rows: list[dict], variants: list[str], noise: float
             shown = [answers[t] if t in tests else f"- (no on {first})" for t in TESTS]
             lines.append(table_row([label, *cells, *shown]))
             for t in tests:
-                final[t][0 if answers[t] == "yes" else 1].extend([label] if answers[t] != "no" else [])
+                if answers[t] == "yes":
+                    final[t][0].append(label)
+                elif answers[t] != "no":
+                    final[t][1].append(label)
     said = []
     for t in TESTS:
         holds, still = final[t]
