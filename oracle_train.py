@@ -1,26 +1,17 @@
 """Train the simulated teacher (the oracle) for INFORM (docs/protocol.md, "Oracles and the expert bar").
 
-Pusher and other continuous-action tasks: SAC (Haarnoja et al. 2018, CleanRL's sac_continuous_action.py) on the
-environment reward from random starts, step for step the SAC of `inform_sac_pusher.py --train-oracle` (a test trains
-both with one seed and compares the networks). The checkpoint written is the best periodic evaluation's networks (as
-SB3's EvalCallback keeps the best), judged again on held-out starts: state_dicts (actor, twin critics) plus the
-arguments to rebuild them, the env id and shapes, the training steps and both evaluations, read by
-`inform_sac_pusher.py --oracle-path` with torch.load(weights_only=True). An episode succeeds by its final distance
-|info[--success-info-key]| below --success-distance, or by its return (--success-return). Twin critics are one batched
-module and the replay buffer is preallocated (LeanRL); the training state is saved every --checkpoint-frequency steps
-and `--resume <run_dir>/training_state.pt` continues an interrupted run.
-
-The maze (`--env-id KnoxStoneMaze-v0` and the other ids of gridworld_env): `--method value-iteration` (the default)
-saves the exact Q*; `q-learning` a tabular Q-learner's table after --maze-episodes episodes (an imperfect teacher like
-the authors' half-trained table); `dqn` a small DQN (CleanRL's dqn.py) trained for --maze-dqn-timesteps steps. Each
-checkpoint holds the 30 x 4 `q_table` that `inform_dqn_gridworld.py --oracle-path` loads (the DQN's: its Q over the
-30 one-hot states, plus its state_dict and `MazeQNetwork(**ckpt["kwargs"])`'s kwargs).
+Pusher and other continuous-action tasks: SAC (CleanRL's sac_continuous_action.py) on the env reward from random
+starts, step for step the SAC of `inform_sac_pusher.py --train-oracle` (a test compares the networks). The oracle
+written is the best periodic evaluation's networks (SB3's EvalCallback), judged again on held-out starts: state_dicts
+plus the arguments to rebuild them, read with torch.load(weights_only=True) by `inform_sac_pusher.py --oracle-path`.
+The maze (`--env-id KnoxStoneMaze-v0`, ...): `--method value-iteration` (exact Q*, the default), `q-learning` (an
+imperfect teacher like the authors' half-trained table) or `dqn` (CleanRL's dqn.py); the checkpoint's 30 x 4
+`q_table` is what `inform_dqn_gridworld.py --oracle-path` loads.
 
 Imported by inform_utils/, the only names other code may use (a test holds it to them): Actor.
 
 Examples:
-    python oracle_train.py --env-id Pusher-v5 --seed 1 --total-timesteps 200000 \
-        --output-path oracles/Pusher-v5__sac_oracle.pt
+    python oracle_train.py --env-id Pusher-v5 --total-timesteps 200000 --output-path oracles/Pusher-v5__sac_oracle.pt
     python oracle_train.py --env-id Reacher-v5 --success-distance 0.02 --total-timesteps 100000
     python oracle_train.py --env-id KnoxStoneMaze-v0 --method dqn --maze-dqn-timesteps 20000
 """
@@ -31,7 +22,6 @@ import io
 import json
 import math
 import os
-import pickle
 import random
 import signal
 import sys
@@ -57,21 +47,19 @@ MAZE_IDS = tuple(gridworld_env.ENV_IDS)
 METHODS = {"sac": ("sac",), "maze": ("value-iteration", "q-learning", "dqn")}  # SAC: Pusher or any continuous env
 LOG_STD_MIN = -5.0
 LOG_STD_MAX = 2.0
-# Reset seeds of the evaluations: training seeds its env once and then draws its starts from the env's own RNG, so
-# these blocks are starts it never trains from. Selection uses one block every time (its numbers compare across steps
-# and choose best.pt); the written oracle is judged on another, not on the starts it was chosen on.
+# Reset seeds of the evaluations, starts training never sees (it seeds its env once, then the env's RNG runs on).
+# Selection uses one block every time, so its numbers compare across steps; the written oracle is judged on another.
 SELECTION_EVAL_SEED = 1_000_000
 FINAL_EVAL_SEED = 20_000
 # the expert bar (docs/protocol.md): over 100 random starts, success >= 0.95 and, on Pusher, final distance <= 0.06
 EXPERT_SUCCESS_RATE = 0.95
 EXPERT_FINAL_DISTANCE = 0.06
-DISK_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES)  # reported in one line
 
 
 @dataclass(frozen=True)
 class Range:
-    """A flag's allowed values, declared beside it (tyro passes the metadata by; check_args reads it): a finite
-    number in [low, high], or (low, high] with `open_low`. None (an unset optional flag) passes."""
+    """A flag's values, declared beside it (tyro passes it by, check_args reads it): finite, in [low, high] (or
+    (low, high] with open_low); None passes."""
 
     low: float = -math.inf
     high: float = math.inf
@@ -81,24 +69,21 @@ class Range:
         if value is None or (math.isfinite(value) and value <= self.high and
                              (value > self.low if self.open_low else value >= self.low)):  # fmt: skip
             return
-        if self.low == -math.inf:
-            raise InputError(f"{flag} must be a finite number, got {value}")
         if self.high == math.inf:
-            raise InputError(f"{flag} must be {'>' if self.open_low else '>='} {self.low:g}, got {value}")
-        raise InputError(f"{flag} must be in {'(' if self.open_low else '['}{self.low:g}, {self.high:g}], got {value}")
+            bound = f"> {self.low}" if self.open_low else f">= {self.low}" if self.low > -math.inf else "finite"
+            raise InputError(f"{flag} must be {bound}, got {value}")
+        raise InputError(f"{flag} must be in {'(' if self.open_low else '['}{self.low}, {self.high}], got {value}")
 
 
-POSITIVE_INT = Range(1)
-POSITIVE = Range(0.0, open_low=True)
-PROBABILITY = Range(0.0, 1.0)
+POSITIVE_INT, POSITIVE, PROBABILITY = Range(1), Range(0, open_low=True), Range(0, 1)
 
 
 @dataclass
 class Args:
     exp_name: str = "oracle_sac"
-    """the name of this experiment (a run directory's name under runs/: no path separators)"""
+    """the name of this experiment (its run directory's, under runs/)"""
     seed: Annotated[int, Range(0, 2**32 - 1)] = 1
-    """seed of the experiment (numpy and torch take [0, 2**32))"""
+    """seed of the experiment"""
     torch_deterministic: bool = True
     """if toggled, `torch.backends.cudnn.deterministic=True`"""
     cuda: bool = False
@@ -106,8 +91,7 @@ class Args:
     save_model: bool = True
     """whether to write the oracle checkpoint to `output_path`"""
     track: bool = False
-    """if toggled, mirror the TensorBoard events to Weights & Biases (needs `pip install wandb`; WANDB_MODE=offline
-    keeps the run on this machine)"""
+    """if toggled, mirror the TensorBoard events to Weights & Biases (`pip install wandb`; WANDB_MODE=offline works)"""
     wandb_project_name: str = "inform"
     """the Weights & Biases project"""
     wandb_entity: str | None = None
@@ -115,30 +99,26 @@ class Args:
     num_threads: Annotated[int, POSITIVE_INT] = 1
     """number of torch CPU threads (1 keeps a second core free; more is faster and changes the numbers)"""
     bf16: bool = False
-    """opt-in speed: the SAC updates' forward passes in bfloat16 (CPU autocast); the numbers change, a teacher need
-    only be good (recorded in the checkpoint's args)"""
+    """opt-in speed: the SAC updates' forward passes in bfloat16 (CPU autocast; changes the numbers)"""
     capture_video: bool = False
-    """film the written oracle's first three held-out evaluation episodes into runs/{run}/videos/oracle.mp4
-    (headless MuJoCo: MUJOCO_GL, egl when unset and there is no display)"""
+    """film the written oracle's first three held-out evaluation episodes into runs/{run}/videos/oracle.mp4"""
 
     # Oracle (SAC) arguments
     env_id: str = "Pusher-v5"
     """Pusher-v5, Pusher-v4 (where mujoco<3 is installed), any continuous-action Gymnasium env (SAC), or a maze id"""
     success_distance: Annotated[float, POSITIVE] = 0.08
-    """an evaluation episode succeeds if its final distance |info[success_info_key]| (Pusher: object to goal) is
-    below this"""
+    """an evaluation episode succeeds if its final distance |info[success_info_key]| is below this"""
     success_info_key: str = "reward_dist"
     """the `info` entry whose absolute value at an episode's end is its final distance (Pusher's, Reacher's)"""
     success_return: Annotated[float | None, Range()] = None
-    """if set, an evaluation episode succeeds if its return is at least this (then the return breaks ties in the
-    choice of the best checkpoint, not the distance)"""
+    """if set, an episode succeeds if its return is at least this (and the return breaks selection's ties)"""
     total_timesteps: Annotated[int, POSITIVE_INT] = 200000
     """total environment steps of SAC training"""
     buffer_size: Annotated[int, POSITIVE_INT] = 1000000
     """the replay memory buffer size (capped at total_timesteps)"""
     gamma: Annotated[float, PROBABILITY] = 0.99
     """the discount factor gamma (SAC, and every maze method)"""
-    tau: Annotated[float, Range(0.0, 1.0, open_low=True)] = 0.005
+    tau: Annotated[float, Range(0, 1, open_low=True)] = 0.005
     """target smoothing coefficient"""
     batch_size: Annotated[int, POSITIVE_INT] = 256
     """the batch size of sample from the replay memory"""
@@ -169,8 +149,8 @@ class Args:
     checkpoint_frequency: Annotated[int, POSITIVE_INT] = 10000
     """write the resumable training state every this many steps"""
     stop_at_expert: bool = False
-    """end training at the first periodic evaluation that meets the expert bar (success rate >= 0.95 and, on Pusher,
-    final distance <= 0.06 over its episodes); the held-out final evaluation then judges the written oracle"""
+    """end training at the first periodic evaluation that meets the expert bar (success >= 0.95, Pusher's distance
+    <= 0.06)"""
     snapshot_frequency: Annotated[int, POSITIVE_INT] = 50000
     """keep a copy of the oracle checkpoint (oracle_step{N}.pt in the run dir) every this many steps"""
     resume: str | None = None
@@ -180,11 +160,11 @@ class Args:
 
     # Maze oracles
     method: str | None = None
-    """sac (Pusher and other continuous envs); value-iteration (exact Q*), q-learning or dqn (imperfect, learned
-    teachers) on the maze; default: sac or value-iteration"""
+    """sac (continuous envs); value-iteration (exact Q*), q-learning or dqn on the maze (default: sac or
+    value-iteration)"""
     maze_episodes: Annotated[int, POSITIVE_INT] = 50
     """episodes of the maze's tabular Q-learning (--method q-learning)"""
-    maze_alpha: Annotated[float, Range(0.0, 1.0, open_low=True)] = 0.2
+    maze_alpha: Annotated[float, Range(0, 1, open_low=True)] = 0.2
     """step size of the maze's tabular Q-learning"""
     maze_epsilon: Annotated[float, PROBABILITY] = 0.1
     """exploration rate of the maze's tabular Q-learning"""
@@ -299,7 +279,7 @@ def soft_update(target: nn.Module, source: nn.Module, tau: float) -> None:
 
 
 class ReplayBuffer:
-    """Preallocated float32 transitions, written in a ring; `n` counts every transition added."""
+    """Preallocated float32 transitions in a ring (SAC's, and the maze DQN's); `n` counts every one added."""
 
     FIELDS = ("obs", "next_obs", "act", "rew", "term")
 
@@ -308,11 +288,10 @@ class ReplayBuffer:
         shapes = {"obs": (obs_dim,), "next_obs": (obs_dim,), "act": (act_dim,), "rew": (), "term": ()}
         self.data = {name: torch.zeros(size, *shapes[name], device=device) for name in self.FIELDS}
 
-    def add(self, obs: torch.Tensor, next_obs: torch.Tensor, action: np.ndarray, reward: float, terminated: bool):
-        i = self.n % self.size
+    def add(self, obs: torch.Tensor, next_obs: torch.Tensor, action, reward: float, terminated: bool) -> None:
         values = (obs, next_obs, torch.as_tensor(action, device=self.device), float(reward), float(terminated))
         for name, value in zip(self.FIELDS, values, strict=True):
-            self.data[name][i] = value
+            self.data[name][self.n % self.size] = value
         self.n += 1
 
     def sample(self, batch_size: int) -> tuple[torch.Tensor, ...]:
@@ -376,7 +355,7 @@ class SAC:
         soft_update(self.qf_target, self.qf, tau)
 
 
-# ALGO LOGIC: the evaluation protocol. Outcome is copied verbatim from inform_sac_pusher.py (a test keeps it alike)
+# ALGO LOGIC: the evaluation that chooses the oracle. Outcome is copied verbatim from inform_sac_pusher.py
 @dataclass(frozen=True)
 class Outcome:
     """How an episode is judged, in the day's success tags and in every test: its final distance |info[info_key]| at
@@ -400,40 +379,22 @@ class Outcome:
         return distance, ep_return >= self.min_return, -ep_return
 
 
-def selection_key(evaluation: dict, outcome: Outcome) -> tuple[float, float]:
-    """What makes one evaluation better than another (SB3's EvalCallback keeps the best): the success rate, then the
-    final distance (smaller is better) or, when success is by return, the return."""
-    tie = evaluation["return"] if outcome.min_return is not None else -evaluation["final_distance"]
-    return evaluation["success_rate"], tie
-
-
-def is_expert(evaluation: dict, env_id: str) -> bool:
-    return evaluation["success_rate"] >= EXPERT_SUCCESS_RATE and (
-        env_id not in PUSHER_IDS or evaluation["final_distance"] <= EXPERT_FINAL_DISTANCE
-    )
-
-
 @torch.inference_mode()
 def run_episode(actor: Actor, env: gym.Env, reset_seed: int, generator: torch.Generator, device) -> tuple[float, dict]:
-    """One deterministic (mean-action) episode from env.reset(seed=reset_seed): (its return, the last info). The
-    unused sample comes from `generator`, so evaluating never moves the training RNG."""
+    """One deterministic (mean-action) episode: (its return, the last info). The unused sample comes from
+    `generator`, so evaluating never moves the training RNG."""
     obs, _ = env.reset(seed=reset_seed)
-    done = False
-    ep_return = 0.0
-    info = {}
+    done, ep_return, info = False, 0.0, {}
     while not done:
-        _, _, action = actor.get_action(
-            torch.as_tensor(obs, dtype=torch.float32, device=device).unsqueeze(0), generator
-        )
-        obs, reward, terminated, truncated, info = env.step(action[0].cpu().numpy())
+        obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device).unsqueeze(0)
+        obs, reward, terminated, truncated, info = env.step(actor.get_action(obs_t, generator)[2][0].cpu().numpy())
         ep_return += float(reward)
         done = terminated or truncated
     return ep_return, info
 
 
 def evaluate(actor: Actor, env_id: str, episodes: int, seed: int, device: torch.device, outcome: Outcome) -> dict:
-    """Deterministic episodes from the random starts of reset seeds seed, seed + 1, ...: return, final distance,
-    success."""
+    """Episodes from the random starts of reset seeds seed, seed + 1, ...: return, final distance, success."""
     env = gym.make(env_id)
     generator = torch.Generator(device=device).manual_seed(seed)
     returns, distances, successes = [], [], []
@@ -445,31 +406,32 @@ def evaluate(actor: Actor, env_id: str, episodes: int, seed: int, device: torch.
         distances.append(distance)
         successes.append(success)
     env.close()
-    return {
-        "return": float(np.mean(returns)),
-        "return_std": float(np.std(returns)),
-        "final_distance": float(np.mean(distances)),
-        "success_rate": float(np.mean(successes)),
-        "episodes": episodes,
-    }
+    return {"return": float(np.mean(returns)), "return_std": float(np.std(returns)),
+            "final_distance": float(np.mean(distances)), "success_rate": float(np.mean(successes)),
+            "episodes": episodes}  # fmt: skip
 
 
 class Selection:
-    """The best periodic evaluation so far and its networks in best.pt (a resumed run goes on from its best.pt)."""
+    """The best periodic evaluation so far (SB3's EvalCallback): by success rate, then the final distance (smaller
+    is better) or, when success is by return, the return. Its networks are best.pt, which a resumed run goes on from."""
 
     def __init__(self, run_dir: str, outcome: Outcome):
         self.path, self.outcome = os.path.join(run_dir, "best.pt"), outcome
         self.key, self.step = (-1.0, -math.inf), None
         if os.path.isfile(self.path):
             best = torch.load(self.path, weights_only=True, map_location="cpu")
-            self.key, self.step = selection_key(best["evaluation"], outcome), best["training_steps"]
+            self.key, self.step = self.rank(best["evaluation"]), best["training_steps"]
+
+    def rank(self, evaluation: dict) -> tuple[float, float]:
+        by_return = self.outcome.min_return is not None
+        return evaluation["success_rate"], evaluation["return"] if by_return else -evaluation["final_distance"]
 
     def tie(self) -> float:  # the best's return, or its final distance
         return self.key[1] if self.outcome.min_return is not None else -self.key[1]
 
     def offer(self, evaluation: dict, step: int, save) -> None:
-        if selection_key(evaluation, self.outcome) > self.key:
-            self.key, self.step = selection_key(evaluation, self.outcome), step
+        if self.rank(evaluation) > self.key:
+            self.key, self.step = self.rank(evaluation), step
             save(step, {**evaluation, "reset_seed": SELECTION_EVAL_SEED}, self.path)
 
 
@@ -484,11 +446,9 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     torch.use_deterministic_algorithms(args.torch_deterministic)
 
     env = make_env(args.env_id, args.seed)
-    obs_dim = int(np.prod(env.observation_space.shape))
-    act_dim = int(np.prod(env.action_space.shape))
-    low, high = env.action_space.low, env.action_space.high
-    sac = SAC(obs_dim, act_dim, low, high, args.hidden_size, args.policy_lr, args.q_lr, args.ent_coef, args.autotune,
-              device)  # fmt: skip
+    obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
+    sac = SAC(obs_dim, act_dim, env.action_space.low, env.action_space.high, args.hidden_size, args.policy_lr,
+              args.q_lr, args.ent_coef, args.autotune, device)  # fmt: skip
     amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
     rb = ReplayBuffer(min(args.buffer_size, args.total_timesteps), obs_dim, act_dim, device)
     start_step = 0
@@ -529,8 +489,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
         if terminated or truncated:
             writer.add_scalar("charts/episodic_return", ep_return, global_step)
             writer.add_scalar("charts/episodic_length", ep_length, global_step)
-            distance = outcome(info, ep_return)[0]
-            if not math.isnan(distance):
+            if not math.isnan(distance := outcome(info, ep_return)[0]):
                 writer.add_scalar("charts/final_distance", distance, global_step)
             ep_return, ep_length = 0.0, 0
             next_obs, _ = env.reset()
@@ -561,11 +520,13 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
             if step % args.snapshot_frequency == 0:  # kept, so the teacher can be chosen by a longer evaluation later
                 save_oracle(step, last_eval or {}, os.path.join(run_dir, f"oracle_step{step:07d}.pt"))
         t_last, step_last = (time.time(), step) if step % args.log_frequency == 0 else (t_last, step_last)
-        if args.stop_at_expert and evaluated and is_expert(last_eval, args.env_id):
-            print(
-                f"[oracle] step {step}: the evaluation meets the expert bar (--stop-at-expert), training ends",
-                flush=True,
-            )
+        if (
+            args.stop_at_expert
+            and evaluated
+            and last_eval["success_rate"] >= EXPERT_SUCCESS_RATE
+            and (args.env_id not in PUSHER_IDS or last_eval["final_distance"] <= EXPERT_FINAL_DISTANCE)
+        ):
+            print(f"[oracle] step {step}: the evaluation meets the expert bar (--stop-at-expert), training ends")
             save_training_state(os.path.join(run_dir, "training_state.pt"), sac, rb, step)
             break
     env.close()
@@ -574,31 +535,24 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
 
 
 def write_oracle(args: Args, sac: SAC, selection: Selection, run_dir: str, device, trained: int, train_time: float):
-    """The oracle written is the best evaluation's networks (the last ones stay in oracle_latest.pt), judged again on
-    held-out starts; oracle_eval.json keeps both evaluations."""
+    """The best evaluation's networks (the last ones stay in oracle_latest.pt), judged again on held-out starts."""
     best = torch.load(selection.path, weights_only=True, map_location="cpu")
     sac.actor.load_state_dict(best["actor_state_dict"])
     sac.qf.load_state_dict(best["qf_state_dict"])
-    outcome = selection.outcome
-    final_eval = evaluate(sac.actor, args.env_id, args.final_eval_episodes, FINAL_EVAL_SEED, device, outcome)
+    final = evaluate(sac.actor, args.env_id, args.final_eval_episodes, FINAL_EVAL_SEED, device, selection.outcome)
     chosen = best["evaluation"]
-    print(
-        f"[oracle] best evaluation at step {best['training_steps']}: success rate {chosen['success_rate']:.2f}, final "
-        f"distance {chosen['final_distance']:.4f} over {chosen['episodes']:.0f} episodes; held-out eval over "
-        f"{args.final_eval_episodes} other starts: return {final_eval['return']:.2f} +- {final_eval['return_std']:.2f}"
-        f" | final distance {final_eval['final_distance']:.4f} | success rate {final_eval['success_rate']:.2f} | "
-        f"train time {train_time:.0f}s (this session)",
-        flush=True,
-    )
+    print(f"[oracle] best evaluation at step {best['training_steps']}: success rate {chosen['success_rate']:.2f}, "
+          f"final distance {chosen['final_distance']:.4f} over {chosen['episodes']:.0f} episodes; held-out eval over "
+          f"{args.final_eval_episodes} other starts: return {final['return']:.2f} +- {final['return_std']:.2f} | "
+          f"final distance {final['final_distance']:.4f} | success rate {final['success_rate']:.2f} | train time "
+          f"{train_time:.0f}s (this session)", flush=True)  # fmt: skip
     if args.save_model:
-        ckpt = oracle_checkpoint(sac, args, best["training_steps"], final_eval)
+        ckpt = oracle_checkpoint(sac, args, best["training_steps"], final)
         ckpt.update(train_time_s_this_session=float(train_time), selection_evaluation=chosen, total_timesteps=trained)
         os.makedirs(os.path.dirname(os.path.abspath(args.output_path)), exist_ok=True)
         atomic_save(ckpt, args.output_path)
-        report = {"eval": final_eval, "selection_eval": chosen, "steps": best["training_steps"]}
-        atomic_write(
-            os.path.join(run_dir, "oracle_eval.json"), {**report, "train_time_s": train_time, "args": asdict(args)}
-        )
+        atomic_write(os.path.join(run_dir, "oracle_eval.json"), {"eval": final, "selection_eval": chosen,
+                     "steps": best["training_steps"], "train_time_s": train_time, "args": asdict(args)})  # fmt: skip
         print(f"oracle written to {args.output_path}", flush=True)
     if args.capture_video:
         record_teacher(args, sac.actor, run_dir, device)
@@ -613,8 +567,7 @@ def maze_q_learning(env: gym.Env, args: Args) -> tuple[np.ndarray, int]:
     obs, _ = env.reset(seed=args.seed)
     for _ in range(args.maze_episodes):
         stop_check()
-        s = int(obs.argmax())
-        done = False
+        s, done = int(obs.argmax()), False
         while not done:
             best = np.flatnonzero(q[s] == q[s].max())
             explore = rng.random() < args.maze_epsilon
@@ -622,9 +575,7 @@ def maze_q_learning(env: gym.Env, args: Args) -> tuple[np.ndarray, int]:
             obs, reward, terminated, truncated, _ = env.step(a)
             s_next = int(obs.argmax())
             q[s, a] += args.maze_alpha * (reward + args.gamma * (1.0 - terminated) * q[s_next].max() - q[s, a])
-            s = s_next
-            done = terminated or truncated
-            steps = steps + 1
+            s, done, steps = s_next, terminated or truncated, steps + 1
         obs, _ = env.reset()
     return q, steps
 
@@ -642,53 +593,40 @@ class MazeQNetwork(nn.Module):
         return self.network(x)
 
 
-def linear_schedule(start_e: float, end_e: float, duration: int, t: int) -> float:
-    return start_e + (end_e - start_e) * min(t / duration, 1.0)
-
-
 def maze_dqn(env: gym.Env, args: Args) -> MazeQNetwork:
     """DQN (CleanRL's dqn.py) on the maze's own reward for --maze-dqn-timesteps steps; truncation bootstraps."""
     torch.set_num_threads(args.num_threads)
     random.seed(args.seed)
     np.random.seed(args.seed)
     torch.manual_seed(args.seed)
-    eye = torch.eye(gridworld_env.N_CELLS)  # one-hot observations are stored as cell indices: eye[s] is s's
+    eye = torch.eye(gridworld_env.N_CELLS)  # the one-hot observation of cell s is eye[s]
     q_network = MazeQNetwork(gridworld_env.N_CELLS, gridworld_env.N_ACTIONS, args.maze_dqn_hidden)
     target_network = MazeQNetwork(gridworld_env.N_CELLS, gridworld_env.N_ACTIONS, args.maze_dqn_hidden)
     target_network.load_state_dict(q_network.state_dict())
     optimizer = torch.optim.Adam(q_network.parameters(), lr=args.maze_dqn_learning_rate, fused=True)
-    size = min(args.maze_dqn_buffer_size, args.maze_dqn_timesteps)
-    buf_s, buf_a, buf_s_next = (torch.zeros(size, dtype=torch.long) for _ in range(3))
-    buf_r, buf_term = torch.zeros(size), torch.zeros(size)
+    rb = ReplayBuffer(min(args.maze_dqn_buffer_size, args.maze_dqn_timesteps), gridworld_env.N_CELLS, 1, eye.device)
     rng = np.random.default_rng(args.seed)
     env.action_space.seed(args.seed)
-    obs, _ = env.reset(seed=args.seed)
-    s = int(obs.argmax())
+    s = int(env.reset(seed=args.seed)[0].argmax())
     decay_steps = max(1, int(args.maze_dqn_exploration_fraction * args.maze_dqn_timesteps))
     for global_step in range(args.maze_dqn_timesteps):
         stop_check()
-        epsilon = linear_schedule(args.maze_dqn_start_e, args.maze_dqn_end_e, decay_steps, global_step)
+        fraction = min(global_step / decay_steps, 1.0)  # epsilon decays linearly from start_e to end_e
+        epsilon = args.maze_dqn_start_e + (args.maze_dqn_end_e - args.maze_dqn_start_e) * fraction
         if rng.random() < epsilon:
             action = int(env.action_space.sample())
         else:
             with torch.no_grad():
                 action = int(q_network(eye[s]).argmax())
         obs, reward, terminated, truncated, _ = env.step(action)
-        s_next = int(obs.argmax())
-        i = global_step % size
-        buf_s[i], buf_a[i], buf_r[i], buf_s_next[i], buf_term[i] = s, action, float(reward), s_next, float(terminated)
-        s = s_next
-        if terminated or truncated:
-            obs, _ = env.reset()
-            s = int(obs.argmax())
+        rb.add(eye[s], eye[int(obs.argmax())], action, reward, terminated)
+        s = int(obs.argmax()) if not (terminated or truncated) else int(env.reset()[0].argmax())
 
         if global_step >= args.maze_dqn_learning_starts and global_step % args.maze_dqn_train_frequency == 0:
-            idx = torch.randint(min(global_step + 1, size), (args.maze_dqn_batch_size,))
+            b_obs, b_next, b_act, b_rew, b_term = rb.sample(args.maze_dqn_batch_size)
             with torch.no_grad():
-                target_max = target_network(eye[buf_s_next[idx]]).max(1).values
-                td_target = buf_r[idx] + args.gamma * target_max * (1.0 - buf_term[idx])
-            old_val = q_network(eye[buf_s[idx]]).gather(1, buf_a[idx, None]).squeeze(1)
-            loss = F.mse_loss(td_target, old_val)
+                td_target = b_rew + args.gamma * target_network(b_next).max(1).values * (1.0 - b_term)
+            loss = F.mse_loss(td_target, q_network(b_obs).gather(1, b_act.long()).squeeze(1))
             optimizer.zero_grad()
             loss.backward()
             optimizer.step()
@@ -701,44 +639,27 @@ def train_maze(args: Args) -> None:
     """A maze teacher: exact Q* by value iteration, a tabular Q-learner's table or a DQN's Q over the 30 cells;
     saved as a 30 x 4 q_table (and, for the DQN, the network's state_dict with the kwargs to rebuild it)."""
     env = gym.make(args.env_id)
-    variant = env.unwrapped.variant
-    start = time.time()
-    extra = {}
+    variant, start, extra = env.unwrapped.variant, time.time(), {}
     if args.method == "q-learning":
         q, steps = maze_q_learning(env, args)
     elif args.method == "dqn":
         q_network, steps = maze_dqn(env, args), args.maze_dqn_timesteps
         with torch.no_grad():  # the network's Q over every one-hot state: row s = Q(one_hot(s), .)
             q = q_network(torch.eye(gridworld_env.N_CELLS)).double().numpy()
-        kwargs = {
-            "obs_dim": gridworld_env.N_CELLS,
-            "n_actions": gridworld_env.N_ACTIONS,
-            "hidden": args.maze_dqn_hidden,
-        }
-        extra = {
-            "kwargs": kwargs,
-            "state_dict": {k: v.detach().cpu().clone() for k, v in q_network.state_dict().items()},
-        }
+        extra["kwargs"] = {"obs_dim": gridworld_env.N_CELLS, "n_actions": gridworld_env.N_ACTIONS,
+                           "hidden": args.maze_dqn_hidden}  # fmt: skip
+        extra["state_dict"] = {k: v.detach().cpu().clone() for k, v in q_network.state_dict().items()}
     else:
         q, steps = gridworld_env.optimal_q(variant, args.gamma), 0
     env.close()
     length = gridworld_env.greedy_episode_length(q.argmax(1), variant)
-    ckpt = {
-        "algorithm": args.method,
-        "env_id": args.env_id,
-        "obs_shape": [gridworld_env.N_CELLS],
-        "act_shape": [gridworld_env.N_ACTIONS],  # discrete: one Q value per action, the q_table's columns
-        "n_actions": gridworld_env.N_ACTIONS,
-        "q_table": torch.tensor(q),
-        "gamma": args.gamma,
-        "training_steps": steps,
-        "training_seed": args.seed,
-        "evaluation": {"episode_length": float(length)},
-        **extra,
-    }
     print(f"[oracle] {args.method} on {args.env_id}: {steps} env steps, greedy episode length {length} "
           f"({time.time() - start:.1f}s)", flush=True)  # fmt: skip
-    if args.save_model:
+    if args.save_model:  # discrete: act_shape is the number of actions, the q_table's columns
+        ckpt = {"algorithm": args.method, "env_id": args.env_id, "obs_shape": [gridworld_env.N_CELLS],
+                "act_shape": [gridworld_env.N_ACTIONS], "n_actions": gridworld_env.N_ACTIONS,
+                "q_table": torch.tensor(q), "gamma": args.gamma, "training_steps": steps, "training_seed": args.seed,
+                "evaluation": {"episode_length": float(length)}, **extra}  # fmt: skip
         os.makedirs(os.path.dirname(os.path.abspath(args.output_path)), exist_ok=True)
         atomic_save(ckpt, args.output_path)
         print(f"oracle written to {args.output_path}", flush=True)
@@ -766,7 +687,7 @@ def main() -> None:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
     except OSError as e:  # a full or read-only disk: one line, what could not be written; nothing partial is left
-        if e.errno not in DISK_ERRORS:
+        if e.errno not in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES):
             raise
         resume = " (--resume <run dir>/training_state.pt continues from the last one saved)" if is_sac else ""
         print(f"failed: cannot write {e.filename}: {e.strerror}; no partial file is left{resume}", file=sys.stderr)
@@ -787,8 +708,7 @@ class InputError(Exception):
 
 
 def check_args(args: Args) -> None:
-    """What tyro cannot know: each flag's Range (declared in Args), the env id, the method, files, the run name.
-    Raises InputError."""
+    """What tyro cannot know: each flag's Range, the env id, the method, files, the run's name. Raises InputError."""
     for name, hint in typing.get_type_hints(Args, include_extras=True).items():
         for rule in getattr(hint, "__metadata__", ()):
             rule.check(f"--{name.replace('_', '-')}", getattr(args, name))
@@ -797,15 +717,12 @@ def check_args(args: Args) -> None:
         raise InputError("--track needs Weights & Biases: `pip install wandb`, or run without --track")
     if args.track and maze:
         raise InputError("--track mirrors TensorBoard events, which only the SAC training writes")
-    methods = METHODS["maze" if maze else "sac"]
-    if args.method is not None and args.method not in methods:
+    if args.method is not None and args.method not in (methods := METHODS["maze" if maze else "sac"]):
         raise InputError(f"--method {args.method} does not apply to {args.env_id}; choose one of {', '.join(methods)}")
     if args.output_path is not None and (not args.output_path or os.path.isdir(args.output_path)):
         raise InputError(f"--output-path {args.output_path!r} must name a file (it is empty or a directory)")
-    if args.resume is not None and maze:
-        raise InputError("--resume continues a SAC run; the maze methods train in seconds and have no training state")
-    if args.resume is not None and not os.path.isfile(args.resume):
-        raise InputError(f"--resume {args.resume}: no such file")
+    if args.resume is not None and (maze or not os.path.isfile(args.resume)):
+        raise InputError(f"--resume {args.resume}: " + ("the maze has no training state" if maze else "no such file"))
     if args.batch_size > args.total_timesteps:
         raise InputError(f"--batch-size {args.batch_size} is larger than --total-timesteps {args.total_timesteps}")
     if args.maze_dqn_batch_size > args.maze_dqn_timesteps:
@@ -818,12 +735,9 @@ def check_args(args: Args) -> None:
         raise InputError(f"--exp-name {args.exp_name!r} must name one directory under runs/ (no '/', not '..')")
     if len(run_name(args).encode()) > 240:  # a file name has at most 255 bytes; room for new_run_dir's suffix
         raise InputError(f"--exp-name is too long: the run directory's name would be {len(run_name(args))} characters")
-    if args.env_id == "Pusher-v4":
-        import mujoco
-
-        if int(mujoco.__version__.split(".")[0]) >= 3:
-            raise InputError(f"Pusher-v4 needs mujoco<3 (installed: {mujoco.__version__}); use --env-id Pusher-v5 "
-                             "or `pip install mujoco==2.3.7` in a separate venv")  # fmt: skip
+    if args.env_id == "Pusher-v4" and int((mujoco := importlib.import_module("mujoco")).__version__.split(".")[0]) >= 3:
+        raise InputError(f"Pusher-v4 needs mujoco<3 (installed: {mujoco.__version__}); use --env-id Pusher-v5 or "
+                         "`pip install mujoco==2.3.7` in a separate venv")  # fmt: skip
     if not maze:
         check_env(args)
 
@@ -835,27 +749,21 @@ def check_env(args: Args) -> None:
         env = gym.make(args.env_id)
     except Exception as e:  # unknown id, a missing extra (box2d, ...), a version that needs other packages
         first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
-        mazes = ", ".join(MAZE_IDS)
-        raise InputError(f"--env-id {args.env_id}: Gymnasium cannot make it ({first}); mazes: {mazes}") from None
-    try:
-        obs_space, act_space = env.observation_space, env.action_space
-        if not isinstance(act_space, gym.spaces.Box):
-            raise InputError(
-                f"--env-id {args.env_id}: its actions are {type(act_space).__name__}, not continuous (Box)"
-            )
-        if not isinstance(obs_space, gym.spaces.Box) or len(obs_space.shape) != 1:
-            raise InputError(f"--env-id {args.env_id}: needs a flat Box observation, not {obs_space}")
-        if args.success_return is None:
-            env.reset(seed=0)
-            info = env.step(act_space.sample())[4]
-            if args.success_info_key not in info:
-                keys = ", ".join(sorted(info)) or "none"
-                raise InputError(
-                    f"--env-id {args.env_id}: its info has no {args.success_info_key!r} to measure a final distance "
-                    f"(it has: {keys}); pass --success-info-key KEY, or --success-return R to judge episodes by return"
-                )
-    finally:
-        env.close()
+        raise InputError(
+            f"--env-id {args.env_id}: Gymnasium cannot make it ({first}); mazes: {', '.join(MAZE_IDS)}"
+        ) from None
+    obs_space, act_space = env.observation_space, env.action_space
+    if not isinstance(act_space, gym.spaces.Box):
+        raise InputError(f"--env-id {args.env_id}: its actions are {type(act_space).__name__}, not continuous (Box)")
+    if not isinstance(obs_space, gym.spaces.Box) or len(obs_space.shape) != 1:
+        raise InputError(f"--env-id {args.env_id}: needs a flat Box observation, not {obs_space}")
+    env.reset(seed=0)
+    info = env.step(act_space.sample())[4]
+    env.close()
+    if args.success_return is None and args.success_info_key not in info:
+        raise InputError(f"--env-id {args.env_id}: its info has no {args.success_info_key!r} to measure a final "
+                         f"distance (it has: {', '.join(sorted(info)) or 'none'}); pass --success-info-key KEY, or "
+                         "--success-return R to judge episodes by return")  # fmt: skip
 
 
 class Stop:
@@ -874,55 +782,41 @@ def stop_check() -> None:
 
 
 def atomic_save(obj, path: str) -> None:
-    """torch.save through a temporary file and a rename: a reader sees the old file or the whole new one."""
     buffer = io.BytesIO()
-    torch.save(obj, buffer)  # serialized in memory first, so a full disk is an OSError of the write below
+    torch.save(obj, buffer)  # serialized in memory first, so that a full disk is an OSError of the write
     atomic_write(path, buffer.getbuffer())
 
 
 def atomic_write(path: str, data) -> None:
-    """Bytes, or a dict as JSON, to path.tmp, then renamed. If that fails (a full disk), path.tmp is removed and the
-    OSError names path."""
-    tmp = path + ".tmp"
+    """Bytes (or a dict, as JSON) to path.tmp, then renamed; if that fails, path.tmp is removed and the OSError names
+    path."""
     try:
-        with open(tmp, "wb") as f:
+        with open(path + ".tmp", "wb") as f:
             f.write(json.dumps(data, indent=1).encode() if isinstance(data, dict) else data)
-        os.replace(tmp, path)
+        os.replace(path + ".tmp", path)
     except OSError as e:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+        if os.path.exists(path + ".tmp"):
+            os.remove(path + ".tmp")
         raise OSError(e.errno, e.strerror, path) from None
 
 
 def oracle_checkpoint(sac: SAC, args: Args, step: int, evaluation: dict) -> dict:
-    """The deployable oracle: state_dicts plus everything needed to rebuild and check them."""
-    return {
-        "algorithm": "sac",
-        "env_id": args.env_id,
-        "obs_shape": [sac.obs_dim],
-        "act_shape": [sac.act_dim],
-        "kwargs": {"obs_dim": sac.obs_dim, "act_dim": sac.act_dim, "hidden": sac.hidden},
-        "action_low": torch.as_tensor(sac.low, dtype=torch.float32),
-        "action_high": torch.as_tensor(sac.high, dtype=torch.float32),
-        "actor_state_dict": {k: v.detach().cpu().clone() for k, v in sac.actor.state_dict().items()},
-        "qf_state_dict": {k: v.detach().cpu().clone() for k, v in sac.qf.state_dict().items()},
-        "training_steps": int(step),
-        "training_seed": args.seed,
-        "random_starts": True,
-        "bf16": bool(args.bf16),  # the opt-in speed flags it was trained with (they change the numbers)
-        "num_threads": int(args.num_threads),
-        "evaluation": {k: float(v) for k, v in evaluation.items()},
-    }
-
-
-TRAINING_STATE_KEYS = (*SAC.MODULES, "log_ent_coef", "buf_n", *(f"buf_{f}" for f in ReplayBuffer.FIELDS))
-TRAINING_STATE_KEYS += ("global_step", "torch_rng")
+    """The deployable oracle: state_dicts plus everything needed to rebuild and check them, and the opt-in speed flags
+    it was trained with (they change the numbers)."""
+    return {"algorithm": "sac", "env_id": args.env_id, "obs_shape": [sac.obs_dim], "act_shape": [sac.act_dim],
+            "kwargs": {"obs_dim": sac.obs_dim, "act_dim": sac.act_dim, "hidden": sac.hidden},
+            "action_low": torch.as_tensor(sac.low, dtype=torch.float32),
+            "action_high": torch.as_tensor(sac.high, dtype=torch.float32),
+            "actor_state_dict": {k: v.detach().cpu().clone() for k, v in sac.actor.state_dict().items()},
+            "qf_state_dict": {k: v.detach().cpu().clone() for k, v in sac.qf.state_dict().items()},
+            "training_steps": int(step), "training_seed": args.seed, "random_starts": True,
+            "bf16": bool(args.bf16), "num_threads": int(args.num_threads),
+            "evaluation": {k: float(v) for k, v in evaluation.items()}}  # fmt: skip
 
 
 def save_training_state(path: str, sac: SAC, rb: ReplayBuffer, step: int) -> None:
-    n = min(rb.n, rb.size)
     state = {key: getattr(sac, key).state_dict() for key in SAC.MODULES}
-    state.update({f"buf_{name}": buf[:n].clone() for name, buf in rb.data.items()})
+    state.update({f"buf_{name}": buf[: min(rb.n, rb.size)].clone() for name, buf in rb.data.items()})
     state.update(log_ent_coef=sac.log_ent_coef.detach().clone(), buf_n=rb.n, global_step=step,
                  torch_rng=torch.get_rng_state())  # fmt: skip
     atomic_save(state, path)
@@ -930,47 +824,37 @@ def save_training_state(path: str, sac: SAC, rb: ReplayBuffer, step: int) -> Non
 
 def read_training_state(path: str) -> dict:
     """torch.load(path, weights_only=True) of a training_state.pt; every way it can fail is one InputError."""
-    if not zipfile.is_zipfile(path):  # torch.save writes a zip archive; a truncated one has lost its directory
-        raise InputError(f"--resume {path}: not a torch checkpoint, or a truncated one (not a complete zip archive)")
-    try:
+    try:  # torch.save writes a zip archive; a truncated one has lost its directory
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            state = torch.load(path, weights_only=True, map_location="cpu")
-    except pickle.UnpicklingError as e:
-        unsupported = [line.strip() for line in str(e).splitlines() if "unsupported" in line.lower()]
-        raise InputError(f"--resume {path}: refused, it holds more than tensors and plain values (it could run code): "
-                         f"{(unsupported or [type(e).__name__])[0][:160]}") from None  # fmt: skip
-    except Exception as e:  # a damaged archive: torch raises RuntimeError, EOFError, ...
-        first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
-        raise InputError(f"--resume {path}: corrupt checkpoint: {first}") from None
-    for old, new in (("a_optimizer", "ent_coef_optimizer"), ("log_alpha", "log_ent_coef")):  # an older state's names
-        if isinstance(state, dict) and old in state:
-            state[new] = state.pop(old)
-    missing = [k for k in TRAINING_STATE_KEYS if not isinstance(state, dict) or k not in state]
-    if missing:
-        more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
-        raise InputError(f"--resume {path}: not a training_state.pt of oracle_train.py (missing "
-                         f"{', '.join(missing[:3])}{more})")  # fmt: skip
+            state = torch.load(path, weights_only=True, map_location="cpu") if zipfile.is_zipfile(path) else None
+    except Exception as e:  # code in the pickle (weights_only refuses it), a damaged archive
+        why = next((line.strip() for line in str(e).splitlines() if "unsupported" in line.lower()), type(e).__name__)
+        raise InputError(
+            f"--resume {path}: refused, not a torch checkpoint of tensors and plain values ({why[:160]})"
+        ) from None
+    keys = (*SAC.MODULES, "log_ent_coef", "buf_n", *(f"buf_{f}" for f in ReplayBuffer.FIELDS), "global_step")
+    if not isinstance(state, dict) or any(key not in state for key in (*keys, "torch_rng")):
+        raise InputError(f"--resume {path}: not a torch checkpoint of a training state of oracle_train.py")
     return state
 
 
 def load_training_state(state: dict, sac: SAC, rb: ReplayBuffer, args: Args) -> int:
-    """Networks, optimizers, replay buffer and torch RNG from a read_training_state; returns its step."""
+    """Networks, optimizers, replay buffer and torch RNG from read_training_state's dict; returns its step."""
     try:
         for key in SAC.MODULES:
             getattr(sac, key).load_state_dict(state[key])
         sac.log_ent_coef.data.copy_(state["log_ent_coef"])
         rb.n = int(state["buf_n"])
-        n = min(rb.n, rb.size)
         for name, buf in rb.data.items():
-            buf[:n] = state[f"buf_{name}"][:n]
+            buf[: min(rb.n, rb.size)] = state[f"buf_{name}"][: min(rb.n, rb.size)]
         step = int(state["global_step"])
         torch.set_rng_state(state["torch_rng"])
     except (RuntimeError, ValueError, TypeError, KeyError, IndexError) as e:  # nothing is written before this
         first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
         raise InputError(f"--resume {args.resume}: does not fit this run ({type(e).__name__}: {first})") from None
-    if args.seed + step >= 2**32:  # the resumed run seeds numpy with seed + step
-        raise InputError(f"--resume at step {step} needs --seed + step < 2**32 (numpy's seeds), got --seed {args.seed}")
+    if args.seed + step >= 2**32:  # numpy's seeds are below 2**32
+        raise InputError(f"--resume at step {step} seeds numpy with --seed + {step}, which must be < 2**32")
     return step
 
 
@@ -980,11 +864,10 @@ def run_name(args: Args) -> str:
 
 def new_run_dir(args: Args) -> str:
     """runs/{run_name}, never an existing directory (a suffix _1, _2, ... when one run started in the same second)."""
-    name = run_name(args)
-    run_dir, suffix = os.path.join("runs", name), 0
+    run_dir, suffix = os.path.join("runs", run_name(args)), 0
     while os.path.exists(run_dir):
         suffix += 1
-        run_dir = os.path.join("runs", f"{name}_{suffix}")
+        run_dir = os.path.join("runs", f"{run_name(args)}_{suffix}")
     os.makedirs(run_dir)
     return run_dir
 
@@ -1019,27 +902,24 @@ def log_evaluation(writer: SummaryWriter, run_dir: str, step: int, evaluation: d
 def print_progress(step: int, start_step: int, total: int, t0: float, evaluation: dict, selection: Selection) -> None:
     sps = (step - start_step) / max(time.time() - t0, 1e-9)
     eta = (total - step) / max(sps, 1e-9)
-    ev = ""
-    if evaluation:
-        ev = (f" | eval return {evaluation['return']:.1f} dist {evaluation['final_distance']:.3f} success "
-              f"{evaluation['success_rate']:.2f} | best {selection.key[0]:.2f} / {selection.tie():.3f} at "
-              f"{selection.step}")  # fmt: skip
+    ev = (f" | eval return {evaluation['return']:.1f} dist {evaluation['final_distance']:.3f} success "
+          f"{evaluation['success_rate']:.2f} | best {selection.key[0]:.2f} / {selection.tie():.3f} at "
+          f"{selection.step}") if evaluation else ""  # fmt: skip
     print(f"[oracle] {step}/{total} {100 * step // total}% | {sps:.0f} SPS | ETA {int(eta // 60)}m{int(eta % 60):02d}s"
           f"{ev}", flush=True)  # fmt: skip
 
 
-# --capture-video: the oracle's episodes rendered headless (MUJOCO_GL) into a list by Gymnasium's RenderCollection;
-# Pusher seen from above (its free camera set to VIDEO_CAMERA, as inform_sac_pusher.py films), mp4 by imageio-ffmpeg
+# --capture-video: the oracle's episodes rendered headless (MUJOCO_GL) by Gymnasium's RenderCollection, Pusher seen
+# from above (the free camera at VIDEO_CAMERA, the view inform_sac_pusher.py films), mp4 by imageio-ffmpeg
 VIDEO_CAMERA = {"lookat": (0.42, -0.2, -0.3), "distance": 1.0, "elevation": -75.0}  # metres, degrees
 VIDEO_SIZE = 480  # pixels, square; a multiple of 16, as H.264 wants
 VIDEO_EPISODES = 3
 
 
 def video_env(env_id: str, size: int = VIDEO_SIZE) -> gym.Env:
-    """The env rendering every reset and step into a list; Pusher from above, without shadows (they triple the time
-    of a frame in software OpenGL)."""
+    """The env, rendering every reset and step into a list; Pusher without shadows (3x faster in software GL)."""
     env = gym.make(env_id, render_mode="rgb_array", width=size, height=size)
-    if env_id in PUSHER_IDS:  # read when the first frame creates the renderer's context
+    if env_id in PUSHER_IDS:  # both are read when the first frame creates the renderer
         camera = {**VIDEO_CAMERA, "lookat": np.array(VIDEO_CAMERA["lookat"]), "azimuth": 180.0, "trackbodyid": -1}
         env.unwrapped.mujoco_renderer.default_cam_config = camera
         env.unwrapped.model.vis.quality.shadowsize = 0
@@ -1047,35 +927,25 @@ def video_env(env_id: str, size: int = VIDEO_SIZE) -> gym.Env:
 
 
 def check_video(env_id: str) -> None:
-    """Before anything is written: pick the headless GL backend (egl when MUJOCO_GL is unset and there is no display),
-    find ffmpeg and render one frame. InputError, one line, if either is missing."""
+    """Before anything is written: the headless GL backend (egl when MUJOCO_GL is unset and there is no display)
+    renders a frame, and imageio-ffmpeg is there; InputError, one line, if not."""
     if env_id in MAZE_IDS:
-        raise InputError(f"--capture-video films a SAC teacher; the maze's are drawn by inform_dqn_gridworld.py "
-                         f"--capture-video, not for {env_id}")  # fmt: skip
+        raise InputError(f"--capture-video films a SAC teacher; inform_dqn_gridworld.py draws the maze's, not {env_id}")
     if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
         os.environ["MUJOCO_GL"] = "egl"
-    try:
-        import imageio_ffmpeg
-
-        imageio_ffmpeg.get_ffmpeg_exe()
-    except Exception as e:
-        raise InputError(f"--capture-video writes mp4 with imageio-ffmpeg, which is missing ({type(e).__name__}): "
-                         "pip install imageio-ffmpeg==0.8.1") from None  # fmt: skip
+    if importlib.util.find_spec("imageio_ffmpeg") is None:
+        raise InputError("--capture-video writes mp4 with imageio-ffmpeg: pip install imageio-ffmpeg==0.8.1")
     try:
         with warnings.catch_warnings():  # a failing backend warns before it raises: one line is enough
             warnings.simplefilter("ignore")
             env = video_env(env_id, size=16)
             env.reset(seed=0)
-            frame = env.render()[-1]
+            np.asarray(env.render()[-1]).reshape(16, 16, 3)  # ValueError if MuJoCo rendered no image
             env.close()
     except Exception as e:
-        raise InputError(
-            f"--capture-video: MuJoCo cannot render with MUJOCO_GL={os.environ.get('MUJOCO_GL')} "
-            f"({type(e).__name__}); install EGL (Debian: apt-get install libegl1 libegl-mesa0) or "
-            "OSMesa (apt-get install libosmesa6, then MUJOCO_GL=osmesa)"
-        ) from None
-    if not isinstance(frame, np.ndarray) or frame.shape != (16, 16, 3):
-        raise InputError(f"--capture-video: MuJoCo rendered no image with MUJOCO_GL={os.environ.get('MUJOCO_GL')}")
+        raise InputError(f"--capture-video: MuJoCo cannot render with MUJOCO_GL={os.environ.get('MUJOCO_GL')} "
+                         f"({type(e).__name__}); install EGL (Debian: apt-get install libegl1 libegl-mesa0) or "
+                         "OSMesa (apt-get install libosmesa6, then MUJOCO_GL=osmesa)") from None  # fmt: skip
 
 
 def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
@@ -1097,23 +967,19 @@ def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
 
 
 def record_teacher(args: Args, actor: Actor, run_dir: str, device: torch.device) -> dict:
-    """The written oracle's first VIDEO_EPISODES held-out evaluation episodes (the same reset seeds and generator as
-    `evaluate` gives them), back to back in videos/oracle.mp4; videos/videos.json has each episode's reset seed,
-    frames and final distance."""
+    """The oracle's first VIDEO_EPISODES held-out evaluation episodes (reset seeds and generator as `evaluate` gives
+    them) in videos/oracle.mp4; videos/videos.json has each one's reset seed, frames and final distance."""
     os.makedirs(os.path.join(run_dir, "videos"), exist_ok=True)
-    env = video_env(args.env_id)
-    outcome = Outcome.from_args(args)
+    env, outcome, t0 = video_env(args.env_id), Outcome.from_args(args), time.time()
     generator = torch.Generator(device=device).manual_seed(FINAL_EVAL_SEED)
-    frames, record, t0 = [], {}, time.time()
+    frames, record = [], {}
     for ep in range(VIDEO_EPISODES):
         stop_check()
         ep_return, info = run_episode(actor, env, FINAL_EVAL_SEED + ep, generator, device)
-        episode = env.render()
-        frames += episode
+        frames += (episode := env.render())
         record[f"episode_{ep}"] = {"reset_seed": FINAL_EVAL_SEED + ep, "frames": len(episode),
                                    "final_distance": outcome(info, ep_return)[0]}  # fmt: skip
-    path = os.path.join(run_dir, "videos", "oracle.mp4")
-    write_video(path, frames, env.metadata["render_fps"])
+    write_video(path := os.path.join(run_dir, "videos", "oracle.mp4"), frames, env.metadata["render_fps"])
     env.close()
     atomic_write(os.path.join(run_dir, "videos", "videos.json"),
                  {"file": "oracle.mp4", "size": list(frames[0].shape), "episodes": record})  # fmt: skip
