@@ -3,6 +3,8 @@ No to what it does (button or key: y, n; space for no answer), and "End the day"
 page then shows. A script imports this module only under `--teacher browser`.
 
 One local page, served by the standard library's HTTP server in a daemon thread; one inline HTML page, no build step.
+The standard library, not a server package (Flask, aiohttp): six routes and long polling need nothing more, and no
+new pin is needed to run it.
 Safe by default: it listens on 127.0.0.1 unless told otherwise; the printed address carries a random token and a
 request without it gets 403; only the routes below exist (any other path: 404) and no part of a request reaches the
 file system. One person per run: the first browser session to load the page teaches (a session cookie), any later

@@ -15,6 +15,7 @@ import io
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -322,6 +323,18 @@ def test_streamed_answers_carry_their_time_and_step_and_the_credit_window(teache
     no = dataclasses.replace(answer, value=0.0, label="no", time=answer.time + 0.001)
     skipped = dataclasses.replace(answer, value=None, label="none", time=answer.time + 0.002)
     assert teacher.labels([answer, no, skipped], delay=(0.0, 4.0)) == dict.fromkeys(range(10), 0.0)  # the later wins
+
+
+def test_bad_arguments_and_a_port_in_use_fail_before_any_file(tmp_path, teacher):
+    for bad in ({"task": "cartpole"}, {"pace": 0.0}, {"delay": (4.0, 0.2)}):
+        with pytest.raises(ValueError):
+            BrowserTeacher(str(tmp_path / "bad"), quiet=True, **bad)
+    with pytest.raises(OSError):
+        BrowserTeacher(str(tmp_path / "busy"), port=teacher.port, quiet=True)
+    assert not (tmp_path / "bad").exists() and not (tmp_path / "busy").exists()
+    with BrowserTeacher(str(tmp_path / "all"), host="0.0.0.0", quiet=True) as everywhere:
+        assert everywhere.url.startswith(f"http://{socket.gethostname()}:{everywhere.port}/?token=")
+        assert Session(everywhere).load() == 200  # reachable on 127.0.0.1 too
 
 
 def test_png_frames_decode_to_the_array():
