@@ -612,10 +612,12 @@ class _Handler(BaseHTTPRequestHandler):
         return value if isinstance(value, dict) else None
 
     def page(self, query, role, new_session):
-        headers = {"Content-Security-Policy": CSP}
+        nonce = secrets.token_urlsafe(16)  # only the page's own script runs
+        headers = {"Content-Security-Policy": CSP.format(nonce=nonce)}
         if new_session:
             headers["Set-Cookie"] = f"{self.teacher.cookie}={new_session}; Path=/; HttpOnly; SameSite=Strict"
-        body = PAGE.replace("__RUN_ID__", self.teacher.run_id).encode()
+        body = PAGE.replace("__RUN_ID__", self.teacher.run_id).replace("<script>", f'<script nonce="{nonce}">')
+        body = body.encode()
         self.reply(200, body, "text/html; charset=utf-8", headers)
 
     def state(self, query, role, new_session):
@@ -658,8 +660,8 @@ class _Handler(BaseHTTPRequestHandler):
 
 
 CSP = (
-    "default-src 'none'; script-src 'unsafe-inline'; style-src 'unsafe-inline'; img-src blob:; connect-src 'self'; "
-    "base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
+    "default-src 'none'; script-src 'nonce-{nonce}'; style-src 'unsafe-inline'; img-src blob: data:; "
+    "connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
 )
 
 PAGE = r"""<!doctype html>
