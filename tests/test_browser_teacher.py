@@ -432,12 +432,24 @@ def browser():
         chromium.close()
 
 
-def new_page(browser, url: str, width: int = 900):
-    context = browser.new_context(viewport={"width": width, "height": 720})
-    page = context.new_page()
-    page.set_default_timeout(WAIT_S * 1000)
-    page.goto(url)
-    return page
+@pytest.fixture
+def new_page(browser):
+    """Open the page in a browser session of its own; at the end, no script error on any page."""
+    errors, contexts = [], []
+
+    def open_page(url: str):
+        context = browser.new_context(viewport={"width": 900, "height": 720})
+        contexts.append(context)
+        page = context.new_page()
+        page.on("pageerror", lambda error: errors.append(str(error)))
+        page.set_default_timeout(WAIT_S * 1000)
+        page.goto(url)
+        return page
+
+    yield open_page
+    for context in contexts:
+        context.close()
+    assert not errors, errors
 
 
 def maze_on_the_page(text: str) -> tuple[int, int]:
@@ -455,13 +467,13 @@ def wait_for_question(page, number: int):
     page.wait_for_selector(f'#day[data-open="1"][data-question="{number}"]')
 
 
-def test_a_scripted_person_teaches_the_maze_through_the_page(browser, tmp_path):
+def test_a_scripted_person_teaches_the_maze_through_the_page(new_page, tmp_path):
     """Twelve moves: y/n by key or button as the oracle would answer, one space, a dropped connection and a
     reload in the middle, then "End the day"; nothing is lost and the loop gets each answer."""
     q = gridworld_env.optimal_q()
     with BrowserTeacher(str(tmp_path / "run"), participant="scripted", budget=10, quiet=True) as teacher:
         loop = Loop(teacher, moves=100, seed=3, frames=True)
-        page = new_page(browser, teacher.url)
+        page = new_page(teacher.url)
         expected = []
         for number in range(1, 13):
             wait_for_question(page, number)
@@ -512,12 +524,12 @@ def test_a_scripted_person_teaches_the_maze_through_the_page(browser, tmp_path):
         assert f.read(8) == b"\x89PNG\r\n\x1a\n"
 
 
-def test_keys_a_watcher_and_a_closed_page(browser, tmp_path):
+def test_keys_a_watcher_and_a_closed_page(new_page, tmp_path):
     with BrowserTeacher(str(tmp_path / "run"), quiet=True, close_grace=0.5) as teacher:
         loop = Loop(teacher, moves=10)
-        person = new_page(browser, teacher.url)
+        person = new_page(teacher.url)
         wait_for_question(person, 1)
-        watcher = new_page(browser, teacher.url)  # another browser session
+        watcher = new_page(teacher.url)  # another browser session
         watcher.wait_for_selector('#day[data-question="1"]')
         assert "read-only" in watcher.text_content("#banner") and watcher.is_disabled("#yes")
         assert watcher.is_disabled("#end")
@@ -542,7 +554,7 @@ def test_keys_a_watcher_and_a_closed_page(browser, tmp_path):
     assert [row["answer"] for row in lines(teacher)] == ["no", "yes", "none", "yes"]
 
 
-def test_the_pusher_streams_and_answers_arrive_with_their_step(browser, tmp_path):
+def test_the_pusher_streams_and_answers_arrive_with_their_step(new_page, tmp_path):
     """Frames at a person's pace (20 steps a second, shown at most 5 a second); a y while the arm moves comes back
     with the step then on the screen, and the credit window spreads it over the steps before."""
     with BrowserTeacher(str(tmp_path / "run"), task="pusher", pace=20.0, quiet=True) as teacher:
@@ -559,7 +571,7 @@ def test_the_pusher_streams_and_answers_arrive_with_their_step(browser, tmp_path
 
         thread = threading.Thread(target=simulation, daemon=True)
         thread.start()
-        page = new_page(browser, teacher.url)
+        page = new_page(teacher.url)
         page.wait_for_selector('#day[data-mode="stream"][data-open="1"]')
         page.wait_for_selector("#frame:visible")
         page.wait_for_function("() => document.querySelector('#frame').complete")
