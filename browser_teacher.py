@@ -714,6 +714,7 @@ const TOKEN = new URLSearchParams(location.search).get("token") || "";
 const QUEUE = "inform_pending___RUN_ID__";  // answers the server has not confirmed yet: they survive a reload
 const $ = (id) => document.getElementById(id);
 let state = null, receivedAt = 0, shownSeq = 0, offline = false, endArmed = 0, gone = false;
+const answered = new Set();  // the questions this page answered (the state may not say so yet)
 
 function url(path, extra) { return path + "?" + new URLSearchParams({token: TOKEN, ...(extra || {})}); }
 function sleep(ms) { return new Promise((r) => setTimeout(r, ms)); }
@@ -746,7 +747,7 @@ function openQuestion() {  // what the person may answer now: a question's id, "
   if (!s || s.role !== "teacher" || s.ended || gone) return null;
   if (s.mode === "stream") return "stream";
   if (s.mode !== "ask" || !s.question || s.question.answered) return null;
-  if (pending().some((a) => a.question === s.question.id)) return null;
+  if (answered.has(s.question.id) || pending().some((a) => a.question === s.question.id)) return null;
   if (s.has_frame && shownSeq < s.question.frame_seq) return null;  // its frame is not on the screen yet
   return s.question.id;
 }
@@ -754,6 +755,7 @@ function openQuestion() {  // what the person may answer now: a question's id, "
 function answer(label) {
   const q = openQuestion();
   if (q === null) return;
+  if (q !== "stream") answered.add(q);
   const list = pending();
   list.push({nonce: nonce(), answer: label, question: q === "stream" ? null : q, seq: shownSeq, pressed: Date.now()});
   setPending(list);

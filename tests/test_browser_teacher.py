@@ -14,6 +14,7 @@ import http.client
 import io
 import json
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -27,7 +28,7 @@ from http.cookiejar import CookieJar
 
 import numpy as np
 import pytest
-from conftest import REPO, default_signals
+from conftest import REPO, Child, default_signals
 
 import gridworld_env
 from browser_teacher import BrowserTeacher, credit_weights, png_bytes
@@ -36,6 +37,7 @@ CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = ["--no-sandbox", "--headless", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync", "--no-first-run"]  # fmt: skip
 SCREENSHOT = os.path.join(REPO, "docs", "figures", "browser_teacher.png")
+MAZE_SCRIPT = os.path.join(REPO, "inform_dqn_gridworld.py")
 WAIT_S = 20.0  # the bound on every wait for a condition (a loaded machine; a pass takes far less)
 
 
@@ -587,3 +589,44 @@ def test_the_pusher_streams_and_answers_arrive_with_their_step(new_page, tmp_pat
         assert teacher.credit(first, delay=(0.0, 4.0))  # the steps on the screen before it
     rows = lines(teacher)
     assert [row["mode"] for row in rows] == ["stream", "stream"] and rows[0]["step"] == first.step
+
+
+def maze_script_takes_the_page() -> bool:
+    with open(MAZE_SCRIPT) as f:
+        return re.search(r'teacher: Literal\[[^\]]*"browser"', f.read()) is not None
+
+
+def test_through_the_page_the_scripted_person_teaches_tamer_the_19_steps_from_s(new_page, tmp_path):
+    """The maze script itself under --teacher browser: the scripted person answers each move as the oracle would
+    until the page says the agent's own way from S takes 19 steps, then ends the day; the night runs, the page shows
+    the outcome, and the run completes with every answer kept."""
+    if not maze_script_takes_the_page():
+        pytest.skip("inform_dqn_gridworld.py takes no --teacher browser yet")
+    flags = ["--teacher", "browser", "--participant", "scripted", "--seed", "1", "--tamer-total-timesteps", "300",
+             "--sleep-gradient-steps", "300"]  # fmt: skip
+    child = Child([sys.executable, MAZE_SCRIPT, *flags], cwd=tmp_path)
+    url = child.wait_for_line("[teacher] open the teaching page", timeout=120).split(": ", 1)[1].strip()
+    page = new_page(url)
+    q = gridworld_env.optimal_q()
+    answers = 0
+    page.wait_for_selector('#day[data-open="1"]')
+    while "its own way from S: reaches G in 19 steps" not in page.text_content("#info"):
+        assert answers < 200, "TAMER never reached 19 steps from S"
+        number = page.get_attribute("#day", "data-question")
+        cell, move = maze_on_the_page(page.text_content("#maze"))
+        page.keyboard.press("y" if q[cell, move] >= q[cell].max() - 1e-9 else "n")
+        answers += 1
+        page.wait_for_selector(f'#day[data-open="1"]:not([data-question="{number}"])')
+    page.click("#end")
+    page.click("#end")
+    page.wait_for_selector("#outcome:visible", timeout=120_000)
+    assert "reaches G in 19 steps" in page.text_content("#outcome-text")
+    code, out, err = child.finish()
+    assert code == 0, err[-2000:]
+    (run_dir,) = (tmp_path / "runs").iterdir()
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["status"] == "completed" and summary["eval/tamer_episode_length"] == 19
+    assert summary["feedback/answers"] == answers
+    with open(run_dir / "answers.jsonl") as f:
+        rows = [row for row in map(json.loads, f) if row["event"] == "answer"]
+    assert len(rows) == answers and all(row["participant"] == "scripted" for row in rows)
