@@ -17,8 +17,7 @@ import inform_dqn_gridworld as inform
 
 SCRIPT = "inform_dqn_gridworld.py"
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-TINY = ["--tamer-total-timesteps", "2000", "--tamer-learning-starts", "500", "--sleep-gradient-steps", "200",
-        "--eval-frequency", "500", "--sleep-eval-frequency", "100"]  # fmt: skip
+TINY = ["--tamer-total-timesteps", "2000", "--tamer-learning-starts", "500", "--sleep-gradient-steps", "200"]
 
 
 class TableQ(torch.nn.Module):
@@ -238,7 +237,7 @@ def test_same_seed_same_numbers(run_script):
         (["--env-id", "CartPole-v1"], "--env-id"),
         (["--sleep-temperature", "0"], "--sleep-temperature"),
         (["--tamer-total-timesteps", "100"], "--tamer-learning-starts"),
-        (["--tau", "2"], "--tau"),
+        (["--sleep-seed", "-1"], "--sleep-seed"),
     ],
 )
 def test_bad_input_is_one_line_and_leaves_nothing(run_script, flags, message):
@@ -366,10 +365,9 @@ def test_evaluate_mode_reproduces_the_run(run_script):
 # Long phases, so that the signal surely lands in the phase named: each prints its first progress line after 5% of
 # its steps (2k of 40k env steps; 1k of 20k gradient steps) and has at least ten seconds to go after it.
 LONG_PHASE = {
-    "tamer": ["--tamer-total-timesteps", "40000", "--eval-frequency", "2000"],
-    "sleep": ["--tamer-total-timesteps", "2000", "--tamer-learning-starts", "500", "--sleep-gradient-steps", "20000",
-              "--sleep-eval-frequency", "1000"],
-}  # fmt: skip
+    "tamer": ["--tamer-total-timesteps", "40000"],
+    "sleep": ["--tamer-total-timesteps", "2000", "--tamer-learning-starts", "500", "--sleep-gradient-steps", "20000"],
+}
 FIRST_EVAL = {"tamer": "[tamer] 2000/", "sleep": "[sleep] 1000/"}  # the progress line of the first evaluation
 
 

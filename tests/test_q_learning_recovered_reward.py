@@ -20,8 +20,7 @@ import q_learning_recovered_reward as qrr
 
 SCRIPT = "q_learning_recovered_reward.py"
 SCRIPT_PATH = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), SCRIPT)
-GRIDWORLD_TINY = ["--tamer-total-timesteps", "2000", "--tamer-learning-starts", "500", "--sleep-gradient-steps", "100",
-                  "--eval-frequency", "500", "--sleep-eval-frequency", "100"]  # fmt: skip
+GRIDWORLD_TINY = ["--tamer-total-timesteps", "2000", "--tamer-learning-starts", "500", "--sleep-gradient-steps", "100"]
 WALL, PLAIN = g.transition_table("wall"), g.transition_table("plain")
 UP, LEFT = 0, 2
 

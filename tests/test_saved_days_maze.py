@@ -18,18 +18,18 @@ import inform_dqn_gridworld as inform
 SCRIPT = "inform_dqn_gridworld.py"
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # a tiny run, as tests/test_inform_gridworld.py's
-TINY = ["--tamer-total-timesteps", "2000", "--tamer-learning-starts", "500", "--sleep-gradient-steps", "200",
-        "--eval-frequency", "500", "--sleep-eval-frequency", "100"]  # fmt: skip
+TINY = ["--tamer-total-timesteps", "2000", "--tamer-learning-starts", "500", "--sleep-gradient-steps", "200"]
 NIGHT = ("eval/", "losses/", "sleep/", "feedback/")  # the numbers a night on the same day must reproduce
 DOCUMENTED_KEYS = {"format", "script", "env_id", "seed", "day_args", "obs", "actions", "next_obs", "feedback",
                    "terminated", "success", "episode_start", "episode_end", "episode_length", "episode_success",
                    "h_net", "q_star", "rng", "day_stats"}  # fmt: skip
 
 
-def run(cwd, *flags: str) -> subprocess.CompletedProcess:
-    """The script in `cwd` (its runs/ lands there), as tests/conftest.py's run_script."""
-    cmd = [sys.executable, os.path.join(REPO, SCRIPT), *flags]
-    return subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=600)
+def run(cwd, *flags: str, study: bool = False) -> subprocess.CompletedProcess:
+    """The script (or with `study`, the sleep study's module) in `cwd` (its runs/ lands there)."""
+    cmd = [sys.executable, *(["-m", "inform_utils.sleep_variants_maze"] if study else [os.path.join(REPO, SCRIPT)])]
+    env = {**os.environ, "PYTHONPATH": REPO}
+    return subprocess.run([*cmd, *flags], cwd=cwd, env=env, capture_output=True, text=True, timeout=600)
 
 
 def run_dirs(cwd) -> list[str]:
@@ -45,10 +45,10 @@ def night(summary: dict) -> dict:
     return {k: v for k, v in summary.items() if k.startswith(NIGHT)}
 
 
-def sleep_on(day_dir: str, cwd, *flags: str) -> tuple[str, dict]:
+def sleep_on(day_dir: str, cwd, *flags: str, study: bool = False) -> tuple[str, dict]:
     """A --sleep-from run on `day_dir`'s day in `cwd`: its new run directory and summary."""
     before = run_dirs(cwd)
-    result = run(cwd, *TINY, "--sleep-from", day_dir, *flags)
+    result = run(cwd, *TINY, "--sleep-from", day_dir, *flags, study=study)
     assert result.returncode == 0, result.stderr
     (new,) = set(run_dirs(cwd)) - set(before)
     return new, summary_of(new)
@@ -208,8 +208,9 @@ def test_save_buffer_and_sleep_from_exclude_each_other(tmp_path):
 )  # fmt: skip
 def test_the_controls_and_the_expert_rows_sleep_on_a_saved_day(saved_day, tmp_path, flags, loss):
     day_dir, original = saved_day
-    _, summary = sleep_on(day_dir, tmp_path, *flags)
+    _, summary = sleep_on(day_dir, tmp_path, *flags, study=True)  # python -m inform_utils.sleep_variants_maze
     assert f"{flags[0].removeprefix('--sleep-').replace('-', '_')}={flags[1]}" in summary["sleep_variant"]
+    assert summary["args"][flags[0].removeprefix("--").replace("-", "_")] == flags[1]  # the study flag, recorded
     assert loss in summary and summary["eval/inform_episode_length"] >= 1
     assert summary["feedback/positive"] == original["feedback/positive"]  # the same day
     if flags[1] != "expert":
