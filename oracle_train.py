@@ -1,18 +1,15 @@
 """Train the simulated teacher (the oracle) for INFORM (docs/protocol.md, "Oracles and the expert bar").
 
 Pusher and other continuous-action tasks: SAC (CleanRL's sac_continuous_action.py) on the env reward from random
-starts, step for step the SAC of `inform_sac_pusher.py --train-oracle` (a test compares the networks). The oracle
-written is the best periodic evaluation's networks (SB3's EvalCallback), judged again on held-out starts: state_dicts
-plus the arguments to rebuild them, read with torch.load(weights_only=True) by `inform_sac_pusher.py --oracle-path`.
-The maze (`--env-id KnoxStoneMaze-v0`, ...): `--method value-iteration` (exact Q*, the default), `q-learning` (an
-imperfect teacher like the authors' half-trained table) or `dqn` (CleanRL's dqn.py); the checkpoint's 30 x 4
-`q_table` is what `inform_dqn_gridworld.py --oracle-path` loads.
+starts, step for step the SAC of `inform_sac_pusher.py --train-oracle`. The oracle written is the best periodic
+evaluation's networks (as SB3's EvalCallback keeps), judged again on held-out starts; `inform_sac_pusher.py
+--oracle-path` reads it with torch.load(weights_only=True). The maze (`--env-id KnoxStoneMaze-v0`, ...): `--method
+value-iteration` (exact Q*, the default), `q-learning` (an imperfect teacher like the authors') or `dqn` (CleanRL's
+dqn.py), saved as the 30 x 4 `q_table` that `inform_dqn_gridworld.py --oracle-path` loads.
 
 Imported by inform_utils/, the only names other code may use (a test holds it to them): Actor.
 
-Examples:
     python oracle_train.py --env-id Pusher-v5 --total-timesteps 200000 --output-path oracles/Pusher-v5__sac_oracle.pt
-    python oracle_train.py --env-id Reacher-v5 --success-distance 0.02 --total-timesteps 100000
     python oracle_train.py --env-id KnoxStoneMaze-v0 --method dqn --maze-dqn-timesteps 20000
 """
 
@@ -26,11 +23,9 @@ import random
 import signal
 import sys
 import time
-import typing
 import warnings
-import zipfile
 from dataclasses import asdict, dataclass
-from typing import Annotated
+from typing import Annotated, get_type_hints
 
 import gymnasium as gym
 import numpy as np
@@ -58,8 +53,7 @@ EXPERT_FINAL_DISTANCE = 0.06
 
 @dataclass(frozen=True)
 class Range:
-    """A flag's values, declared beside it (tyro passes it by, check_args reads it): finite, in [low, high] (or
-    (low, high] with open_low); None passes."""
+    """A flag's values, beside it (tyro passes it by, check_args reads it): finite, in [low, high] or (low, high]."""
 
     low: float = -math.inf
     high: float = math.inf
@@ -69,10 +63,11 @@ class Range:
         if value is None or (math.isfinite(value) and value <= self.high and
                              (value > self.low if self.open_low else value >= self.low)):  # fmt: skip
             return
-        if self.high == math.inf:
-            bound = f"> {self.low}" if self.open_low else f">= {self.low}" if self.low > -math.inf else "finite"
-            raise InputError(f"{flag} must be {bound}, got {value}")
-        raise InputError(f"{flag} must be in {'(' if self.open_low else '['}{self.low}, {self.high}], got {value}")
+        if self.high < math.inf:
+            bound = f"in {'(' if self.open_low else '['}{self.low}, {self.high}]"
+        else:
+            bound = f"{'>' if self.open_low else '>='} {self.low}" if self.low > -math.inf else "finite"
+        raise InputError(f"{flag} must be {bound}, got {value}")
 
 
 POSITIVE_INT, POSITIVE, PROBABILITY = Range(1), Range(0, open_low=True), Range(0, 1)
@@ -149,8 +144,7 @@ class Args:
     checkpoint_frequency: Annotated[int, POSITIVE_INT] = 10000
     """write the resumable training state every this many steps"""
     stop_at_expert: bool = False
-    """end training at the first periodic evaluation that meets the expert bar (success >= 0.95, Pusher's distance
-    <= 0.06)"""
+    """end training at the first periodic evaluation that meets the expert bar (EXPERT_SUCCESS_RATE, ...)"""
     snapshot_frequency: Annotated[int, POSITIVE_INT] = 50000
     """keep a copy of the oracle checkpoint (oracle_step{N}.pt in the run dir) every this many steps"""
     resume: str | None = None
@@ -160,8 +154,7 @@ class Args:
 
     # Maze oracles
     method: str | None = None
-    """sac (continuous envs); value-iteration (exact Q*), q-learning or dqn on the maze (default: sac or
-    value-iteration)"""
+    """sac (continuous envs), or value-iteration (exact Q*), q-learning or dqn (the maze); default: the first"""
     maze_episodes: Annotated[int, POSITIVE_INT] = 50
     """episodes of the maze's tabular Q-learning (--method q-learning)"""
     maze_alpha: Annotated[float, Range(0, 1, open_low=True)] = 0.2
@@ -313,14 +306,12 @@ class SAC:
         self.qf_target.load_state_dict(self.qf.state_dict())
         self.q_optimizer = torch.optim.Adam(self.qf.parameters(), lr=q_lr)
         self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=policy_lr)
-        self.target_entropy = -float(act_dim)
         self.log_ent_coef = torch.zeros(1, device=device, requires_grad=True)
         self.ent_coef_optimizer = torch.optim.Adam([self.log_ent_coef], lr=q_lr)
-        self.autotune = autotune
+        self.target_entropy, self.autotune = -float(act_dim), autotune
         if not autotune:
             self.log_ent_coef.data.fill_(math.log(ent_coef))
-        zero = torch.zeros((), device=device)
-        self.losses = {"qf_loss": zero, "actor_loss": zero, "ent_coef_loss": zero}  # logged every --log-frequency
+        self.losses = dict.fromkeys(("qf_loss", "actor_loss", "ent_coef_loss"), torch.zeros((), device=device))
 
     def update(self, batch, gamma: float, tau: float, update_actor: bool, amp) -> None:
         """One gradient step of the critics; of the actor and the entropy coefficient if `update_actor` (delayed)."""
@@ -336,7 +327,6 @@ class SAC:
         qf_loss.backward()
         self.q_optimizer.step()
         self.losses["qf_loss"] = qf_loss
-
         if update_actor:
             with amp:
                 pi, logp, _ = self.actor.get_action(b_obs)
@@ -380,27 +370,19 @@ class Outcome:
 
 
 @torch.inference_mode()
-def run_episode(actor: Actor, env: gym.Env, reset_seed: int, generator: torch.Generator, device) -> tuple[float, dict]:
-    """One deterministic (mean-action) episode: (its return, the last info). The unused sample comes from
-    `generator`, so evaluating never moves the training RNG."""
-    obs, _ = env.reset(seed=reset_seed)
-    done, ep_return, info = False, 0.0, {}
-    while not done:
-        obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device).unsqueeze(0)
-        obs, reward, terminated, truncated, info = env.step(actor.get_action(obs_t, generator)[2][0].cpu().numpy())
-        ep_return += float(reward)
-        done = terminated or truncated
-    return ep_return, info
-
-
-def evaluate(actor: Actor, env_id: str, episodes: int, seed: int, device: torch.device, outcome: Outcome) -> dict:
-    """Episodes from the random starts of reset seeds seed, seed + 1, ...: return, final distance, success."""
-    env = gym.make(env_id)
+def evaluate(actor: Actor, env: gym.Env, episodes: int, seed: int, device: torch.device, outcome: Outcome) -> dict:
+    """Deterministic (mean-action) episodes from the random starts of reset seeds seed, seed + 1, ...: return, final
+    distance, success. The unused sample has its own generator, so evaluating never moves the training RNG."""
     generator = torch.Generator(device=device).manual_seed(seed)
     returns, distances, successes = [], [], []
     for ep in range(episodes):
-        stop_check()
-        ep_return, info = run_episode(actor, env, seed + ep, generator, device)
+        Stop.check()
+        obs, _ = env.reset(seed=seed + ep)
+        done, ep_return, info = False, 0.0, {}
+        while not done:
+            obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device).unsqueeze(0)
+            obs, reward, terminated, truncated, info = env.step(actor.get_action(obs_t, generator)[2][0].cpu().numpy())
+            ep_return, done = ep_return + float(reward), terminated or truncated
         distance, success, _ = outcome(info, ep_return)
         returns.append(ep_return)
         distances.append(distance)
@@ -413,26 +395,37 @@ def evaluate(actor: Actor, env_id: str, episodes: int, seed: int, device: torch.
 
 class Selection:
     """The best periodic evaluation so far (SB3's EvalCallback): by success rate, then the final distance (smaller
-    is better) or, when success is by return, the return. Its networks are best.pt, which a resumed run goes on from."""
+    is better) or, when success is by return, the return. Its networks are best.pt (a resumed run goes on from it);
+    every evaluation is logged, and a row of eval_curve.csv."""
 
     def __init__(self, run_dir: str, outcome: Outcome):
-        self.path, self.outcome = os.path.join(run_dir, "best.pt"), outcome
+        self.run_dir, self.path, self.by_return = (
+            run_dir,
+            os.path.join(run_dir, "best.pt"),
+            outcome.min_return is not None,
+        )
         self.key, self.step = (-1.0, -math.inf), None
         if os.path.isfile(self.path):
             best = torch.load(self.path, weights_only=True, map_location="cpu")
             self.key, self.step = self.rank(best["evaluation"]), best["training_steps"]
 
     def rank(self, evaluation: dict) -> tuple[float, float]:
-        by_return = self.outcome.min_return is not None
-        return evaluation["success_rate"], evaluation["return"] if by_return else -evaluation["final_distance"]
+        return evaluation["success_rate"], evaluation["return"] if self.by_return else -evaluation["final_distance"]
 
     def tie(self) -> float:  # the best's return, or its final distance
-        return self.key[1] if self.outcome.min_return is not None else -self.key[1]
+        return self.key[1] if self.by_return else -self.key[1]
 
-    def offer(self, evaluation: dict, step: int, save) -> None:
+    def offer(self, evaluation: dict, step: int, save, writer: SummaryWriter) -> None:
         if self.rank(evaluation) > self.key:
             self.key, self.step = self.rank(evaluation), step
             save(step, {**evaluation, "reset_seed": SELECTION_EVAL_SEED}, self.path)
+        for name in ("return", "final_distance", "success_rate"):
+            writer.add_scalar(f"eval/oracle_{name}", evaluation[name], step)
+        writer.add_scalar("eval/best_success_rate", self.key[0], step)
+        writer.add_scalar("eval/best_return" if self.by_return else "eval/best_final_distance", self.tie(), step)
+        with open(os.path.join(self.run_dir, "eval_curve.csv"), "a") as f:
+            f.write("step,success_rate,final_distance,return\n" if f.tell() == 0 else "")
+            f.write(f"{step},{evaluation['success_rate']},{evaluation['final_distance']},{evaluation['return']}\n")
 
 
 def train_sac(args: Args, resume_state: dict | None = None) -> None:
@@ -462,6 +455,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
         run_dir = new_run_dir(args)
     writer = open_writer(args, run_dir)
     print(f"run directory: {run_dir}", flush=True)
+    state_path = os.path.join(run_dir, "training_state.pt")
 
     def save_oracle(step: int, evaluation: dict, path: str) -> None:
         atomic_save(oracle_checkpoint(sac, args, step, evaluation), path)
@@ -470,13 +464,12 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     selection = Selection(run_dir, outcome)
     obs, _ = env.reset(seed=args.seed + start_step)  # random starts: seed once, then the env RNG runs on
     obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
-    ep_return, ep_length = 0.0, 0
+    ep_return, ep_length, last_eval = 0.0, 0, {}
     t0 = t_last = time.time()
     step_last = trained = start_step  # trained: env steps so far (fewer than --total-timesteps after --stop-at-expert)
-    last_eval = {}
     report_every = max(1, (args.total_timesteps - start_step) // 20)
     for global_step in range(start_step, args.total_timesteps):
-        stop_check()
+        Stop.check()
         if global_step < args.learning_starts:
             action = env.action_space.sample()
         else:
@@ -492,8 +485,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
             if not math.isnan(distance := outcome(info, ep_return)[0]):
                 writer.add_scalar("charts/final_distance", distance, global_step)
             ep_return, ep_length = 0.0, 0
-            next_obs, _ = env.reset()
-            next_obs_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
+            next_obs_t = torch.as_tensor(env.reset()[0], dtype=torch.float32, device=device)
         obs_t = next_obs_t
 
         # ALGO LOGIC: one SAC update per env step, the actor's delayed
@@ -507,27 +499,22 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
                 writer.add_scalar(f"losses/{name}", loss.item(), step)
             writer.add_scalar("losses/ent_coef", sac.log_ent_coef.exp().item(), step)
             writer.add_scalar("charts/SPS", (step - step_last) / max(time.time() - t_last, 1e-9), step)
-        evaluated = step % args.eval_frequency == 0 or step == args.total_timesteps
-        if evaluated:
-            last_eval = evaluate(sac.actor, args.env_id, args.eval_episodes, SELECTION_EVAL_SEED, device, outcome)
-            selection.offer(last_eval, step, save_oracle)
-            log_evaluation(writer, run_dir, step, last_eval, selection)
+        if evaluated := step % args.eval_frequency == 0 or step == args.total_timesteps:
+            last_eval = evaluate(sac.actor, gym.make(args.env_id), args.eval_episodes, SELECTION_EVAL_SEED, device,
+                                 outcome)  # fmt: skip
+            selection.offer(last_eval, step, save_oracle, writer)
         if step % report_every == 0 or evaluated:
             print_progress(step, start_step, args.total_timesteps, t0, last_eval, selection)
         if step % args.checkpoint_frequency == 0 or step == args.total_timesteps:
-            save_training_state(os.path.join(run_dir, "training_state.pt"), sac, rb, step)
-            save_oracle(step, last_eval or {}, os.path.join(run_dir, "oracle_latest.pt"))
+            save_training_state(state_path, sac, rb, step)
+            save_oracle(step, last_eval, os.path.join(run_dir, "oracle_latest.pt"))
             if step % args.snapshot_frequency == 0:  # kept, so the teacher can be chosen by a longer evaluation later
-                save_oracle(step, last_eval or {}, os.path.join(run_dir, f"oracle_step{step:07d}.pt"))
+                save_oracle(step, last_eval, os.path.join(run_dir, f"oracle_step{step:07d}.pt"))
         t_last, step_last = (time.time(), step) if step % args.log_frequency == 0 else (t_last, step_last)
-        if (
-            args.stop_at_expert
-            and evaluated
-            and last_eval["success_rate"] >= EXPERT_SUCCESS_RATE
-            and (args.env_id not in PUSHER_IDS or last_eval["final_distance"] <= EXPERT_FINAL_DISTANCE)
-        ):
+        if args.stop_at_expert and evaluated and last_eval["success_rate"] >= EXPERT_SUCCESS_RATE and (
+            args.env_id not in PUSHER_IDS or last_eval["final_distance"] <= EXPERT_FINAL_DISTANCE):  # fmt: skip
             print(f"[oracle] step {step}: the evaluation meets the expert bar (--stop-at-expert), training ends")
-            save_training_state(os.path.join(run_dir, "training_state.pt"), sac, rb, step)
+            save_training_state(state_path, sac, rb, step)
             break
     env.close()
     write_oracle(args, sac, selection, run_dir, device, trained, time.time() - t0)
@@ -539,7 +526,8 @@ def write_oracle(args: Args, sac: SAC, selection: Selection, run_dir: str, devic
     best = torch.load(selection.path, weights_only=True, map_location="cpu")
     sac.actor.load_state_dict(best["actor_state_dict"])
     sac.qf.load_state_dict(best["qf_state_dict"])
-    final = evaluate(sac.actor, args.env_id, args.final_eval_episodes, FINAL_EVAL_SEED, device, selection.outcome)
+    final = evaluate(sac.actor, gym.make(args.env_id), args.final_eval_episodes, FINAL_EVAL_SEED, device,
+                     Outcome.from_args(args))  # fmt: skip
     chosen = best["evaluation"]
     print(f"[oracle] best evaluation at step {best['training_steps']}: success rate {chosen['success_rate']:.2f}, "
           f"final distance {chosen['final_distance']:.4f} over {chosen['episodes']:.0f} episodes; held-out eval over "
@@ -551,8 +539,8 @@ def write_oracle(args: Args, sac: SAC, selection: Selection, run_dir: str, devic
         ckpt.update(train_time_s_this_session=float(train_time), selection_evaluation=chosen, total_timesteps=trained)
         os.makedirs(os.path.dirname(os.path.abspath(args.output_path)), exist_ok=True)
         atomic_save(ckpt, args.output_path)
-        atomic_write(os.path.join(run_dir, "oracle_eval.json"), {"eval": final, "selection_eval": chosen,
-                     "steps": best["training_steps"], "train_time_s": train_time, "args": asdict(args)})  # fmt: skip
+        report = {"eval": final, "selection_eval": chosen, "steps": best["training_steps"], "train_time_s": train_time}
+        atomic_write(os.path.join(run_dir, "oracle_eval.json"), json.dumps({**report, "args": asdict(args)}, indent=1))
         print(f"oracle written to {args.output_path}", flush=True)
     if args.capture_video:
         record_teacher(args, sac.actor, run_dir, device)
@@ -566,7 +554,7 @@ def maze_q_learning(env: gym.Env, args: Args) -> tuple[np.ndarray, int]:
     steps = 0
     obs, _ = env.reset(seed=args.seed)
     for _ in range(args.maze_episodes):
-        stop_check()
+        Stop.check()
         s, done = int(obs.argmax()), False
         while not done:
             best = np.flatnonzero(q[s] == q[s].max())
@@ -610,10 +598,9 @@ def maze_dqn(env: gym.Env, args: Args) -> MazeQNetwork:
     s = int(env.reset(seed=args.seed)[0].argmax())
     decay_steps = max(1, int(args.maze_dqn_exploration_fraction * args.maze_dqn_timesteps))
     for global_step in range(args.maze_dqn_timesteps):
-        stop_check()
+        Stop.check()
         fraction = min(global_step / decay_steps, 1.0)  # epsilon decays linearly from start_e to end_e
-        epsilon = args.maze_dqn_start_e + (args.maze_dqn_end_e - args.maze_dqn_start_e) * fraction
-        if rng.random() < epsilon:
+        if rng.random() < args.maze_dqn_start_e + (args.maze_dqn_end_e - args.maze_dqn_start_e) * fraction:
             action = int(env.action_space.sample())
         else:
             with torch.no_grad():
@@ -621,7 +608,6 @@ def maze_dqn(env: gym.Env, args: Args) -> MazeQNetwork:
         obs, reward, terminated, truncated, _ = env.step(action)
         rb.add(eye[s], eye[int(obs.argmax())], action, reward, terminated)
         s = int(obs.argmax()) if not (terminated or truncated) else int(env.reset()[0].argmax())
-
         if global_step >= args.maze_dqn_learning_starts and global_step % args.maze_dqn_train_frequency == 0:
             b_obs, b_next, b_act, b_rew, b_term = rb.sample(args.maze_dqn_batch_size)
             with torch.no_grad():
@@ -667,7 +653,7 @@ def train_maze(args: Args) -> None:
 
 def main() -> None:
     # Ctrl-C, SIGTERM (Slurm's cancel and time limit, kill) and SIGHUP (a closed terminal) stop training: recorded
-    # here, acted on by stop_check() at the next loop head. An ignored signal stays ignored (nohup, `&`).
+    # here, acted on by Stop.check() at the next loop head. An ignored signal stays ignored (nohup, `&`).
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         if signal.getsignal(sig) is not signal.SIG_IGN:
             signal.signal(sig, lambda signum, frame: Stop.signals.append(signal.Signals(signum).name))
@@ -693,13 +679,14 @@ def main() -> None:
         print(f"failed: cannot write {e.filename}: {e.strerror}; no partial file is left{resume}", file=sys.stderr)
         sys.exit(1)
     except KeyboardInterrupt:  # nothing half-written: every file is saved atomically
-        reason = (Stop.signals or ["SIGINT"])[0]
-        print(f"interrupted ({reason}); no oracle checkpoint was written. SAC training continues from its last saved "
-              "state with --resume <run dir>/training_state.pt", file=sys.stderr)  # fmt: skip
-        sys.exit(128 + signal.Signals[reason].value)  # 130 SIGINT, 143 SIGTERM, 129 SIGHUP
-    if Stop.signals:  # after the last loop: the oracle is complete, and the caller (a shell loop too) asked to stop
+        Stop.raised = True
+        print(f"interrupted ({(Stop.signals or ['SIGINT'])[0]}); no oracle checkpoint was written. SAC training "
+              "continues from its last saved state with --resume <run dir>/training_state.pt",
+              file=sys.stderr)  # fmt: skip
+    if Stop.signals and not Stop.raised:  # after the last loop: the oracle is complete, and the caller asked to stop
         print(f"{Stop.signals[0]} received after training finished; the oracle checkpoint is complete", file=sys.stderr)
-        sys.exit(128 + signal.Signals[Stop.signals[0]].value)
+    if Stop.signals or Stop.raised:
+        sys.exit(128 + signal.Signals[(Stop.signals or ["SIGINT"])[0]].value)  # 130 SIGINT, 143 SIGTERM, 129 SIGHUP
 
 
 # TRY NOT TO MODIFY: the flags' checks, stops, files, logging and videos
@@ -709,7 +696,7 @@ class InputError(Exception):
 
 def check_args(args: Args) -> None:
     """What tyro cannot know: each flag's Range, the env id, the method, files, the run's name. Raises InputError."""
-    for name, hint in typing.get_type_hints(Args, include_extras=True).items():
+    for name, hint in get_type_hints(Args, include_extras=True).items():
         for rule in getattr(hint, "__metadata__", ()):
             rule.check(f"--{name.replace('_', '-')}", getattr(args, name))
     maze = args.env_id in MAZE_IDS
@@ -729,8 +716,8 @@ def check_args(args: Args) -> None:
         raise InputError(f"--maze-dqn-batch-size {args.maze_dqn_batch_size} is larger than --maze-dqn-timesteps "
                          f"{args.maze_dqn_timesteps}")  # fmt: skip
     if args.maze_dqn_learning_starts >= args.maze_dqn_timesteps:
-        raise InputError(f"--maze-dqn-learning-starts ({args.maze_dqn_learning_starts}) must be below "
-                         f"--maze-dqn-timesteps ({args.maze_dqn_timesteps}), or the DQN never learns")  # fmt: skip
+        raise InputError(f"--maze-dqn-learning-starts {args.maze_dqn_learning_starts} leaves no step of "
+                         f"--maze-dqn-timesteps {args.maze_dqn_timesteps} to learn in")  # fmt: skip
     if not args.exp_name or any(c in args.exp_name for c in "/\\\0") or args.exp_name in (".", ".."):
         raise InputError(f"--exp-name {args.exp_name!r} must name one directory under runs/ (no '/', not '..')")
     if len(run_name(args).encode()) > 240:  # a file name has at most 255 bytes; room for new_run_dir's suffix
@@ -749,9 +736,8 @@ def check_env(args: Args) -> None:
         env = gym.make(args.env_id)
     except Exception as e:  # unknown id, a missing extra (box2d, ...), a version that needs other packages
         first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
-        raise InputError(
-            f"--env-id {args.env_id}: Gymnasium cannot make it ({first}); mazes: {', '.join(MAZE_IDS)}"
-        ) from None
+        raise InputError(f"--env-id {args.env_id}: Gymnasium cannot make it ({first}); mazes: {', '.join(MAZE_IDS)}"
+                         ) from None  # fmt: skip
     obs_space, act_space = env.observation_space, env.action_space
     if not isinstance(act_space, gym.spaces.Box):
         raise InputError(f"--env-id {args.env_id}: its actions are {type(act_space).__name__}, not continuous (Box)")
@@ -767,32 +753,29 @@ def check_env(args: Args) -> None:
 
 
 class Stop:
-    """The stop signals received (main's handler only records them) and whether stop_check() has acted on them."""
+    """The stop signals received (main's handler only records them); check() acts on them once, at a loop's head: in
+    our own code, never inside a library call (TensorBoard's writer, a checkpoint being written)."""
 
-    signals = []
-    raised = False
+    signals, raised = [], False
 
-
-def stop_check() -> None:
-    """KeyboardInterrupt if a stop signal came (once), at the head of every loop: in our own code, never inside a
-    library call (TensorBoard's writer, a checkpoint being written)."""
-    if Stop.signals and not Stop.raised:
-        Stop.raised = True
-        raise KeyboardInterrupt
+    @classmethod
+    def check(cls) -> None:
+        if cls.signals and not cls.raised:
+            cls.raised = True
+            raise KeyboardInterrupt
 
 
 def atomic_save(obj, path: str) -> None:
-    buffer = io.BytesIO()
-    torch.save(obj, buffer)  # serialized in memory first, so that a full disk is an OSError of the write
-    atomic_write(path, buffer.getbuffer())
+    with io.BytesIO() as buffer:  # serialized in memory first, so that a full disk is an OSError of the write
+        torch.save(obj, buffer)
+        atomic_write(path, buffer.getvalue())
 
 
-def atomic_write(path: str, data) -> None:
-    """Bytes (or a dict, as JSON) to path.tmp, then renamed; if that fails, path.tmp is removed and the OSError names
-    path."""
+def atomic_write(path: str, data: bytes | str) -> None:
+    """data to path.tmp, then renamed; if that fails, path.tmp is removed and the OSError names path."""
     try:
         with open(path + ".tmp", "wb") as f:
-            f.write(json.dumps(data, indent=1).encode() if isinstance(data, dict) else data)
+            f.write(data.encode() if isinstance(data, str) else data)
         os.replace(path + ".tmp", path)
     except OSError as e:
         if os.path.exists(path + ".tmp"):
@@ -824,18 +807,14 @@ def save_training_state(path: str, sac: SAC, rb: ReplayBuffer, step: int) -> Non
 
 def read_training_state(path: str) -> dict:
     """torch.load(path, weights_only=True) of a training_state.pt; every way it can fail is one InputError."""
-    try:  # torch.save writes a zip archive; a truncated one has lost its directory
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            state = torch.load(path, weights_only=True, map_location="cpu") if zipfile.is_zipfile(path) else None
-    except Exception as e:  # code in the pickle (weights_only refuses it), a damaged archive
-        why = next((line.strip() for line in str(e).splitlines() if "unsupported" in line.lower()), type(e).__name__)
-        raise InputError(
-            f"--resume {path}: refused, not a torch checkpoint of tensors and plain values ({why[:160]})"
-        ) from None
+    try:  # weights_only refuses a pickle that could run code
+        state = torch.load(path, weights_only=True, map_location="cpu")
+    except Exception as e:
+        raise InputError(f"--resume {path}: not a torch checkpoint of tensors and plain values, refused "
+                         f"({type(e).__name__})") from None  # fmt: skip
     keys = (*SAC.MODULES, "log_ent_coef", "buf_n", *(f"buf_{f}" for f in ReplayBuffer.FIELDS), "global_step")
     if not isinstance(state, dict) or any(key not in state for key in (*keys, "torch_rng")):
-        raise InputError(f"--resume {path}: not a torch checkpoint of a training state of oracle_train.py")
+        raise InputError(f"--resume {path}: not a training_state.pt of oracle_train.py")
     return state
 
 
@@ -848,14 +827,13 @@ def load_training_state(state: dict, sac: SAC, rb: ReplayBuffer, args: Args) -> 
         rb.n = int(state["buf_n"])
         for name, buf in rb.data.items():
             buf[: min(rb.n, rb.size)] = state[f"buf_{name}"][: min(rb.n, rb.size)]
-        step = int(state["global_step"])
         torch.set_rng_state(state["torch_rng"])
     except (RuntimeError, ValueError, TypeError, KeyError, IndexError) as e:  # nothing is written before this
         first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
         raise InputError(f"--resume {args.resume}: does not fit this run ({type(e).__name__}: {first})") from None
-    if args.seed + step >= 2**32:  # numpy's seeds are below 2**32
-        raise InputError(f"--resume at step {step} seeds numpy with --seed + {step}, which must be < 2**32")
-    return step
+    if args.seed + int(state["global_step"]) >= 2**32:  # numpy's seeds are below 2**32
+        raise InputError(f"--resume: the run goes on with numpy's seed --seed + {state['global_step']}, over 2**32")
+    return int(state["global_step"])
 
 
 def run_name(args: Args) -> str:
@@ -886,19 +864,6 @@ def open_writer(args: Args, run_dir: str) -> SummaryWriter:
     return writer
 
 
-def log_evaluation(writer: SummaryWriter, run_dir: str, step: int, evaluation: dict, selection: Selection) -> None:
-    """A periodic evaluation and the best so far, in TensorBoard and as a row of eval_curve.csv."""
-    for name in ("return", "final_distance", "success_rate"):
-        writer.add_scalar(f"eval/oracle_{name}", evaluation[name], step)
-    writer.add_scalar("eval/best_success_rate", selection.key[0], step)
-    by_return = selection.outcome.min_return is not None
-    writer.add_scalar("eval/best_return" if by_return else "eval/best_final_distance", selection.tie(), step)
-    with open(os.path.join(run_dir, "eval_curve.csv"), "a") as f:  # the selection curve, one row per evaluation
-        if f.tell() == 0:
-            f.write("step,success_rate,final_distance,return\n")
-        f.write(f"{step},{evaluation['success_rate']},{evaluation['final_distance']},{evaluation['return']}\n")
-
-
 def print_progress(step: int, start_step: int, total: int, t0: float, evaluation: dict, selection: Selection) -> None:
     sps = (step - start_step) / max(time.time() - t0, 1e-9)
     eta = (total - step) / max(sps, 1e-9)
@@ -917,13 +882,13 @@ VIDEO_EPISODES = 3
 
 
 def video_env(env_id: str, size: int = VIDEO_SIZE) -> gym.Env:
-    """The env, rendering every reset and step into a list; Pusher without shadows (3x faster in software GL)."""
+    """The env, rendering every reset and step into one list; Pusher without shadows (3x faster in software GL)."""
     env = gym.make(env_id, render_mode="rgb_array", width=size, height=size)
     if env_id in PUSHER_IDS:  # both are read when the first frame creates the renderer
         camera = {**VIDEO_CAMERA, "lookat": np.array(VIDEO_CAMERA["lookat"]), "azimuth": 180.0, "trackbodyid": -1}
         env.unwrapped.mujoco_renderer.default_cam_config = camera
         env.unwrapped.model.vis.quality.shadowsize = 0
-    return gym.wrappers.RenderCollection(env)
+    return gym.wrappers.RenderCollection(env, reset_clean=False)
 
 
 def check_video(env_id: str) -> None:
@@ -940,7 +905,7 @@ def check_video(env_id: str) -> None:
             warnings.simplefilter("ignore")
             env = video_env(env_id, size=16)
             env.reset(seed=0)
-            np.asarray(env.render()[-1]).reshape(16, 16, 3)  # ValueError if MuJoCo rendered no image
+            np.asarray(env.render()[-1]).reshape(16, 16, 3)  # a ValueError if MuJoCo rendered no image
             env.close()
     except Exception as e:
         raise InputError(f"--capture-video: MuJoCo cannot render with MUJOCO_GL={os.environ.get('MUJOCO_GL')} "
@@ -949,7 +914,7 @@ def check_video(env_id: str) -> None:
 
 
 def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
-    """H.264 mp4, written to a temporary name and renamed: an interrupted write leaves no half-written video."""
+    """H.264 mp4 by imageio-ffmpeg (Gymnasium's RecordVideo needs moviepy), under a temporary name, then renamed."""
     import imageio_ffmpeg
 
     tmp = path[: -len(".mp4")] + ".tmp.mp4"  # ffmpeg reads the container from the extension
@@ -966,25 +931,20 @@ def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
             os.remove(tmp)
 
 
-def record_teacher(args: Args, actor: Actor, run_dir: str, device: torch.device) -> dict:
-    """The oracle's first VIDEO_EPISODES held-out evaluation episodes (reset seeds and generator as `evaluate` gives
-    them) in videos/oracle.mp4; videos/videos.json has each one's reset seed, frames and final distance."""
+def record_teacher(args: Args, actor: Actor, run_dir: str, device: torch.device) -> None:
+    """The oracle's first VIDEO_EPISODES held-out evaluation episodes, back to back in videos/oracle.mp4, and their
+    evaluation (the held-out one's on its first episodes) in videos/videos.json."""
     os.makedirs(os.path.join(run_dir, "videos"), exist_ok=True)
-    env, outcome, t0 = video_env(args.env_id), Outcome.from_args(args), time.time()
-    generator = torch.Generator(device=device).manual_seed(FINAL_EVAL_SEED)
-    frames, record = [], {}
-    for ep in range(VIDEO_EPISODES):
-        stop_check()
-        ep_return, info = run_episode(actor, env, FINAL_EVAL_SEED + ep, generator, device)
-        frames += (episode := env.render())
-        record[f"episode_{ep}"] = {"reset_seed": FINAL_EVAL_SEED + ep, "frames": len(episode),
-                                   "final_distance": outcome(info, ep_return)[0]}  # fmt: skip
+    env, t0 = video_env(args.env_id), time.time()
+    evaluation = evaluate(actor, env, VIDEO_EPISODES, FINAL_EVAL_SEED, device, Outcome.from_args(args))
+    frames = env.render()
     write_video(path := os.path.join(run_dir, "videos", "oracle.mp4"), frames, env.metadata["render_fps"])
-    env.close()
-    atomic_write(os.path.join(run_dir, "videos", "videos.json"),
-                 {"file": "oracle.mp4", "size": list(frames[0].shape), "episodes": record})  # fmt: skip
+    record = {"file": "oracle.mp4", "size": list(frames[0].shape), "frames": len(frames), "evaluation": evaluation}
+    atomic_write(
+        os.path.join(run_dir, "videos", "videos.json"),
+        json.dumps({**record, "first_reset_seed": FINAL_EVAL_SEED}, indent=1),
+    )
     print(f"[video] {VIDEO_EPISODES} episodes of the oracle filmed in {time.time() - t0:.1f}s: {path}", flush=True)
-    return record
 
 
 if __name__ == "__main__":
