@@ -16,7 +16,9 @@ one watches read-only.
     GET  /outcome     the picture of what came of the night (PNG, or an animated GIF)
     POST /answer      {"nonce", "answer": "yes" | "no" | "none", "question": id | null, "seq": frame, "waited_ms"}
     POST /end         the person ends the day
-    POST /bye         the page is being closed or reloaded: the day ends unless it is back within `close_grace` s
+    POST /bye         the page is being closed or reloaded: the day ends if, `close_grace` s later, no page is open
+
+The page names itself in every request (?page=, one id a load), so a reload (a new page) is told from a closed one.
 
 Two ways to teach. `ask` waits for the person's answer about one move (the maze; the Pusher at the person's pace).
 `show` streams steps at `pace` steps a second without waiting, and `answers` hands over what the person answered
@@ -159,6 +161,7 @@ class BrowserTeacher:
         pace: float | None = None,
         delay: tuple[float, float] = DEEP_TAMER_DELAY,
         close_grace: float = 5.0,
+        linger: float = 5.0,
         quiet: bool = False,
     ):
         if task not in TASKS:
@@ -173,6 +176,7 @@ class BrowserTeacher:
         self.pace = pace
         self.delay = (float(delay[0]), float(delay[1]))
         self.close_grace = close_grace
+        self.linger = linger
         self.token = secrets.token_urlsafe(24)
         self.run_id = hashlib.sha256(self.token.encode()).hexdigest()[:12]  # names the cookie and the page's storage
         self.cookie = f"inform_{self.run_id}"
@@ -180,10 +184,11 @@ class BrowserTeacher:
         self._cond = threading.Condition()  # guards everything below; notified at each change
         self._version = 0
         self._started = time.monotonic()
-        self._closed = False
+        self._closed = self._closing = False
         self._sessions: set[str] = set()
         self._owner: str | None = None
-        self._owner_seen = 0.0
+        self._pages: dict[str, float] = {}  # the person's pages (one a load of the page): when each was last heard
+        self._pages_gone: set[str] = set()  # the pages that said goodbye (closed, or reloaded)
         self._bye_at: float | None = None
         self._step: int | None = None
         self._counts = dict.fromkeys(LABELS, 0)
@@ -204,6 +209,8 @@ class BrowserTeacher:
         self._message = ""
         self._outcome: dict | None = None
         self._outcome_image: tuple[bytes, str] | None = None  # (bytes, content type)
+        self._outcome_fetched = False  # by the person's page
+        self._owner_version = -1  # the newest state the person's page was sent
         handler = type("Handler", (_Handler,), {"teacher": self})
         server_class = _Server6 if ":" in host else _Server
         self._server = server_class((host, port), handler)  # first: a port in use is an OSError before any file
@@ -327,25 +334,34 @@ class BrowserTeacher:
         with self._cond:
             if self.ended is None:
                 self._end("day done")
-            self._outcome = {"text": str(text), "image": picture is not None}
+            number = self._outcome["id"] + 1 if self._outcome else 1
+            self._outcome = {"id": number, "text": str(text), "image": picture is not None}
             self._outcome_image = picture
+            self._outcome_fetched = False
             self._mode = "outcome"
             self._changed()
 
     def close(self) -> None:
-        """Stop serving (the day ends as "closed" if it had not ended); the page shows that the run is over."""
+        """Stop serving (the day ends as "closed" if it had not ended); the page shows that the run is over. An open
+        page first gets the newest state and the outcome's picture: close waits for that, at most `linger` s."""
         with self._cond:
-            if self._closed:
+            if self._closed or self._closing:
                 return
+            self._closing = True
             if self.ended is None:
                 self._end("closed")
-            self._closed = True
-            self._changed()  # waiting long polls answer with the final state before the server stops
-        self._server.shutdown()
-        self._server.server_close()
-        self._thread.join(5)
-        with self._cond:
-            self._log.close()
+        try:
+            with self._cond:
+                self._cond.wait_for(self._page_has_all, self.linger)
+        finally:
+            with self._cond:
+                self._closed = True
+                self._changed()  # waiting long polls answer with the final state before the server stops
+            self._server.shutdown()
+            self._server.server_close()
+            self._thread.join(5)
+            with self._cond:
+                self._log.close()
 
     def __enter__(self):
         return self
@@ -380,12 +396,17 @@ class BrowserTeacher:
         self._record({"event": "end", "why": why, "step": self._step, "answers": sum(self._counts.values())})
         self._changed()
 
+    def _live_pages(self) -> list[str]:
+        """The person's pages still open: heard from lately (an open page long-polls) and not gone."""
+        now = time.monotonic()
+        return [page for page, t in self._pages.items() if page not in self._pages_gone and now - t < LONG_POLL_S + 3]
+
     def _check_page_closed(self) -> None:
-        """The page said goodbye (closed or reloaded) and has not come back within close_grace: it was closed."""
+        """A page said goodbye (closed or reloaded) close_grace ago, and no page of the person's is open: closed."""
         if self._bye_at is not None and time.monotonic() - self._bye_at > self.close_grace:
-            if self._owner_seen <= self._bye_at:
-                self._end("page closed")
             self._bye_at = None
+            if not self._live_pages():
+                self._end("page closed")
 
     def _put_frame(self, step, action, state_text, frame) -> None:
         self._step = step
@@ -439,11 +460,23 @@ class BrowserTeacher:
         with self._cond:
             if since is not None:
                 self._cond.wait_for(lambda: self._version != since or self._closed, LONG_POLL_S)
+            if role == "teacher":
+                self._owner_version = self._version
+                self._cond.notify_all()  # close() may wait for this
             return self._state(role)
 
-    def _outcome_picture(self) -> tuple[bytes, str] | None:
+    def _outcome_picture(self, role: str) -> tuple[bytes, str] | None:
         with self._cond:
+            if role == "teacher" and self._outcome_image is not None:
+                self._outcome_fetched = True
+                self._cond.notify_all()
             return self._outcome_image
+
+    def _page_has_all(self) -> bool:
+        """The person's page has the newest state and the outcome's picture (or no page is open to want them)."""
+        gone = not self._live_pages()
+        fetched = self._outcome_image is None or self._outcome_fetched
+        return gone or (self._owner_version >= self._version and fetched)
 
     def _png(self) -> tuple[int | None, bytes | None]:
         with self._cond:
@@ -520,10 +553,11 @@ class BrowserTeacher:
                 self._owner = session
             return session, session
 
-    def _role(self, session: str | None) -> str:
+    def _role(self, session: str | None, page: str | None) -> str:
         with self._cond:
             if session is not None and session == self._owner:
-                self._owner_seen = time.monotonic()
+                if page is not None:
+                    self._pages[page] = time.monotonic()
                 return "teacher"
             return "watcher"
 
@@ -576,7 +610,8 @@ class _Handler(BaseHTTPRequestHandler):
         if method != allowed:
             return self.reply(405, b"405\n", "text/plain", {"Allow": allowed})
         session, new = self.teacher._session(self.headers.get("Cookie"), make=path == "/")
-        role = self.teacher._role(session)
+        page = query.get("page", [""])[0]
+        role = self.teacher._role(session, page if NONCE.fullmatch(page) else None)
         handle(query, role, new)
 
     def reply(self, status: int, body: bytes, content_type: str, headers: dict | None = None):
@@ -632,7 +667,7 @@ class _Handler(BaseHTTPRequestHandler):
         self.reply(200, png, "image/png", {"X-Frame-Seq": str(seq)})
 
     def outcome(self, query, role, new_session):
-        picture = self.teacher._outcome_picture()
+        picture = self.teacher._outcome_picture(role)
         if picture is None:
             return self.reply(404, b"404: no outcome yet\n", "text/plain")
         self.reply(200, *picture)
@@ -653,8 +688,10 @@ class _Handler(BaseHTTPRequestHandler):
         self.reply_json(200, {"ended": self.teacher.ended})
 
     def bye(self, query, role, new_session):
-        if role == "teacher":
+        page = query.get("page", [""])[0]
+        if role == "teacher" and NONCE.fullmatch(page):
             with self.teacher._cond:
+                self.teacher._pages_gone.add(page)
                 self.teacher._bye_at = time.monotonic()
         self.reply(204, b"", "text/plain")
 
@@ -715,8 +752,10 @@ const QUEUE = "inform_pending___RUN_ID__";  // answers the server has not confir
 const $ = (id) => document.getElementById(id);
 let state = null, receivedAt = 0, shownSeq = 0, offline = false, endArmed = 0, gone = false;
 const answered = new Set();  // the questions this page answered (the state may not say so yet)
+let outcomeShown = null;  // the outcome whose picture was fetched
+const PAGE = nonce();  // this load of the page: the server tells a reload from a closed page by it
 
-function url(path, extra) { return path + "?" + new URLSearchParams({token: TOKEN, ...(extra || {})}); }
+function url(path, extra) { return path + "?" + new URLSearchParams({token: TOKEN, page: PAGE, ...(extra || {})}); }
 function sleep(ms) { return new Promise((r) => setTimeout(r, ms)); }
 function pending() { try { return JSON.parse(localStorage.getItem(QUEUE) || "[]"); } catch (e) { return []; } }
 function setPending(list) { localStorage.setItem(QUEUE, JSON.stringify(list)); }
@@ -841,7 +880,10 @@ function render() {
       drawMaze($("outcome-text"), s.outcome.text);
       $("outcome-text").dataset.text = s.outcome.text;
     }
-    if (s.outcome.image && $("outcome-img").hidden) loadImage($("outcome-img"), url("/outcome"));
+    if (s.outcome.image && outcomeShown !== s.outcome.id) {  // once per outcome (show_outcome may come again)
+      outcomeShown = s.outcome.id;
+      loadImage($("outcome-img"), url("/outcome")).catch(() => {});
+    }
   }
 }
 

@@ -52,9 +52,12 @@ class Session:
         self.base = f"http://127.0.0.1:{teacher.port}"
         self.token = teacher.token if token is None else token
         self.opener = urllib.request.build_opener(urllib.request.HTTPCookieProcessor(CookieJar()))
+        self.page = None  # the id of the page's current load, as the page's script sends it
 
     def request(self, method: str, path: str, body: dict | None = None, **query) -> tuple[int, bytes, dict]:
-        params = {"token": self.token, **query} if self.token else query
+        params = {"token": self.token, **query} if self.token else dict(query)
+        if self.page is not None:
+            params.setdefault("page", self.page)
         address = self.base + path + ("?" + urllib.parse.urlencode(params) if params else "")
         data = None if body is None else json.dumps(body).encode()
         req = urllib.request.Request(address, data=data, method=method, headers={"Content-Type": "application/json"})
@@ -65,6 +68,7 @@ class Session:
             return error.code, error.read(), dict(error.headers)
 
     def load(self) -> int:
+        self.page = os.urandom(8).hex()  # a new load of the page
         return self.request("GET", "/")[0]
 
     def state(self, since: int | None = None) -> dict:
@@ -148,7 +152,9 @@ def wait_until(condition, what: str, timeout: float = WAIT_S):
 
 @pytest.fixture
 def teacher(tmp_path):
-    with BrowserTeacher(str(tmp_path / "run"), participant="P07", budget=5, quiet=True, close_grace=0.3) as page:
+    """A page served to urllib sessions, which do not long-poll: close() need not wait for them (linger 0)."""
+    run_dir = str(tmp_path / "run")
+    with BrowserTeacher(run_dir, participant="P07", budget=5, quiet=True, close_grace=0.3, linger=0) as page:
         yield page
 
 
@@ -268,7 +274,7 @@ def test_a_reload_or_a_retried_answer_loses_nothing(teacher):
 
 
 def test_the_day_ends_by_the_button_or_a_closed_page(tmp_path):
-    with BrowserTeacher(str(tmp_path / "a"), quiet=True) as page:
+    with BrowserTeacher(str(tmp_path / "a"), quiet=True, linger=0) as page:
         loop = Loop(page, moves=5)
         person = Session(page)
         person.load()
@@ -278,7 +284,7 @@ def test_the_day_ends_by_the_button_or_a_closed_page(tmp_path):
         assert loop.returned == [None] and page.ended == "end of day"
         assert page.ask(2, 0) is None  # no more questions once the day is over
         assert person.answer("yes", 1, "after")[0] == 409
-    with BrowserTeacher(str(tmp_path / "b"), quiet=True, close_grace=0.3) as page:
+    with BrowserTeacher(str(tmp_path / "b"), quiet=True, close_grace=0.3, linger=0) as page:
         loop = Loop(page, moves=5)
         person = Session(page)
         person.load()
@@ -287,9 +293,15 @@ def test_the_day_ends_by_the_button_or_a_closed_page(tmp_path):
         person.load()
         person.answer("yes", 1, "b1")
         person.open_question(2)
+        old, _ = person.page, person.load()  # a reload whose goodbye comes after the new page's first request
+        person.request("POST", "/bye", body={}, page=old)
+        wait_until(lambda: page._bye_at is None, "the grace to pass")  # and the day goes on: the new page is open
+        assert page.ended is None
+        person.answer("yes", 2, "b2")
+        person.open_question(3)
         person.request("POST", "/bye", body={})  # closed: it does not come back
         loop.join()
-        assert loop.returned == [1.0, None] and page.ended == "page closed"
+        assert loop.returned == [1.0, 1.0, None] and page.ended == "page closed"
     assert [row["why"] for row in lines(page, "end")] == ["page closed"]
 
 
@@ -334,7 +346,7 @@ def test_bad_arguments_and_a_port_in_use_fail_before_any_file(tmp_path, teacher)
     with pytest.raises(OSError):
         BrowserTeacher(str(tmp_path / "busy"), port=teacher.port, quiet=True)
     assert not (tmp_path / "bad").exists() and not (tmp_path / "busy").exists()
-    with BrowserTeacher(str(tmp_path / "all"), host="0.0.0.0", quiet=True) as everywhere:
+    with BrowserTeacher(str(tmp_path / "all"), host="0.0.0.0", quiet=True, linger=0) as everywhere:
         assert everywhere.url.startswith(f"http://{socket.gethostname()}:{everywhere.port}/?token=")
         assert Session(everywhere).load() == 200  # reachable on 127.0.0.1 too
 
@@ -357,7 +369,11 @@ def test_the_outcome_a_picture_or_a_short_video(teacher):
     status, body, headers = person.request("GET", "/outcome")
     assert status == 200 and headers["Content-Type"] == "image/gif" and body.startswith(b"GIF8")
     state = person.state()
-    assert state["mode"] == "outcome" and state["outcome"] == {"text": "TAMER 19 steps, INFORM 19", "image": True}
+    assert state["mode"] == "outcome" and state["outcome"] == {
+        "id": 1,
+        "text": "TAMER 19 steps, INFORM 19",
+        "image": True,
+    }
     assert teacher.ended == "day done"  # the script's own end of the day, said on the page
     teacher.show_outcome("a frame", image=frames[0])
     assert person.request("GET", "/outcome")[2]["Content-Type"] == "image/png"
@@ -514,9 +530,10 @@ def test_a_scripted_person_teaches_the_maze_through_the_page(new_page, tmp_path)
         page.wait_for_selector('#day[data-mode="ended"]')
         path = gridworld_env.draw_maze(agent=gridworld_env.START, arrows={4: 2, 3: 2})
         teacher.show_outcome("TAMER, greedy from S:\n" + path + "reaches G in 19 steps", image=np.full((4, 4, 3), 9))
-        page.wait_for_selector("#outcome-img:visible")
-        assert "reaches G in 19 steps" in page.text_content("#outcome-text")
-    page.wait_for_selector('#day[data-mode="closed"]')  # close(): the page says the run is over
+    # as a script does: close() right after the outcome, and the page still gets all of it
+    page.wait_for_selector('#day[data-mode="closed"]')  # the page says the run is over
+    page.wait_for_selector("#outcome-img:visible")
+    assert "reaches G in 19 steps" in page.text_content("#outcome-text")
     assert loop.returned[:12] == expected and loop.returned[12] is None
     rows = lines(teacher)
     assert [row["step"] for row in rows] == list(range(1, 13))  # each answer once, none lost
