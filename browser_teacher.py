@@ -855,7 +855,7 @@ function render() {
   const taken = "Answer taken: the agent learns, and its next move comes next.";
   const mine = s.role === "teacher" && s.question && (s.question.answered || pending().length);
   let line = "The agent is getting ready…";
-  if (s.ended && s.mode === "outcome") line = "The day is over, and the night has run.";
+  if (s.ended && s.outcome) line = "The day is over, and the night has run: what came of it is below.";
   else if (s.ended) line = `The day is over (${s.ended}). The agent sleeps on it now…`;
   else if (s.mode === "stream") line = "Answer whenever the arm does well (y) or badly (n).";
   else if (s.mode === "ask" && q !== null) line = `Step ${s.question.step}: ${asked}`;
@@ -866,6 +866,7 @@ function render() {
   $("info").textContent = describe(s.mode === "ask" && s.question ? s.question.info : s.info);
   for (const id of ["yes", "no", "none"]) $(id).disabled = q === null;
   $("end").disabled = !(s.role === "teacher" && !s.ended && !gone);
+  $("buttons").hidden = Boolean(s.ended);
   $("end").textContent = endArmed > Date.now() ? "Click again to end the day" : "End the day";
   const window = `Your answer applies to what happened ${s.delay[0]}–${s.delay[1]} s before it.`;
   $("hint").textContent = s.mode === "stream" ? window : "";

@@ -6,7 +6,8 @@ and a reload; a watcher in a second session; the Pusher's stream with its credit
 
 The browser tests skip, saying why, without /usr/bin/chromium (apt-get install chromium) or the pinned playwright;
 INFORM_REQUIRE_BROWSER=1 makes them fail instead. INFORM_WRITE_SCREENSHOT=1 saves the page's screenshot to
-docs/figures/browser_teacher.png (the README's), else it goes to the test's temporary directory.
+docs/figures/browser_teacher.png (the README's; the maze script's run mid-day, where the script takes --teacher
+browser), else it goes to the test's temporary directory.
 """
 
 import dataclasses
@@ -631,6 +632,8 @@ def test_through_the_page_the_scripted_person_teaches_tamer_the_19_steps_from_s(
         assert answers < 200, "TAMER never reached 19 steps from S"
         number = page.get_attribute("#day", "data-question")
         cell, move = maze_on_the_page(page.text_content("#maze"))
+        if answers == 20 and os.environ.get("INFORM_WRITE_SCREENSHOT") == "1":  # the README's: the script mid-day
+            page.screenshot(path=SCREENSHOT, full_page=True)
         page.keyboard.press("y" if q[cell, move] >= q[cell].max() - 1e-9 else "n")
         answers += 1
         page.wait_for_selector(f'#day[data-open="1"]:not([data-question="{number}"])')
