@@ -747,8 +747,8 @@ def check_env(args: Args) -> None:
     info = env.step(act_space.sample())[4]
     env.close()
     if args.success_return is None and args.success_info_key not in info:
-        raise InputError(f"--env-id {args.env_id}: its info has no {args.success_info_key!r} to measure a final "
-                         f"distance (it has: {', '.join(sorted(info)) or 'none'}); pass --success-info-key KEY, or "
+        raise InputError(f"--env-id {args.env_id}: its info has no {args.success_info_key!r} for a final distance "
+                         f"(it has: {', '.join(sorted(info)) or 'none'}); pass --success-info-key KEY, or "
                          "--success-return R to judge episodes by return")  # fmt: skip
 
 
