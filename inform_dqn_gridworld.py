@@ -9,8 +9,7 @@ their id alone: exact Q* by value iteration on `env.unwrapped.P`, one-hot observ
 ends on the task's goal (the terminal that earns its top reward); the maze's own tests are skipped there.
 
 Imported by inform_utils/, the only names other code may use (a test holds it to them): Args, Sleep, cli, main,
-check_args, StopSignals, Teacher, ReplayBuffer, tamer_loss, iq_loss, greedy_actions, greedy_episode, load_q_network,
-maze_frames, InputError.
+check_args, StopSignals, Teacher, ReplayBuffer, tamer_loss, iq_loss, greedy_actions, load_q_network, InputError.
 
     python inform_dqn_gridworld.py --seed 1
     python inform_dqn_gridworld.py --teacher-noise 0.2 --teacher-delay 1 --credit-window 2   # a human-like teacher
@@ -261,25 +260,14 @@ def oracle_feedback(q_star_sa, q_star_best, alpha):
 
 class Teacher:
     """A simulated person between Eq. 4 and the learner: noisy, sparse, late and limited (paper Sec. VII's future work).
-
-    Each call hands over the perfect teacher's answer h* (0 or 1) about the transition at buffer index `step` and
-    returns the labels that arrive now, {buffer index: h} (h = 1 here; a graded or negative teacher returns other
-    values, and the forward phase writes whatever it gets). In order: the judgement is flipped with probability
-    `noise`; a +1 is then clicked only with probability `sparsity`; a click about step t arrives at step t + `delay`
-    and labels that later transition and the `credit_window` - 1 before it (Deep TAMER's remedy; a window of
-    delay + 1 covers the step it was about). The teacher leaves after `budget` delivered +1 signals (None: never).
-    Its randomness is its own generator, so the defaults (0, 1, 0, 1, None) reproduce the perfect teacher exactly
-    and leave every other random stream untouched. Signals still on their way when the phase ends are lost.
-    """
+    A call hands over the perfect answer h* about buffer index `step` and returns the labels arriving now, {index: h}.
+    The judgement is flipped with probability `noise`; a +1 is clicked with probability `sparsity`; a click about
+    step t arrives at t + `delay` and labels that transition and the `credit_window` - 1 before it (Deep TAMER). The
+    teacher leaves after `budget` +1 signals. Its own generator: the defaults are the perfect teacher exactly."""
 
     def __init__(self, noise=0.0, sparsity=1.0, delay=0, credit_window=1, budget=None, seed=0):
-        self.noise, self.sparsity, self.delay, self.credit_window, self.budget = (
-            noise,
-            sparsity,
-            delay,
-            credit_window,
-            budget,
-        )
+        self.noise, self.sparsity, self.delay, self.credit_window = noise, sparsity, delay, credit_window
+        self.budget = budget
         self.rng = np.random.default_rng(seed)
         self.in_flight = collections.deque()  # clicks on their way, oldest first
         self.positives = 0  # +1 signals delivered
@@ -393,9 +381,9 @@ def forward_phase(args: Args, env, q_star: np.ndarray, buffer: ReplayBuffer, eva
     h_optimizer = torch.optim.Adam(h_net.parameters(), lr=args.tamer_h_lr, fused=True)
     teacher = Teacher(args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window,
                       args.feedback_budget, seed=args.seed + 7919)  # fmt: skip
-    human = (
-        HumanTeacher(env.unwrapped.variant, args.success_max_steps, h_net, device) if args.teacher == "human" else None
-    )
+    human = None
+    if args.teacher == "human":  # you, at the terminal
+        human = HumanTeacher(env.unwrapped.variant, args.success_max_steps, h_net, device)
     n, log_every = args.tamer_total_timesteps, LOG_FREQUENCY[args.teacher]
     progress = Progress("tamer", n, evaluator)
     h_loss = torch.zeros((), device=device)
@@ -414,13 +402,13 @@ def forward_phase(args: Args, env, q_star: np.ndarray, buffer: ReplayBuffer, eva
         else:
             with torch.no_grad():
                 h_values = h_net(torch.as_tensor(obs, device=device))
-            action = int(h_values.argmax()) if human is None else human.propose(h_values, cell)
+            action = int(h_values.argmax()) if not human else human.propose(h_values, cell)
 
         # the teacher watches (s, a): the perfect answer (Eq. 4), then the person's (Teacher), or yours
         taught = not teacher.gone  # after the budget is spent, TAMER has nothing to learn from
         feedback_alpha = linear_schedule(args.feedback_alpha_start, args.feedback_alpha_end, n - 1, step)
         h_star = oracle_feedback(q_star[cell, action], q_star[cell].max(), feedback_alpha) if taught else 0.0
-        if human is not None and taught:
+        if human and taught:
             h_star = human(cell, action, explore, step + 1, teacher.positives, h_star, successes)
             if h_star is None:  # q or the end of the input: stop teaching, the sleep starts
                 break
@@ -441,7 +429,7 @@ def forward_phase(args: Args, env, q_star: np.ndarray, buffer: ReplayBuffer, eva
             obs, _ = env.reset()
 
         # TAMER's update: H regresses on the feedback (Eq. 1); a person's answer gets several
-        if taught and human is not None and step + 1 >= args.tamer_learning_starts:
+        if taught and human and step + 1 >= args.tamer_learning_starts:
             h_loss = human.learn(h_optimizer, buffer, HUMAN_UPDATES_PER_ANSWER, args.tamer_batch_size)
         elif taught and step >= args.tamer_learning_starts:
             idx = torch.randint(0, buffer.size, (args.tamer_batch_size,), device=device)
@@ -483,7 +471,7 @@ def forward_phase(args: Args, env, q_star: np.ndarray, buffer: ReplayBuffer, eva
         "feedback/step_to_tamer_optimum": None if optimum_at is None else optimum_at[0],
         "feedback/positive_to_tamer_optimum": None if optimum_at is None else optimum_at[1],
     }
-    if human is not None:
+    if human:
         stats.update(human.finish(buffer.size, teacher.positives, successes))
     return h_net, stats
 
@@ -501,11 +489,10 @@ class HumanTeacher:
         self.refused = np.zeros((gridworld_env.N_CELLS, gridworld_env.N_ACTIONS))  # Enter answers per (cell, move)
         self.answers_to_goal = None  # answers given when the agent's own (greedy) way from S first reached G
         self.echo = not sys.stdin.isatty()  # piped answers are not echoed by a terminal: print them
-        say("You are the teacher. The agent A must reach G by the shortest path (19 steps from S).\n"
-            "For each move answer: y = good (+1), Enter = no feedback, q = stop teaching (the sleep starts).\n"
-            "A move you answer with Enter is not proposed again in that cell while it has moves you have not "
-            f"judged.\nThe sleep learns from the walks from S to G in fewer than {success_max_steps} steps: "
-            "teach until there is at least one.")  # fmt: skip
+        say("You are the teacher. The agent A must reach G by the shortest path (19 steps from S).\nFor each move "
+            "answer: y = good (+1), Enter = no feedback, q = stop teaching (the sleep starts).\nA move you answer "
+            "with Enter is not proposed again in that cell while it has moves you have not judged.\nThe sleep learns "
+            f"from the walks from S to G in fewer than {success_max_steps} steps: teach one.")  # fmt: skip
 
     def propose(self, h_values: torch.Tensor, cell: int) -> int:
         """The agent's move: greedy on H, but never a move you refused in this cell before the ones you have not."""
@@ -516,10 +503,8 @@ class HumanTeacher:
         how = " (exploring: a random move)" if explore else ""
         how += " into a wall: it stays where it is" if self.next_cell[cell, action] == cell else ""
         way = f"reaches G in {self.own_way} steps" if self.own_way < 200 else "does not reach G yet"
-        maze, move = (
-            gridworld_env.draw_maze(self.variant, agent=cell, arrows={cell: action}),
-            gridworld_env.ACTION_NAMES[action],
-        )
+        maze = gridworld_env.draw_maze(self.variant, agent=cell, arrows={cell: action})
+        move = gridworld_env.ACTION_NAMES[action]
         say(f"\nstep {step} | answers {self.answers} | positives given {positives} | its own way from S: {way} | "
             f"walks to G in time: {successes}\n{maze}the agent moves {move}{how}")  # fmt: skip
         while True:
@@ -592,11 +577,11 @@ class Sleep:
         self.q_target = QNetwork(obs_dim, n_actions).to(device)
         self.q_target.load_state_dict(self.q_net.state_dict())
         self.optimizer = torch.optim.Adam(self.q_net.parameters(), lr=lr, fused=True)
-        self.temperature, self.chi2_coef = temperature, chi2_coef
+        self.gamma, self.temperature, self.chi2_coef = GAMMA, temperature, chi2_coef
 
     def loss(self, obs, actions, next_obs, feedback, terminated, is_expert):
         """The loss of one batch and its named terms."""
-        return iq_loss(self.q_net, self.q_target, obs, actions, next_obs, terminated, is_expert, GAMMA,
+        return iq_loss(self.q_net, self.q_target, obs, actions, next_obs, terminated, is_expert, self.gamma,
                        self.temperature, self.chi2_coef)  # fmt: skip
 
     def update(self, batch, is_expert) -> tuple[torch.Tensor, dict]:
@@ -797,7 +782,7 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
                 reward = reward_table(q_net, env.unwrapped.next_cell, GAMMA, args.sleep_temperature, device)
                 figure = reward_figure(reward.numpy(), f"recovered reward, seed {args.seed}")
                 writer.add_figure("sleep/recovered_reward", figure)
-                save({"reward": reward, **extra}, f"{run_dir}/recovered_reward.pt")
+                save_atomic({"reward": reward, **extra}, f"{run_dir}/recovered_reward.pt")
         if args.env_id not in MAZE_IDS:
             summary["maze_tests/skipped"] = f"the wall maze, start cells, reward table, drawings: none on {args.env_id}"
         for name, policy in policies.items():  # INFORM's at the sleep's last step, the others at the day's
@@ -872,9 +857,8 @@ def make_writer(run_dir: str, args: Args) -> SummaryWriter:
         wandb.init(project=project, sync_tensorboard=True, config=vars(args), name=os.path.basename(run_dir),
                    dir=run_dir, save_code=True)  # fmt: skip
     writer = SummaryWriter(run_dir)
-    writer.add_text(
-        "hyperparameters", "|param|value|\n|-|-|\n" + "\n".join(f"|{k}|{v}|" for k, v in vars(args).items())
-    )
+    table = "\n".join(f"|{key}|{value}|" for key, value in vars(args).items())
+    writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + table)
     return writer
 
 
@@ -933,11 +917,8 @@ def record_videos(run_dir: str, policies: dict[str, np.ndarray]) -> dict:
 
     os.makedirs(f"{run_dir}/videos", exist_ok=True)
     record, t0 = {}, time.time()
-    clips = (
-        ("plain", "", (gridworld_env.START,)),
-        ("wall", "Wall", (gridworld_env.START,)),
-        ("starts", "", VIDEO_START_CELLS),
-    )
+    start = (gridworld_env.START,)
+    clips = (("plain", "", start), ("wall", "Wall", start), ("starts", "", VIDEO_START_CELLS))
     for (name, policy), (clip, maze, starts) in itertools.product(policies.items(), clips):
         env = gym.wrappers.RenderCollection(gym.make(f"KnoxStoneMaze{maze}-v0", render_mode="rgb_array"))
         frames = []
@@ -976,7 +957,7 @@ def read_checkpoint(path: str, flag: str) -> dict:
         raise InputError(f"{flag} {path}: {what}: {(code or lines)[0][:160]}") from None
     if not isinstance(ckpt, dict):
         raise InputError(
-            f"{flag} {path}: not a checkpoint of this project (expected a dict, found {type(ckpt).__name__})"
+            f"{flag} {path}: not a checkpoint of this project (expected a dict, not {type(ckpt).__name__})"
         )
     return ckpt
 
@@ -1010,25 +991,14 @@ def load_q_network(path: str, n_states: int = 30, flag: str = "--evaluate") -> Q
     return net
 
 
-def save(obj: dict, path: str) -> None:
-    """torch.save through a file of our own (closed, then removed, if the write fails); a full disk is one line."""
-    try:
-        with atomic(path) as tmp, open(tmp, "wb") as f:
-            torch.save(obj, f)
-    except (OSError, RuntimeError) as e:  # torch's zip writer says ENOSPC as a RuntimeError
-        raise OSError(f"{path} not written, the disk is full or failing ({str(e).splitlines()[0][:100]})") from None
-
-
 def save_network(path: str, net: QNetwork, **extra) -> None:
-    save({"state_dict": net.state_dict(), "kwargs": net.kwargs, **extra}, path)
+    save_atomic({"state_dict": net.state_dict(), "kwargs": net.kwargs, **extra}, path)
 
 
 # Saved days (--save-buffer, --sleep-from): one forward phase, many nights
 DAY_FORMAT = "inform-day-1"
-DAY_ARGS = ("env_id", "seed", "oracle_path", "tamer_total_timesteps", "tamer_learning_starts", "tamer_batch_size",
-            "tamer_h_lr", "start_e", "end_e", "feedback_alpha_start", "feedback_alpha_end", "success_max_steps",
-            "teacher", "teacher_noise", "teacher_sparsity", "teacher_delay", "credit_window", "feedback_budget",
-            "budget_ends_forward_phase", "eval_episodes")  # fmt: skip  # what the day and its evaluation read
+NOT_OF_THE_DAY = ("exp_name", "capture_video", "track", "save_buffer", "evaluate")  # and the sleep's flags
+DAY_ARGS = tuple(f.name for f in fields(Args) if not f.name.startswith("sleep_") and f.name not in NOT_OF_THE_DAY)
 DAY_TENSORS = ("obs", "actions", "next_obs", "feedback", "terminated", "success")  # the buffer, one row a transition
 EPISODE_TABLE = ("episode_start", "episode_end", "episode_length", "episode_success", "episode_ended")
 
@@ -1040,9 +1010,10 @@ def save_day(path: str, args: Args, buffer: ReplayBuffer, h_net: QNetwork, q_sta
     n, rows = buffer.size, [(start, end, True) for start, end in buffer.episodes]
     if (rows[-1][1] if rows else 0) < n:
         rows.append((rows[-1][1] if rows else 0, n, False))
-    start, end, ended = (torch.tensor(column, dtype=torch.int64) for column in zip(*rows, strict=True))
+    columns = list(zip(*rows, strict=True)) or [(), (), ()]  # no step at all: a person who answered q at once
+    start, end, ended = (torch.tensor(column, dtype=torch.int64) for column in columns)
     np_state, (version, internal, gauss) = np.random.get_state(), random.getstate()
-    save({
+    save_atomic({
         "format": DAY_FORMAT, "script": os.path.basename(__file__), "env_id": args.env_id, "seed": args.seed,
         "day_args": {name: getattr(args, name) for name in DAY_ARGS},
         **{name: getattr(buffer, name)[:n].to("cpu", copy=True) for name in DAY_TENSORS},  # a copy: not the capacity
@@ -1068,13 +1039,10 @@ def load_day(run_dir: str, args: Args) -> dict:
     """RUN_DIR/day.pt, checked (keys, shapes, index and value ranges); its day flags replace those of `args` (one
     line says so). Raises InputError before anything is written."""
     path = os.path.join(run_dir, "day.pt")
-    if not os.path.isdir(run_dir) or not os.path.exists(path):
-        why = (
-            "no day.pt in it (a run saves its day with --save-buffer)"
-            if os.path.isdir(run_dir)
-            else "no such directory"
-        )
-        raise InputError(f"--sleep-from {run_dir}: {why}")
+    if not os.path.isdir(run_dir):
+        raise InputError(f"--sleep-from {run_dir}: no such directory")
+    if not os.path.exists(path):
+        raise InputError(f"--sleep-from {run_dir}: no day.pt in it (a run saves its day with --save-buffer)")
     day = read_checkpoint(path, "--sleep-from")
     if day.get("format") != DAY_FORMAT:
         raise InputError(f"{path}: not a saved day of this script (format {day.get('format')!r}, not {DAY_FORMAT!r})")
@@ -1098,8 +1066,9 @@ def load_day(run_dir: str, args: Args) -> dict:
             raise InputError(f"{path}: {name} has shape {found}, expected {shape}")
     start, end, one_hot = day["episode_start"], day["episode_end"], torch.eye(n_states)
     ranges = {  # what a forward phase can have written; anything else is a damaged or tampered day
-        "episode_start, episode_end": rows > 0 and start[0] == 0 and end[-1] == n and bool((start <= end).all())
-        and torch.equal(start[1:], end[:-1]) and torch.equal(day["episode_length"], end - start),
+        "episode_start, episode_end": (rows == n == 0) or (rows > 0 and start[0] == 0 and end[-1] == n
+        and bool((start <= end).all()) and torch.equal(start[1:], end[:-1])
+        and torch.equal(day["episode_length"], end - start)),
         "actions": bool(((day["actions"] >= 0) & (day["actions"] < n_actions)).all()),
         "feedback": bool(((day["feedback"] >= -1) & (day["feedback"] <= 1)).all()),  # h in [-1, 1]
         "terminated": bool(((day["terminated"] == 0) | (day["terminated"] == 1)).all()),
@@ -1159,15 +1128,11 @@ def check_args(args: Args) -> None:
         value, interval = getattr(args, f.name), next(iter(getattr(hints[f.name], "__metadata__", ())), None)
         if isinstance(interval, Range) and value is not None:
             (low, high), (left, right) = (float(x) for x in interval[1:-1].split(", ")), (interval[0], interval[-1])
-            if not (
-                (value >= low if left == "[" else value > low) and (value <= high if right == "]" else value < high)
-            ):
-                counts = isinstance(value, int) and left == "["  # "[1, inf)": must be >= 1
-                must = (
-                    f"be >= {low:g}" + (f" and below {high:.0f}" if high < math.inf else "")
-                    if counts
-                    else f"be in {interval}"
-                )
+            above, below = value >= low if left == "[" else value > low, value <= high if right == "]" else value < high
+            if not (above and below):  # NaN is neither
+                must = f"be in {interval}"
+                if isinstance(value, int) and left == "[":  # a count or a seed: "must be >= 1"
+                    must = f"be >= {low:g}" + (f" and below {high:.0f}" if high < math.inf else "")
                 raise InputError(f"--{f.name.replace('_', '-')} must {must}, got {value}")
     check_run_name(args.env_id, args.exp_name, args.seed)
     check_env(args.env_id)
@@ -1232,7 +1197,6 @@ def check_env(env_id: str) -> None:
 
 
 # --- shared plumbing: the same in inform_dqn_gridworld.py ---
-# (needs: contextlib, json, math, os, signal, sys, time, torch; and the script's own print_results(summary, run_dir))
 class InputError(Exception):
     """Bad input (a flag, a file): one `error:` line and exit 2, before anything is written."""
 
@@ -1250,13 +1214,8 @@ class StopSignals:
     current = None  # the run's StopSignals, which check() and waiting() read
 
     def __init__(self):
-        self.received, self.raised, self.waiting_for_input, self.finished, self.broken_pipe = (
-            [],
-            False,
-            False,
-            False,
-            False,
-        )
+        self.received, self.raised, self.finished = [], False, False
+        self.waiting_for_input = self.broken_pipe = False
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
             if signal.getsignal(sig) is not signal.SIG_IGN:
                 signal.signal(sig, self.handler)
@@ -1268,8 +1227,7 @@ class StopSignals:
             StopSignals.check()
 
     @classmethod
-    def check(cls) -> None:
-        """KeyboardInterrupt if a stop signal came (once: main then saves what finished, and says so)."""
+    def check(cls) -> None:  # KeyboardInterrupt if a stop signal came (once: main then saves what finished)
         stop = cls.current
         if stop is not None and stop.received and not (stop.raised or stop.finished):
             stop.raised = True
@@ -1277,32 +1235,28 @@ class StopSignals:
 
     @classmethod
     @contextlib.contextmanager
-    def waiting(cls):
-        """A wait for a person: a stop signal that comes before it or during it raises at once."""
+    def waiting(cls):  # a wait for a person: a stop signal before it or during it raises at once
         stop = cls.current
-        if stop is not None:
-            stop.waiting_for_input = True
+        if stop is None:  # none installed (the script imported, not run): a plain wait
+            yield
+            return
+        stop.waiting_for_input = True
         try:
             cls.check()
             yield
         finally:
-            if stop is not None:
-                stop.waiting_for_input = False
+            stop.waiting_for_input = False
 
-    def reason(self) -> str:
-        """What stopped the run: the first signal; else SIGPIPE if the reader of our output died, else Ctrl-C."""
+    def reason(self) -> str:  # the first signal; else SIGPIPE if the reader of our output died, else Ctrl-C
         return self.received[0] if self.received else "SIGPIPE" if self.broken_pipe else "SIGINT"
 
-    def exit_code(self, status: str) -> int:
-        """128 + the signal (130 SIGINT, 143 SIGTERM, 129 SIGHUP, 141 a dead reader), as a shell reports a kill;
-        a signal after the summary still says the person wanted the run to stop. 1: diverged or failed."""
+    def exit_code(self, status: str) -> int:  # 128 + the signal, as a shell reports a kill (even after the summary)
         if status == "interrupted" or self.received:
             return 128 + signal.Signals[self.reason()].value
         return 0 if status == "completed" else 1
 
 
-def say(text: str, file=None) -> None:
-    """print, except that a dead reader (a broken pipe) is not an error: what follows goes to /dev/null."""
+def say(text: str, file=None) -> None:  # print; a dead reader (a broken pipe) is no error: the rest goes to /dev/null
     file = file or sys.stdout
     try:
         print(text, file=file, flush=True)
@@ -1311,20 +1265,13 @@ def say(text: str, file=None) -> None:
             os.dup2(os.open(os.devnull, os.O_WRONLY), file.fileno())  # the exit's final flush then succeeds too
 
 
-def check_seed(flag: str, seed: int | None) -> None:
-    if seed is not None and not 0 <= seed < 2**32:  # numpy's seeding takes no more
-        raise InputError(f"{flag} must be in [0, 2**32), got {seed}")
-
-
-def check_run_name(env_id: str, exp_name: str, seed: int) -> None:
-    """The run directory is one plain name inside runs/: no separator, no '..', short enough for any file system."""
+def check_run_name(env_id: str, exp_name: str, seed: int) -> None:  # one plain, short directory name inside runs/
     name = f"{env_id}__{exp_name}__{seed}__{int(time.time())}_99.tmp"  # the longest a run's files get
     if not exp_name or exp_name in (".", "..") or any(c in name for c in "/\\\0") or len(name.encode()) > 255:
         raise InputError(f"--exp-name {exp_name!r}: a run name must be one short directory name inside runs/")
 
 
-def make_run_dir(run_name: str) -> str:
-    """runs/{run_name}, never an existing directory: a clash gets a numeric suffix."""
+def make_run_dir(run_name: str) -> str:  # runs/{run_name}, never an existing directory: a clash gets a suffix
     for n in range(100):
         path = f"runs/{run_name}" + (f"_{n}" if n else "")
         with contextlib.suppress(FileExistsError):
@@ -1335,8 +1282,8 @@ def make_run_dir(run_name: str) -> str:
 
 @contextlib.contextmanager
 def atomic(path: str):
-    """Yields a temporary name for `path`, renamed to it once written; a write that fails (a full disk, a signal)
-    leaves neither a half-written file nor the temporary one, whose space the summary may need."""
+    """A temporary name for `path`, renamed once written; a failed write leaves no partial file (the summary may need
+    its space)."""
     tmp = path + ".tmp"
     try:
         yield tmp
@@ -1347,12 +1294,14 @@ def atomic(path: str):
 
 
 def save_atomic(obj: dict, path: str) -> None:
-    with atomic(path) as tmp:
-        torch.save(obj, tmp)
+    with atomic(path) as tmp, open(tmp, "wb") as f:  # our own file object: closed for sure, its space freed
+        try:
+            torch.save(obj, f)
+        except RuntimeError as e:  # torch reports a failed write (a full disk) so: an OSError, as open() would
+            raise OSError(f"{path}: {' '.join(str(e).split())[-120:]}") from None
 
 
-def strict_json(value):
-    """NaN and inf as null, at any depth (a metric that does not exist in this run, e.g. no success episodes)."""
+def strict_json(value):  # NaN and inf as null, at any depth (a metric this run does not have, e.g. no successes)
     if isinstance(value, float) and not math.isfinite(value):
         return None
     if isinstance(value, dict):
@@ -1369,27 +1318,17 @@ def end_run(args, summary, status, phase, run_dir, run_start, evaluator, closing
     """The summary first, then the messages: no signal cuts this short (StopSignals only notes the later ones)."""
     stop.finished = True
     if run_dir is not None:
-        summary = {
-            **(evaluator.final if evaluator else {}),
-            **summary,
-            "time/eval_s": evaluator.seconds if evaluator else 0.0,
-            "wall_time_s": time.time() - run_start,
-            "seed": args.seed,
-            "script": os.path.basename(__file__),
-            "status": status,
-            "args": vars(args),
-        }
-        if status != "completed":
-            summary["phase"] = phase
-        if status == "interrupted":
-            summary["signal"] = stop.reason()
+        final = {"time/eval_s": evaluator.seconds if evaluator else 0.0, "wall_time_s": time.time() - run_start}
+        final.update(seed=args.seed, script=os.path.basename(__file__), status=status, args=vars(args))
+        summary = {**(evaluator.final if evaluator else {}), **summary, **final}
+        summary.update({"phase": phase} if status != "completed" else {})
+        summary.update({"signal": stop.reason()} if status == "interrupted" else {})
         try:
             write_json_atomic(f"{run_dir}/summary.json", summary)
         except OSError as e:
             say(f"error: {run_dir}/summary.json not written: {e}", sys.stderr)
-    for thing in (*closing, evaluator):
-        if thing is not None:
-            thing.close()
+    for thing in (thing for thing in (*closing, evaluator) if thing is not None):
+        thing.close()
     if status == "interrupted":
         saved = f"what finished is saved in {run_dir}" if run_dir else "no run was made"
         say(f"interrupted ({stop.reason()}) during the {phase} phase; {saved}", sys.stderr)
