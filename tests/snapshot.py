@@ -422,13 +422,18 @@ def main() -> None:
     if os.path.isfile(VALUES):
         with open(VALUES) as f:
             values = json.load(f).get("cases", {})
-    for c in CASES:
-        if args.only and c["name"] not in args.only and not any(c["name"] == BY_NAME[o]["needs"] for o in args.only):
-            continue
+
+    def record(c: dict) -> None:  # the case it needs first (a case may need one listed after it)
+        if c["needs"] and c["needs"] not in done:
+            record(BY_NAME[c["needs"]])
         cwd = os.path.join(args.work_dir, c["name"])
         os.makedirs(cwd, exist_ok=True)
         print(f"[snapshot] {c['name']}", flush=True)
         values[c["name"]] = run_case(c, args.code_dir, cwd, pythons(args.code_dir)[c["python"]], done, "old")
+
+    for c in CASES:
+        if not args.only or c["name"] in args.only:
+            record(c)
     if args.write:
         out = {"base": BASE, "cpu": cpu_signature(), "cases": values}
         with open(VALUES + ".tmp", "w") as f:
