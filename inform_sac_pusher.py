@@ -1,19 +1,19 @@
 """INFORM on MuJoCo Pusher: SAC-style TAMER learns from a simulated teacher's yes/no feedback ("day"), then offline
 IQ-Learn on the remembered transitions ("sleep") gives a far-sighted policy and a recovered reward.
 
-Tarakli & Di Nuovo, "Learning while Sleeping" (ICDL 2024): Algorithm 1, Fig. 3 and the obstacle robustness test; what
-the paper leaves open is in docs/protocol.md. Every episode starts from the run's seed (the paper's protocol) unless
---random-starts. The teacher is the shipped oracles/{env_id}__sac_oracle.pt (from oracle_train.py), --oracle-path, or
-a SAC agent trained here (--train-oracle). Read top to bottom down to `main`: Args, the networks, Eq. 1-4 and the
-teacher, the buffer, the day, the night, main. Everything else comes after main.
+Tarakli & Di Nuovo, "Learning while Sleeping" (ICDL 2024): Algorithm 1, Fig. 3 and the obstacle test (Fig. 5); what
+the paper leaves open is in docs/protocol.md. Episodes start from the run's seed (the paper's protocol) unless
+--random-starts. The teacher: the shipped oracles/{env_id}__sac_oracle.pt, --oracle-path, or SAC trained here
+(--train-oracle). Read top to bottom: Args, make_env, the networks, Eq. 1-4 and the teacher, the buffer, the day, the
+night, main; below main the evaluation protocol, then the plumbing. Other continuous-action tasks run from their id
+(`--env-id Reacher-v5`), judged by a final distance in `info` or by --success-return; the obstacle test is Pusher's.
+The sleep study's variants of the night are in inform_utils/sleep_variants_pusher.py, which imports this script.
 
-Other continuous-action tasks run from their id alone (`--env-id Reacher-v5`): an episode succeeds by a final
-distance that the env reports in `info` (--success-info-key, --success-distance) or by its return
-(--success-return). What only Pusher has (the object's path, the obstacle test, the videos' camera) is one block
-below main, skipped elsewhere, and the summary says so.
-
-Imported by inform_utils/, the only names other code may use (a test holds it to them): Args, main, evaluate,
-read_checkpoint, actor_from_checkpoint, check_video, video_env, mujoco_major, InputError, Outcome, object_xy.
+Imported by inform_utils/, the only names other code may use (a test holds it to them): Args, main, cli, evaluate,
+read_checkpoint, actor_from_checkpoint, check_video, video_env, mujoco_major, InputError, Outcome, object_xy, In,
+QEnsemble, Actor, iq_loss, actor_loss, tamer_loss, update_actor, soft_update, soft_value, recover_reward,
+sleep_recipe, sleep_batch, check_finite, StopSignals, Progress, HIDDEN_SIZE, TAU, SLEEP_GAMMA, TAMER_POLICY_LR,
+SLEEP_EVAL_FREQUENCY, PERIODIC_EVAL_EPISODES, LOG_FREQUENCY.
 
     python inform_sac_pusher.py --seed 1                            # Pusher-v5, the authors' budget
     python inform_sac_pusher.py --env-id Pusher-v4 --seed 1         # the paper's Pusher (needs mujoco==2.3.7)
@@ -24,7 +24,6 @@ read_checkpoint, actor_from_checkpoint, check_video, video_env, mujoco_major, In
 import atexit
 import collections
 import contextlib
-import copy
 import dataclasses
 import gc
 import importlib.util
@@ -37,9 +36,10 @@ import signal
 import sys
 import tempfile
 import time
+import typing
 import xml.etree.ElementTree as ET
-from dataclasses import asdict, dataclass, fields
-from typing import Literal
+from dataclasses import dataclass, fields
+from typing import Annotated, Literal
 
 
 def stopped_while_starting(signum, frame):
@@ -64,48 +64,67 @@ from torch.utils.tensorboard import SummaryWriter  # noqa: E402
 
 PUSHER_IDS = ("Pusher-v5", "Pusher-v4")  # the paper's task; any other continuous-action env id works too
 POLICIES = ("oracle", "tamer", "inform")
-LOG_STD_MIN = -5.0
-LOG_STD_MAX = 2.0
 REPO_DIR = os.path.dirname(os.path.abspath(__file__))
+# the authors' settings (docs/protocol.md), constants rather than flags: change them here
+HIDDEN_SIZE = 256  # both hidden layers of every network (oracle, TAMER, INFORM)
+TAU = 0.005  # soft update of target networks (the oracle's SAC and the sleep)
+TAMER_POLICY_LR = 3e-4  # the TAMER actor (H's rate is --tamer-h-lr)
+SLEEP_GAMMA = 0.99  # the sleep's discount: non-myopic, unlike TAMER's 0
+ORACLE_SAC = {"learning_starts": 5000, "batch_size": 256, "q_lr": 1e-3, "policy_lr": 3e-4, "gamma": 0.99}
+EVAL_FREQUENCY = 2000  # forward-phase env steps between evaluations of TAMER (curves like Fig. 3)
+SLEEP_EVAL_FREQUENCY = 1000  # sleep gradient steps between evaluations of INFORM
+PERIODIC_EVAL_EPISODES = 5  # episodes of each evaluation during the phases
+LOG_FREQUENCY = 1000  # steps between scalar logs
+# the night's recipe, ours and the authors' (their test loads the 100k-step checkpoint); a preset fills in only what
+# the command left unset (None)
+SLEEP_PROTOCOLS = {
+    "ours": dict(sleep_gradient_steps=5000, sleep_init_actor_from_tamer=True, sleep_actor_states="replay",
+                 sleep_policy_frequency=1),
+    "authors": dict(sleep_gradient_steps=100000, sleep_init_actor_from_tamer=False, sleep_actor_states="replay+expert",
+                    sleep_policy_frequency=2),
+}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class In:
+    """A flag's range, in its Annotated type; check_args refuses a value outside it (NaN too) in one line."""
+
+    low: float
+    high: float = math.inf
+    ends: str = "[)"  # which ends belong to the range
+
+    def __contains__(self, x) -> bool:
+        above = x >= self.low if self.ends[0] == "[" else x > self.low
+        return above and (x <= self.high if self.ends[1] == "]" else x < self.high)
+
+    def __str__(self) -> str:
+        return f"in {self.ends[0]}{self.low}, {self.high}{self.ends[1]}"
+
+
+COUNT, SEED, UNIT, RATE, WEIGHT = In(1), In(0, 2**32), In(0, 1, "[]"), In(0, ends="()"), In(0)
 
 
 @dataclass
 class Args:
     exp_name: str = os.path.basename(__file__)[: -len(".py")]
-    """the name of this experiment"""
-    seed: int = 1
+    """the name of this experiment (one plain directory name: runs/{env_id}__{exp_name}__{seed}__{time})"""
+    seed: Annotated[int, SEED] = 1
     """seed of the experiment (also the reset seed of every episode under the fixed-start protocol)"""
-    torch_deterministic: bool = True
-    """if toggled, `torch.backends.cudnn.deterministic=True` and deterministic algorithms"""
-    cuda: bool = False
-    """if toggled, use CUDA when available (these small networks are fast enough on one CPU thread)"""
-    num_threads: int = 1
-    """torch CPU threads"""
+    num_threads: Annotated[int, COUNT] = 1
+    """torch CPU threads (these small networks are fastest on one)"""
     capture_video: bool = False
-    """film the final deterministic episode of the oracle, TAMER and INFORM, plain and with the boxes, into
-    runs/{run}/videos/ (headless MuJoCo: MUJOCO_GL, egl when unset and there is no display)"""
-    bf16: bool = False
-    """opt-in speed: the training updates' forward passes in bfloat16 (CPU autocast); the numbers change"""
-    save_model: bool = True
-    """whether to save the oracle (when trained here), TAMER and INFORM networks into the run directory"""
+    """film the final deterministic episodes, plain and with the boxes, into runs/{run}/videos/ (headless MUJOCO_GL)"""
     track: bool = False
-    """if toggled, mirror the TensorBoard events to Weights & Biases (CleanRL's --track; needs `pip install wandb`,
-    and WANDB_MODE=offline keeps the run on this machine)"""
-    wandb_project_name: str = "inform"
-    """the Weights & Biases project"""
-    wandb_entity: str | None = None
-    """the Weights & Biases team or user (None: your default)"""
+    """mirror the TensorBoard events to Weights & Biases (`pip install wandb`; WANDB_PROJECT, WANDB_MODE=offline)"""
     env_id: str = "Pusher-v5"
-    """Pusher-v5 (current MuJoCo), Pusher-v4 (the paper's; needs mujoco<3), or any continuous-action Gymnasium env
-    (Reacher-v5, ...; the obstacle test is Pusher's and is skipped)"""
+    """Pusher-v5 (current MuJoCo), Pusher-v4 (the paper's; needs mujoco<3), or any continuous-action Gymnasium env"""
     random_starts: bool = False
     """random initial states (the standard task) instead of the paper's fixed start (reset with the run's seed)"""
-    success_distance: float = 0.08
+    success_distance: Annotated[float, RATE] = 0.08
     """an episode is a success if its final distance |info[success_info_key]| (Pusher: object to goal) is below this"""
     success_info_key: str = "reward_dist"
-    """the `info` entry whose absolute value at an episode's end is its final distance (Pusher's and Reacher's
-    reward_dist); envs without one need --success-return"""
-    success_return: float | None = None
+    """the `info` entry whose absolute value at an episode's end is its final distance (else --success-return)"""
+    success_return: Annotated[float | None, In(-math.inf, math.inf, "()")] = None
     """if set, an episode is a success if its return is at least this (the final distance is then only reported)"""
 
     # Oracle (the simulated teacher): a SAC agent trained on the environment reward
@@ -113,138 +132,78 @@ class Args:
     """oracle checkpoint from oracle_train.py; default: the shipped oracles/{env_id}__sac_oracle.pt if present"""
     train_oracle: bool = False
     """train the SAC oracle here on the environment reward (also what happens when no checkpoint is found)"""
-    oracle_total_timesteps: int = 200000
-    """environment steps of the in-script SAC oracle"""
-    oracle_random_starts: bool = True
-    """train the in-script oracle from random initial states, so it is an expert from any start"""
-    oracle_learning_starts: int = 5000
-    """random-action steps before the oracle learns"""
-    oracle_batch_size: int = 256
-    """SAC batch size of the oracle"""
-    oracle_q_lr: float = 1e-3
-    """learning rate of the oracle's twin critics"""
-    oracle_policy_lr: float = 3e-4
-    """learning rate of the oracle's actor"""
-    oracle_policy_frequency: int = 2
-    """oracle actor and entropy updates every this many steps"""
-    oracle_gamma: float = 0.99
-    """discount of the oracle's SAC"""
-    hidden_size: int = 256
-    """width of the two hidden layers of every network (oracle, TAMER, INFORM)"""
-    tau: float = 0.005
-    """soft-update rate of target networks (oracle SAC and sleep phase)"""
+    oracle_total_timesteps: Annotated[int, In(ORACLE_SAC["learning_starts"] + 1)] = 200000
+    """environment steps of the in-script SAC oracle (from random starts; the first 5,000 random actions)"""
 
     # Forward phase: TAMER (Eq. 1) with simulated feedback (Eq. 4)
-    tamer_total_timesteps: int = 200000
-    """environment steps of the forward phase (each gets one feedback signal); 200k is the authors' budget, 30000
-    the quick look"""
-    tamer_learning_starts: int = 5000
+    tamer_total_timesteps: Annotated[int, COUNT] = 200000
+    """environment steps of the forward phase (each gets one feedback signal); 200k is the authors' budget"""
+    tamer_learning_starts: Annotated[int, COUNT] = 5000
     """random-action steps before H and the actor are trained"""
-    tamer_batch_size: int = 256
+    tamer_batch_size: Annotated[int, COUNT] = 256
     """batch size of the H regression and the actor update"""
-    tamer_h_lr: float = 1e-3
+    tamer_h_lr: Annotated[float, RATE] = 1e-3
     """learning rate of the twin feedback models H (and of TAMER's entropy coefficient)"""
-    tamer_policy_lr: float = 3e-4
-    """learning rate of the TAMER actor"""
-    tamer_policy_frequency: int = 1
-    """TAMER actor and entropy updates every this many steps"""
-    feedback_alpha_start: float = 0.99
+    feedback_alpha_start: Annotated[float, UNIT] = 0.99
     """alpha of Eq. 4 at the start of the forward phase (1 = only the oracle's action earns +1)"""
-    feedback_alpha_end: float = 0.992
+    feedback_alpha_end: Annotated[float, UNIT] = 0.992
     """alpha of Eq. 4 at the end of the forward phase (alpha rises linearly: the teacher gets stricter)"""
 
     # The teacher as a person (docs/protocol.md); the defaults are the paper's perfect, instant, tireless teacher
-    teacher_noise: float = 0.0
+    teacher_noise: Annotated[float, UNIT] = 0.0
     """probability that the teacher's judgement is flipped (+1 <-> no feedback)"""
-    teacher_sparsity: float = 1.0
+    teacher_sparsity: Annotated[float, UNIT] = 1.0
     """probability that a +1 judgement is actually given (otherwise no feedback)"""
-    teacher_delay: int = 0
+    teacher_delay: Annotated[int, In(0)] = 0
     """env steps between a transition and the arrival of its signal (which labels the later transition)"""
-    credit_window: int = 1
+    credit_window: Annotated[int, COUNT] = 1
     """each arriving signal labels this many most recent transitions (teacher_delay + 1 covers the right one)"""
-    feedback_budget: int | None = None
+    feedback_budget: Annotated[int | None, COUNT] = None
     """the teacher leaves after this many +1 signals (None: never); then TAMER stops learning"""
     budget_ends_forward_phase: bool = False
     """when the budget is spent, end the forward phase and sleep (otherwise keep acting, without feedback)"""
 
     # Sleep phase: offline IQ-Learn (Eq. 2), no environment steps
-    sleep_gradient_steps: int = 5000
-    """gradient steps of the sleep phase; at the 200k forward budget the measured sleep curve was best early (3% below
-    the oracle after 2k steps, 8% after 5k) and drifted later (38% below at 13k): docs/pusher_notes.md"""
-    sleep_batch_size: int = 256
-    """transitions from the success set, and as many from the whole buffer, per step"""
-    sleep_q_lr: float = 3e-4
-    """learning rate of the soft Q network"""
-    sleep_policy_lr: float = 5e-6
-    """learning rate of the INFORM actor"""
-    sleep_gamma: float = 0.99
-    """discount of the sleep phase (non-myopic, unlike TAMER's 0)"""
-    sleep_temperature: float = 0.01
-    """fixed entropy temperature of V(s) = Q(s, a~pi) - temp * log pi(a|s)"""
-    sleep_chi2_coef: float = 0.5
-    """weight of the chi-squared regulariser, 1 / (4 * 0.5) as IQ-Learn; 0 turns it off"""
-    sleep_init_actor_from_tamer: bool = True
-    """start the INFORM actor from the TAMER actor (consolidation); False starts it from scratch"""
-    sleep_actor_states: Literal["replay", "replay+expert", "expert"] = "replay"
-    """the states of each batch the INFORM actor is trained on: the replay rows, both halves, or the expert rows"""
-    sleep_policy_frequency: int = 1
-    """the INFORM actor is updated this many times every this many gradient steps (CleanRL's delayed policy update;
-    the authors' sleep: 2)"""
-    sleep_loss_rows: Literal["all", "expert"] = "all"
-    """the rows of Eq. 2's value and chi-squared terms: the whole batch (the paper), or the expert rows only
-    (IQ-Learn's offline recipe, its `value_expert` loss)"""
-    sleep_twin_critics: bool = False
-    """two soft Q networks, each trained on Eq. 2, their minimum in V(s) and in the actor's objective"""
-    sleep_bc_coef: float = 0.0
-    """a behaviour-cloning term on the INFORM actor, TD3+BC style: the Q objective divided by mean |Q|, plus this
-    weight times the squared error of the mean action on the expert rows; 0 turns it off"""
-    sleep_control: Literal["none", "bc", "sham"] = "none"
-    """a control in place of the INFORM actor's update, same steps: bc = behaviour cloning on the success set (the
-    mean action's squared error on the expert rows); sham = TAMER's own update (H on the feedback, the actor on H),
-    no consolidation. The soft Q network sleeps as usual"""
     sleep_protocol: Literal["ours", "authors"] = "ours"
-    """authors: the authors' sleep in one flag: the actor from scratch, on replay + expert states, 2 updates every 2nd
-    step, 100k gradient steps (their test loads the 100k-step checkpoint); it sets those flags"""
-    sleep_seed: int | None = None
-    """None: the sleep goes on with the random streams where the day left them; an integer re-seeds them before the
-    sleep (several sleeps on one day)"""
-    sleep_holdout_fraction: float = 0.0
-    """hold this fraction of the day's episodes out of the sleep (split by episode, fixed by the seed) and log the
-    offline criterion on them every --sleep-eval-frequency steps; the checkpoint it picks is kept and tested as
-    `inform_selected`. 0: no hold-out (the default)"""
+    """authors: their night (the actor from scratch, on replay + expert states, 2 updates every 2nd step, 100k steps);
+    a preset fills in only what the command did not set"""
+    sleep_gradient_steps: Annotated[int | None, COUNT] = None
+    """gradient steps of the sleep (None: the protocol's, 5,000 ours: best early at the 200k forward budget)"""
+    sleep_batch_size: Annotated[int, COUNT] = 256
+    """transitions from the success set, and as many from the whole buffer, per step"""
+    sleep_q_lr: Annotated[float, RATE] = 3e-4
+    """learning rate of the soft Q network"""
+    sleep_policy_lr: Annotated[float, RATE] = 5e-6
+    """learning rate of the INFORM actor"""
+    sleep_temperature: Annotated[float, RATE] = 0.01
+    """fixed entropy temperature of V(s) = Q(s, a~pi) - temp * log pi(a|s)"""
+    sleep_chi2_coef: Annotated[float, WEIGHT] = 0.5
+    """weight of the chi-squared regulariser, 1 / (4 * 0.5) as IQ-Learn; 0 turns it off"""
+    sleep_seed: Annotated[int | None, SEED] = None
+    """re-seed the random streams before the sleep (several nights on one day); None: go on where the day left them"""
 
     # Saved days: one forward phase, many nights
     save_buffer: bool = False
     """write the day (memories, episode table, teacher, TAMER, random states) to runs/{run}/day.pt for --sleep-from"""
     sleep_from: str | None = None
-    """run only the night and the final tests on the day saved in this run directory (by --save-buffer); the day's
-    flags (env, seed, teacher, TAMER) replace this run's"""
+    """run only the night and the tests on the day saved in this run directory; the day's flags replace this run's"""
 
     # Evaluation
-    eval_episodes: int = 20
+    eval_episodes: Annotated[int, COUNT] = 20
     """episodes of each final evaluation (deterministic and sampled actions)"""
-    eval_frequency: int = 2000
-    """forward-phase environment steps between evaluations of TAMER (curves like Fig. 3)"""
-    sleep_eval_frequency: int = 1000
-    """sleep-phase gradient steps between evaluations of INFORM"""
-    periodic_eval_episodes: int = 5
-    """episodes of each evaluation during the phases"""
-    obstacle_episodes: int = 100
+    obstacle_episodes: Annotated[int, In(0)] = 100
     """episodes per policy on the obstacle variant, all from the run's initial state, sampled actions"""
     obstacle_layout: Literal["bisector", "paper"] = "bisector"
     """bisector: on the bisector of the object's start and the goal, the middle box on the path; paper: the paper's"""
-    authors_test_episodes: int = 100
+    authors_test_episodes: Annotated[int, In(0)] = 100
     """episodes of the authors' test: sampled actions from the run's initial state (eval/authors_test/...)"""
-    log_frequency: int = 1000
-    """steps between scalar logs (losses, SPS, feedback)"""
     evaluate: str | None = None
     """re-evaluate a saved tamer_actor.pt, inform_actor.pt or oracle (and the obstacle test); print JSON, no run"""
 
 
 def make_env(env_id: str, seed: int, obstacles=None, **render) -> gym.Env:
-    """The env, or Pusher with the robustness test's boxes at the xy `obstacles`; `render` (--capture-video:
-    render_mode, width, height) adds Pusher's videos' camera (other envs film with their own). The boxes and the
-    camera are built below main."""
+    """The env, or Pusher with the obstacle test's boxes at the xy `obstacles`; `render` (render_mode, width, height)
+    adds Pusher's video camera. The boxes and the camera are built below main."""
     if (obstacles is None and not render) or env_id not in PUSHER_IDS:
         env = gym.make(env_id, **render)
     else:
@@ -278,7 +237,9 @@ class Outcome:
 
 
 # ---------------------------------------------------------------------------------------------------------------------
-# networks: each is rebuilt from the `kwargs` saved beside its state_dict
+# ALGO LOGIC: the networks (each is rebuilt from the `kwargs` saved beside its state_dict)
+LOG_STD_MIN = -5.0
+LOG_STD_MAX = 2.0
 
 
 class BatchedLinear(nn.Module):
@@ -360,7 +321,7 @@ def soft_update(target: nn.Module, source: nn.Module, tau: float) -> None:
 
 
 # ---------------------------------------------------------------------------------------------------------------------
-# the pieces of Algorithm 1, named after the paper: Eq. 1-4 and the teacher
+# ALGO LOGIC: the pieces of Algorithm 1, named after the paper: Eq. 1-4 and the teacher
 
 
 def linear_schedule(start: float, end: float, duration: int, t: int) -> float:
@@ -381,40 +342,25 @@ def oracle_q(oracle_actor: Actor, oracle_qf: QEnsemble, obs: torch.Tensor, actio
 
 
 # ALGO LOGIC: the teacher (docs/protocol.md). Eq. 4 says what a perfect teacher would answer; a person distorts it.
-# Copy this class verbatim into both INFORM scripts (CleanRL style: repeated across files, never within one).
 class Teacher:
     """A simulated person between Eq. 4 and the learner: noisy, sparse, late and limited (paper Sec. VII's future work).
 
-    Each call hands over the perfect teacher's answer h* (0 or 1) about the transition at buffer index `step` and
-    returns the labels that arrive now, {buffer index: h} (h = 1 here; a graded or negative teacher returns other
-    values, and the forward phase writes whatever it gets). In order: the judgement is flipped with probability
-    `noise`; a +1 is then clicked only with probability `sparsity`; a click about step t arrives at step t + `delay`
-    and labels that later transition and the `credit_window` - 1 before it (Deep TAMER's remedy; a window of
-    delay + 1 covers the step it was about). The teacher leaves after `budget` delivered +1 signals (None: never).
-    Its randomness is its own generator, so the defaults (0, 1, 0, 1, None) reproduce the perfect teacher exactly
-    and leave every other random stream untouched. Signals still on their way when the phase ends are lost.
+    Each call hands over the perfect answer h* (0 or 1) about the transition at buffer index `step` and returns the
+    labels that arrive now, {buffer index: h}. The judgement is flipped with probability `noise`; a +1 is clicked only
+    with probability `sparsity`; a click about step t arrives at step t + `delay` and labels that transition and the
+    `credit_window` - 1 before it (Deep TAMER's remedy). The teacher leaves after `budget` +1 signals (None: never).
+    Its own generator: the defaults (0, 1, 0, 1, None) are the perfect teacher and leave every other stream untouched.
     """
 
     def __init__(self, noise=0.0, sparsity=1.0, delay=0, credit_window=1, budget=None, seed=0):
-        self.noise = noise
-        self.sparsity = sparsity
-        self.delay = delay
-        self.credit_window = credit_window
-        self.budget = budget
-        self.rng = np.random.default_rng(seed)
+        self.noise, self.sparsity, self.delay, self.credit_window = noise, sparsity, delay, credit_window
+        self.budget, self.rng = budget, np.random.default_rng(seed)
         self.in_flight = collections.deque()  # clicks on their way, oldest first
         self.positives = 0  # +1 signals delivered
         self.perfect_positives = 0  # +1 answers of the perfect teacher (Eq. 4), for the record
 
-    @classmethod
-    def from_args(cls, args) -> "Teacher":
-        """The person that the --teacher-* flags describe, with a generator of its own."""
-        flags = ("teacher_noise", "teacher_sparsity", "teacher_delay", "credit_window", "feedback_budget")
-        return cls(*(getattr(args, flag) for flag in flags), seed=args.seed + 7919)
-
     @property
-    def gone(self) -> bool:
-        """The budget is spent: no more feedback from now on."""
+    def gone(self) -> bool:  # the budget is spent: no more feedback from now on
         return self.budget is not None and self.positives >= self.budget
 
     def __call__(self, step: int, h_star: float) -> dict[int, float]:
@@ -444,8 +390,8 @@ def soft_value(q_net: QEnsemble, actor: Actor, obs: torch.Tensor, temperature: f
     return q_net(obs, action).min(0).values - temperature * log_prob
 
 
-# ALGO LOGIC: the sleep loss. The maze script's signature and return, plus the actor that V(s) needs here, and the
-# rows of the value and chi-squared terms (IQ-Learn's offline recipe takes the expert rows only).
+# ALGO LOGIC: the sleep loss. `rows`: the rows of the value and chi-squared terms (None: all; IQ-Learn's offline
+# recipe takes the expert rows only)
 def iq_loss(
     q_net, target_net, obs, actions, next_obs, terminated, is_expert, gamma, temperature, chi2_coef, actor, rows=None
 ):
@@ -475,12 +421,11 @@ def actor_loss(q_net: QEnsemble, actor: Actor, obs: torch.Tensor, temperature: t
     return (temperature * log_prob - q_net(obs, action).min(0).values).mean(), log_prob
 
 
-def update_actor(q_net, actor, obs, log_ent_coef, actor_optimizer, ent_coef_optimizer, bf16: bool = False) -> None:
+def update_actor(q_net, actor, obs, log_ent_coef, actor_optimizer, ent_coef_optimizer) -> None:
     """One SAC actor step on min_i Q_i (the oracle's critics, or TAMER's H), then one of the autotuned entropy
     coefficient exp(log_ent_coef) towards SAC's target entropy, -dim(A)."""
     q_net.requires_grad_(False)  # the gradient flows through the critic to the action, but none is kept on it
-    with torch.autocast(obs.device.type, dtype=torch.bfloat16, enabled=bf16):
-        pi_loss, logp = actor_loss(q_net, actor, obs, log_ent_coef.detach().exp())
+    pi_loss, logp = actor_loss(q_net, actor, obs, log_ent_coef.detach().exp())
     actor_optimizer.zero_grad(set_to_none=True)
     pi_loss.backward()
     q_net.requires_grad_(True)
@@ -506,9 +451,7 @@ class ReplayBuffer:
         self.size = 0  # transitions stored (fewer than the capacity when the teacher's budget ends the day early)
 
     def add(self, obs, action, next_obs, terminated) -> None:
-        self.obs[self.size] = obs
-        self.actions[self.size] = action
-        self.next_obs[self.size] = next_obs
+        self.obs[self.size], self.actions[self.size], self.next_obs[self.size] = obs, action, next_obs
         self.terminated[self.size] = float(terminated)
         self.size += 1
 
@@ -523,9 +466,7 @@ class ReplayBuffer:
     def batch(self, idx: torch.Tensor):
         return self.obs[idx], self.actions[idx], self.next_obs[idx], self.feedback[idx], self.terminated[idx]
 
-    def expert_indices(
-        self, keep: torch.Tensor | None = None, fallback_fraction: float = 0.1
-    ) -> tuple[torch.Tensor, int]:
+    def expert_indices(self, keep: torch.Tensor | None = None, fallback_fraction: float = 0.1):
         """The success set's transitions and 0; with no success, the transitions of the episodes with the smallest
         shortfall (ended closest to the goal) and how many episodes those are. Only transitions in `keep` (a mask;
         None: all) count: a held-out episode is never an expert."""
@@ -540,32 +481,27 @@ class ReplayBuffer:
 
 
 # ---------------------------------------------------------------------------------------------------------------------
-# the phases of Algorithm 1, then main
+# ALGO LOGIC: the phases of Algorithm 1, then main
 
 
 def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer, evaluator, writer, device):
     """The day: SAC-style TAMER (Eq. 1, gamma = 0) on the teacher's yes/no feedback (Eq. 4), all remembered."""
-    obs_dim = buffer.obs.shape[1]
-    act_dim = buffer.actions.shape[1]
-    h_net = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
-    tamer_actor = Actor(obs_dim, act_dim, args.hidden_size, env.action_space.low, env.action_space.high).to(device)
-    amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
+    obs_dim, act_dim, n = buffer.obs.shape[1], buffer.actions.shape[1], args.tamer_total_timesteps
+    h_net = QEnsemble(obs_dim, act_dim, HIDDEN_SIZE, n=2).to(device)
+    tamer_actor = Actor(obs_dim, act_dim, HIDDEN_SIZE, env.action_space.low, env.action_space.high).to(device)
     h_optimizer = torch.optim.Adam(h_net.parameters(), lr=args.tamer_h_lr, foreach=True)
-    actor_optimizer = torch.optim.Adam(tamer_actor.parameters(), lr=args.tamer_policy_lr, foreach=True)
+    actor_optimizer = torch.optim.Adam(tamer_actor.parameters(), lr=TAMER_POLICY_LR, foreach=True)
     log_ent_coef = torch.zeros(1, device=device, requires_grad=True)  # the actor's entropy coefficient, autotuned
     ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.tamer_h_lr, foreach=True)
-    teacher = Teacher.from_args(args)
+    teacher = Teacher(args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window,
+                      args.feedback_budget, seed=args.seed + 7919)  # fmt: skip
     outcome = Outcome.from_args(args)
-    n = args.tamer_total_timesteps
     print(f"[tamer] {n} env steps, feedback alpha {args.feedback_alpha_start} -> {args.feedback_alpha_end}", flush=True)
     progress = Progress("tamer", n, warmup=args.tamer_learning_starts, evaluator=evaluator)
-    reset_seed = None if args.random_starts else args.seed
     obs, _ = env.reset(seed=args.seed)
     obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
     h_loss = torch.zeros((), device=device)
-    ep_start = ep_length = 0
-    ep_return = 0.0
-    last_return = float("nan")
+    ep_start, ep_length, ep_return, last_return = 0, 0, 0.0, float("nan")
     for step in range(n):
         StopSignals.check()  # a stop signal ends the run here, between two steps
         # the teacher gets stricter: alpha rises linearly over the phase
@@ -593,16 +529,11 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer
         if terminated or truncated or last_step:  # tag the trajectory; a cut-off last one by where it stands
             distance, success, shortfall = outcome(info, ep_return)
             buffer.tag_episode(ep_start, shortfall, success)
-            writer.add_scalar("charts/episodic_return", ep_return, step + 1)
-            writer.add_scalar("charts/episodic_length", ep_length, step + 1)
-            if not math.isnan(distance):
-                writer.add_scalar("charts/final_distance", distance, step + 1)
-            writer.add_scalar("charts/episode_success", float(success), step + 1)
-            last_return = ep_return
-            ep_start = step + 1
-            ep_return = 0.0
-            ep_length = 0
-            next_obs, _ = env.reset(seed=reset_seed)
+            charts = {"episodic_return": ep_return, "episodic_length": ep_length, "episode_success": float(success)}
+            for tag, value in {**charts, **({} if math.isnan(distance) else {"final_distance": distance})}.items():
+                writer.add_scalar(f"charts/{tag}", value, step + 1)
+            ep_start, ep_length, ep_return, last_return = step + 1, 0, 0.0, ep_return
+            next_obs, _ = env.reset(seed=None if args.random_starts else args.seed)
             next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
         obs_t = next_t
 
@@ -610,293 +541,227 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer
         if step >= args.tamer_learning_starts and taught:
             idx = torch.randint(0, step + 1, (args.tamer_batch_size,), device=device)
             obs_b = buffer.obs[idx]
-            with amp:
-                h_loss = tamer_loss(h_net, obs_b, buffer.actions[idx], buffer.feedback[idx])
+            h_loss = tamer_loss(h_net, obs_b, buffer.actions[idx], buffer.feedback[idx])
             h_optimizer.zero_grad(set_to_none=True)
             h_loss.backward()
             h_optimizer.step()
-            if step % args.tamer_policy_frequency == 0:
-                update_actor(h_net, tamer_actor, obs_b, log_ent_coef, actor_optimizer, ent_coef_optimizer, args.bf16)
+            update_actor(h_net, tamer_actor, obs_b, log_ent_coef, actor_optimizer, ent_coef_optimizer)
 
-        # TRY NOT TO MODIFY: logging and periodic evaluation
-        if (step + 1) % args.log_frequency == 0 or last_step:
-            writer.add_scalar("losses/tamer_loss", h_loss.item(), step + 1)
-            writer.add_scalar("losses/tamer_entropy_coef", log_ent_coef.exp().item(), step + 1)
-            writer.add_scalar("feedback/positive", teacher.positives, step + 1)
-            writer.add_scalar("feedback/positive_rate", teacher.positives / (step + 1), step + 1)
-            writer.add_scalar("feedback/alpha", feedback_alpha, step + 1)
-            writer.add_scalar("charts/SPS", progress.sps(step + 1), step + 1)
+        # TRY NOT TO MODIFY: the divergence check, logging and periodic evaluation
+        if (step + 1) % 100 == 0 or last_step:
+            check_finite({"tamer_loss": h_loss}, {}, "TAMER's feedback model H", f"env step {step + 1}", "--tamer-h-lr")
+        if (step + 1) % LOG_FREQUENCY == 0 or last_step:
+            logs = {"losses/tamer_loss": h_loss.item(), "losses/tamer_entropy_coef": log_ent_coef.exp().item()}
+            logs.update(
+                {"feedback/positive": teacher.positives, "feedback/positive_rate": teacher.positives / (step + 1)}
+            )
+            logs.update({"feedback/alpha": feedback_alpha, "charts/SPS": progress.sps(step + 1)})
+            for tag, value in logs.items():
+                writer.add_scalar(tag, value, step + 1)
         report = {"return": last_return}
-        if (step + 1) % args.eval_frequency == 0 or last_step:
-            metrics = evaluator("tamer", tamer_actor, step + 1, args.periodic_eval_episodes)
+        if (step + 1) % EVAL_FREQUENCY == 0 or last_step:
+            metrics = evaluator("tamer", tamer_actor, step + 1, PERIODIC_EVAL_EPISODES)
             report["eval return"] = metrics["eval/tamer_return"]
         progress(step + 1, **report)
         if last_step:
             break
 
-    successes = buffer.successes()
-    print(
-        f"[tamer] feedback +1 on {teacher.positives}/{buffer.size} steps ({teacher.positives / buffer.size:.1%}); "
-        f"{successes}/{len(buffer.episodes)} episodes tagged success",
-        flush=True,
-    )
-    stats = {
-        "feedback/positive": teacher.positives,
-        "feedback/perfect_positive": teacher.perfect_positives,
-        "feedback/steps": buffer.size,
-        "feedback/positive_rate": teacher.positives / buffer.size,
-        "sleep/success_episodes": int(successes),
-        "sleep/episodes": len(buffer.episodes),
-        "losses/tamer_entropy_coef": log_ent_coef.exp().item(),
-    }
-    return h_net, tamer_actor, stats
+    positives, successes = teacher.positives, buffer.successes()
+    print(f"[tamer] feedback +1 on {positives}/{buffer.size} steps ({positives / buffer.size:.1%}); "
+          f"{successes}/{len(buffer.episodes)} episodes tagged success", flush=True)  # fmt: skip
+    stats = {"feedback/positive": positives, "feedback/perfect_positive": teacher.perfect_positives}
+    stats.update({"feedback/steps": buffer.size, "feedback/positive_rate": positives / buffer.size})
+    stats.update({"sleep/success_episodes": int(successes), "sleep/episodes": len(buffer.episodes)})
+    return h_net, tamer_actor, {**stats, "losses/tamer_entropy_coef": log_ent_coef.exp().item()}
 
 
-def sleep_phase(
-    args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator, writer, device, h_net=None, ent_coef=1.0
-):
-    """The night: offline IQ-Learn (Eq. 2) on the buffer, the successful trajectories as the expert set. TAMER's H and
-    entropy coefficient at the day's end are needed only by the sham control. Returns the soft Q, the INFORM actor,
-    the stats and, with a hold-out, the checkpoint the offline criterion picked (else None)."""
-    held = held_out(args, buffer, device)  # --sleep-holdout-fraction: episodes the sleep never sees
-    keep = torch.ones(buffer.size, dtype=torch.bool, device=device)
-    if held is not None:
-        keep[held] = False
-    replay_idx = keep.nonzero().squeeze(-1)
-    expert_idx, fallback_episodes = buffer.expert_indices(keep)
+def sleep_recipe(args) -> dict:
+    """The night's settings that --sleep-protocol presets: the protocol's, under whatever the command set (a field of
+    `args` that is not None; the study module's Args has more of them)."""
+    recipe = SLEEP_PROTOCOLS[args.sleep_protocol]
+    return {k: v if getattr(args, k, None) is None else getattr(args, k) for k, v in recipe.items()}
+
+
+def sleep_batch(buffer: ReplayBuffer, batch_size: int, expert_idx: torch.Tensor, replay_idx=None):
+    """The sleep's batch: `batch_size` replay rows (drawn from replay_idx; None: the whole buffer), then as many
+    expert rows."""
+    replay = torch.randint(0, buffer.size if replay_idx is None else replay_idx.numel(), (batch_size,))
+    replay = replay if replay_idx is None else replay_idx[replay]
+    expert = expert_idx[torch.randint(0, expert_idx.numel(), (batch_size,))]
+    return buffer.batch(torch.cat([replay, expert]))
+
+
+def sleep_phase(args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator, writer, device, **tamer):
+    """The night: offline IQ-Learn (Eq. 2) on the buffer, the successful trajectories as the expert set. Returns the
+    soft Q, the INFORM actor, the stats and a checkpoint picked offline (none here; `tamer`: TAMER's H and entropy
+    coefficient, for the study's variants that go on with TAMER)."""
+    recipe = sleep_recipe(args)
+    expert_idx, fallback_episodes = buffer.expert_indices()
     if fallback_episodes:
-        print(
-            f"[sleep] warning: no successful episode; using the {fallback_episodes} episodes that came closest "
-            "(the smallest final distance, or with --success-return the highest return) as the expert set",
-            flush=True,
-        )
-    print(f"[sleep] {expert_idx.numel()} expert transitions, {replay_idx.numel()} in the buffer", flush=True)
-    obs_dim = buffer.obs.shape[1]
-    act_dim = buffer.actions.shape[1]
-    n_critics = 2 if args.sleep_twin_critics else 1
-    q_net = QEnsemble(obs_dim, act_dim, args.hidden_size, n=n_critics).to(device)
-    q_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=n_critics).to(device)
+        closest = "the smallest final distance, or with --success-return the highest return"
+        print(f"[sleep] warning: no successful episode; the {fallback_episodes} closest ({closest}) are the expert set")
+    print(f"[sleep] {expert_idx.numel()} expert transitions, {buffer.size} in the buffer", flush=True)
+    obs_dim, act_dim = buffer.obs.shape[1], buffer.actions.shape[1]
+    q_net = QEnsemble(obs_dim, act_dim, HIDDEN_SIZE, n=1).to(device)
+    q_target = QEnsemble(obs_dim, act_dim, HIDDEN_SIZE, n=1).to(device)
     q_target.load_state_dict(q_net.state_dict())
-    low = tamer_actor.action_bias - tamer_actor.action_scale
-    high = tamer_actor.action_bias + tamer_actor.action_scale
-    inform_actor = Actor(obs_dim, act_dim, args.hidden_size, low, high).to(device)
-    if args.sleep_init_actor_from_tamer or args.sleep_control == "sham":
+    low, high = tamer_actor.action_bias - tamer_actor.action_scale, tamer_actor.action_bias + tamer_actor.action_scale
+    inform_actor = Actor(obs_dim, act_dim, HIDDEN_SIZE, low, high).to(device)
+    if recipe["sleep_init_actor_from_tamer"]:  # consolidation: the night starts from the day's actor
         inform_actor.load_state_dict(tamer_actor.state_dict())
-    amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
     q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_q_lr, foreach=True)
-    policy_lr = args.tamer_policy_lr if args.sleep_control == "sham" else args.sleep_policy_lr
-    inform_optimizer = torch.optim.Adam(inform_actor.parameters(), lr=policy_lr, foreach=True)
-    if args.sleep_control == "sham":  # TAMER goes on learning from its memories: H and the actor, TAMER's rates
-        sham_h = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
-        sham_h.load_state_dict(h_net.state_dict())
-        sham_h_optimizer = torch.optim.Adam(sham_h.parameters(), lr=args.tamer_h_lr, foreach=True)
-        log_ent_coef = torch.full((1,), math.log(ent_coef), device=device, requires_grad=True)
-        ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.tamer_h_lr, foreach=True)
-    batch_size = args.sleep_batch_size
-    gamma = args.sleep_gamma
-    temp = args.sleep_temperature
-    chi2 = args.sleep_chi2_coef
+    inform_optimizer = torch.optim.Adam(inform_actor.parameters(), lr=args.sleep_policy_lr, foreach=True)
+    batch_size, temp, chi2 = args.sleep_batch_size, args.sleep_temperature, args.sleep_chi2_coef
     is_expert = torch.arange(2 * batch_size, device=device) >= batch_size  # the batch: replay rows, then expert rows
-    rows = is_expert if args.sleep_loss_rows == "expert" else None  # of the value and chi2 terms
-    actor_rows = {"replay": ~is_expert, "expert": is_expert, "replay+expert": slice(None)}[args.sleep_actor_states]
+    actor_rows = {"replay": ~is_expert, "expert": is_expert, "replay+expert": slice(None)}[recipe["sleep_actor_states"]]
+    frequency, steps = recipe["sleep_policy_frequency"], recipe["sleep_gradient_steps"]
     stats = {"sleep/expert_transitions": int(expert_idx.numel()), "sleep/expert_fallback": int(fallback_episodes > 0)}
-    losses = {}
-    criterion = OfflineCriterion(args, buffer, held, writer) if held is not None else None
-    pi_loss = torch.zeros((), device=device)
-    progress = Progress("sleep", args.sleep_gradient_steps, evaluator=evaluator)
-    for step in range(1, args.sleep_gradient_steps + 1):
+    losses, pi_loss = {}, torch.zeros((), device=device)
+    progress = Progress("sleep", steps, evaluator=evaluator)
+    for step in range(1, steps + 1):
         StopSignals.check()
         # ALGO LOGIC: the sleep update: Q by IQ-Learn (Eq. 2), the INFORM actor on Q, the target Q follows softly
-        replay = replay_idx[torch.randint(0, replay_idx.numel(), (batch_size,), device=device)]
-        expert = expert_idx[torch.randint(0, expert_idx.numel(), (batch_size,), device=device)]
-        obs, actions, next_obs, feedback, terminated = buffer.batch(torch.cat([replay, expert]))
-        with amp:
-            loss, terms = iq_loss(
-                q_net, q_target, obs, actions, next_obs, terminated, is_expert, gamma, temp, chi2, inform_actor, rows
-            )
+        obs, actions, next_obs, _, terminated = sleep_batch(buffer, batch_size, expert_idx)
+        loss, terms = iq_loss(q_net, q_target, obs, actions, next_obs, terminated, is_expert, SLEEP_GAMMA, temp, chi2,
+                              inform_actor)  # fmt: skip
         q_optimizer.zero_grad(set_to_none=True)
         loss.backward()
         q_optimizer.step()
-        for _ in range(args.sleep_policy_frequency if step % args.sleep_policy_frequency == 0 else 0):
-            if args.sleep_control == "sham":  # control: TAMER's own update (Eq. 1, then its actor on H), no Q
-                with amp:
-                    pi_loss = tamer_loss(sham_h, obs[~is_expert], actions[~is_expert], feedback[~is_expert])
-                sham_h_optimizer.zero_grad(set_to_none=True)
-                pi_loss.backward()
-                sham_h_optimizer.step()
-                update_actor(
-                    sham_h, inform_actor, obs[~is_expert], log_ent_coef, inform_optimizer, ent_coef_optimizer, args.bf16
-                )
-                continue
+        for _ in range(frequency if step % frequency == 0 else 0):  # the authors': 2 updates every 2nd step
             q_net.requires_grad_(False)  # the actor's gradient flows through Q, but none is kept on it
-            with amp:
-                if args.sleep_control == "bc":  # control: behaviour cloning on the success set, no Q
-                    pi_loss = (inform_actor.get_action(obs[is_expert])[2] - actions[is_expert]).pow(2).mean()
-                else:
-                    pi_loss, _ = actor_loss(q_net, inform_actor, obs[actor_rows], temp)
-                if args.sleep_bc_coef > 0:  # TD3+BC: the Q objective made scale-free, plus cloning the experts
-                    pi_loss = (
-                        pi_loss / q_net(obs, actions).abs().mean().detach()
-                        + args.sleep_bc_coef
-                        * (inform_actor.get_action(obs[is_expert])[2] - actions[is_expert]).pow(2).mean()
-                    )
+            pi_loss, _ = actor_loss(q_net, inform_actor, obs[actor_rows], temp)
             inform_optimizer.zero_grad(set_to_none=True)
             pi_loss.backward()
             q_net.requires_grad_(True)
             inform_optimizer.step()
-        soft_update(q_target, q_net, args.tau)
+        soft_update(q_target, q_net, TAU)
 
         # TRY NOT TO MODIFY: logging (one host sync per 100 steps to catch divergence) and periodic evaluation
-        last_step = step == args.sleep_gradient_steps
-        log_now = step % args.log_frequency == 0 or last_step
-        if log_now or step % 100 == 0:
+        last_step = step == steps
+        if step % 100 == 0 or step % LOG_FREQUENCY == 0 or last_step:
             tags = {"iq_loss": loss, **terms, "inform_actor_loss": pi_loss}
-            values = torch.stack(list(tags.values())).tolist()
-            if not all(map(math.isfinite, values)):
-                last = ", ".join(f"{k.split('/')[1]} {v:.4g}" for k, v in losses.items())
-                raise Diverged(
-                    f"the sleep loss diverged (NaN or inf) by gradient step {step}; last finite losses: "
-                    f"{last or 'none yet'}; try a lower --sleep-q-lr or --sleep-policy-lr"
-                )
-            losses = {f"losses/{tag}": value for tag, value in zip(tags, values, strict=True)}
-        if log_now:
-            for tag, value in losses.items():
+            losses = check_finite(tags, losses, "the sleep loss", f"gradient step {step}", SLEEP_LRS)
+        if step % LOG_FREQUENCY == 0 or last_step:
+            for tag, value in {**losses, "sleep/SPS": progress.sps(step)}.items():
                 writer.add_scalar(tag, value, step)
-            writer.add_scalar("sleep/SPS", progress.sps(step), step)
         report = {"iq_loss": losses.get("losses/iq_loss")}
-        if step % args.sleep_eval_frequency == 0 or last_step:
-            metrics = evaluator("inform", inform_actor, step, args.periodic_eval_episodes)
+        if step % SLEEP_EVAL_FREQUENCY == 0 or last_step:
+            metrics = evaluator("inform", inform_actor, step, PERIODIC_EVAL_EPISODES)
             report["eval return"] = metrics["eval/inform_return"]
-            if criterion is not None:  # no environment: the held-out episodes only
-                report["criterion"] = criterion(step, q_net, q_target, inform_actor)
         progress(step, **report)
-    selected = None
-    if criterion is not None:
-        stats.update(criterion.stats())
-        selected = criterion.selected
-    return q_net, inform_actor, {**stats, **losses}, selected
+    return q_net, inform_actor, {**stats, **losses}, None
 
 
-def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals", day: dict | None = None) -> dict:
-    run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
-    run_start = time.time()
-    run_dir = writer = env = evaluator = None
-    summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
+SLEEP_LRS = "--sleep-q-lr or --sleep-policy-lr"  # what helps a diverging night
+
+
+def check_finite(tags: dict, last: dict, what: str, when: str, flag: str) -> dict:
+    """{losses/tag: value} after one host sync; Diverged, naming `what` and the `flag` that helps, if any is NaN or
+    inf (`last`: the last finite ones, for the message)."""
+    values = torch.stack(list(tags.values())).tolist()
+    if not all(map(math.isfinite, values)):
+        finite = ", ".join(f"{k.split('/')[1]} {v:.4g}" for k, v in last.items()) or "none yet"
+        raise Diverged(f"{what} diverged (NaN or inf) by {when}; last finite losses: {finite}; try a lower {flag}")
+    return {f"losses/{tag}": value for tag, value in zip(tags, values, strict=True)}
+
+
+def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals", day: dict | None = None, sleep=None) -> dict:
+    """oracle -> day (the forward phase) -> night (`sleep`, by default sleep_phase) -> Eq. 3 and the tests."""
+    recipe = sleep_recipe(args)  # the preset's values that ran go into the summary's args
+    args = dataclasses.replace(args, **{k: v for k, v in recipe.items() if hasattr(args, k)})
+    run_start, run_dir, writer, env, evaluator = time.time(), None, None, None, None
     oracle_ckpt = day["oracle"] if day is not None else oracle_ckpt  # --sleep-from: the saved day's teacher
+    summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
     summary["oracle_path"] = oracle_ckpt["path"] if oracle_ckpt is not None else None
     summary["sleep_from"] = os.path.abspath(args.sleep_from) if day is not None else None
-    summary["sleep_variant"] = sleep_variant(args)
-    status = "completed"
-    failure = None
-    phase = "startup"
+    settings = {k.removeprefix("sleep_"): v for k, v in {**vars(args), **recipe}.items() if k.startswith("sleep_")}
+    summary["sleep_variant"] = " ".join(f"{k}={v}" for k, v in settings.items() if k != "from")  # the night's settings
+    status, failure, phase = "completed", None, "startup"
     try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
-        run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
-        print(f"run directory: {run_dir}", flush=True)
+        run_dir = make_run_dir(f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}")
+        print(f"run directory: {run_dir}", flush=True)  # only now: bad input was refused, nothing half-written is left
         StopSignals.check()  # a stop while starting ends here, with a summary in the run directory
         random.seed(args.seed)
         np.random.seed(args.seed)
         torch.manual_seed(args.seed)
-        torch.backends.cudnn.deterministic = args.torch_deterministic
-        if args.torch_deterministic:
-            os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # CUDA matmuls refuse determinism without it
-        torch.use_deterministic_algorithms(args.torch_deterministic)
+        torch.backends.cudnn.deterministic = True
+        torch.use_deterministic_algorithms(True)
         torch.set_num_threads(args.num_threads)
-        device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
-
+        device = torch.device("cpu")  # these small networks run faster on one CPU thread than on a GPU
         if args.track:  # Weights & Biases mirrors the TensorBoard events (CleanRL's --track); before the writer
             import wandb
 
-            wandb.init(
-                project=args.wandb_project_name,
-                entity=args.wandb_entity,
-                sync_tensorboard=True,
-                config=vars(args),
-                name=os.path.basename(run_dir),
-                dir=run_dir,
-                save_code=True,
-            )
+            wandb.init(project=os.environ.get("WANDB_PROJECT", "inform"), sync_tensorboard=True, config=vars(args),
+                       name=os.path.basename(run_dir), dir=run_dir, save_code=True)  # fmt: skip
         writer = SummaryWriter(run_dir)
-        writer.add_text(
-            "hyperparameters",
-            "|param|value|\n|-|-|\n" + "\n".join(f"|{key}|{value}|" for key, value in vars(args).items()),
-        )
-        env = make_env(args.env_id, args.seed)
-        evaluator = Evaluator(args, writer)
-        obs_dim = int(np.prod(env.observation_space.shape))
-        act_dim = int(np.prod(env.action_space.shape))
+        table = "\n".join(f"|{k}|{v}|" for k, v in vars(args).items())
+        writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + table)
+        env, evaluator = make_env(args.env_id, args.seed), Evaluator(args, writer)
+        obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
 
         # ---- oracle: the simulated teacher (docs/protocol.md, "Oracles and the expert bar")
-        phase = "oracle"
-        t0 = time.time()
+        phase, t0 = "oracle", time.time()
         if oracle_ckpt is not None:
             oracle_actor, oracle_qf = oracle_from_checkpoint(oracle_ckpt, device)
-            steps = oracle_ckpt.get("training_steps", "?")
-            print(f"[oracle] loaded {oracle_ckpt['path']} ({steps} SAC steps)", flush=True)
+            print(f"[oracle] loaded {oracle_ckpt['path']} ({oracle_ckpt.get('training_steps', '?')} SAC steps)")
         else:
             print(f"[oracle] training SAC on the env reward for {args.oracle_total_timesteps} steps", flush=True)
-            oracle_actor, oracle_qf, summary["sps/oracle"] = train_oracle(args, writer, device)
-            if args.save_model:
-                save_oracle(f"{run_dir}/oracle.pt", args, oracle_actor, oracle_qf, env.action_space)
+            outcome = Outcome.from_args(args)
+            oracle_actor, oracle_qf, summary["sps/oracle"] = train_oracle(
+                args.env_id, args.seed, args.oracle_total_timesteps, outcome, writer, device
+            )
+            save_atomic(oracle_checkpoint(args, oracle_actor, oracle_qf), f"{run_dir}/oracle.pt")
         oracle_actor.requires_grad_(False)
         oracle_qf.requires_grad_(False)
         summary["time/oracle_s"] = time.time() - t0
-        evaluator("oracle", oracle_actor, 0, args.periodic_eval_episodes)
+        evaluator("oracle", oracle_actor, 0, PERIODIC_EVAL_EPISODES)
 
         # ---- forward phase ("day"): TAMER with simulated feedback, every transition remembered
-        phase = "tamer"
-        t0 = time.time() - evaluator.seconds  # the phase's clock stops during its evaluations
+        phase, t0 = "tamer", time.time() - evaluator.seconds  # the phase's clock stops during its evaluations
         buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, act_dim, device)
         if day is None:
-            h_net, tamer_actor, stats = forward_phase(
-                args, env, oracle_actor, oracle_qf, buffer, evaluator, writer, device
-            )
+            h_net, tamer_actor, stats = forward_phase(args, env, oracle_actor, oracle_qf, buffer, evaluator, writer,
+                                                      device)  # fmt: skip
         else:  # --sleep-from: the saved day's memories and TAMER, and the random streams where the day left them
             h_net, tamer_actor, stats = restore_day(day, buffer, evaluator, device)
         summary["time/tamer_s"] = time.time() - evaluator.seconds - t0
         summary["sps/tamer"] = stats["feedback/steps"] / max(summary["time/tamer_s"], 1e-9)
         summary.update(stats)  # a saved day's stats bring the day's own time
-        if args.save_model:
-            save_actor(f"{run_dir}/tamer_actor.pt", tamer_actor, env_id=args.env_id)
-            save_critic(f"{run_dir}/tamer_h.pt", h_net, obs_dim, act_dim, env_id=args.env_id)
+        save_actor(f"{run_dir}/tamer_actor.pt", tamer_actor, env_id=args.env_id)
+        save_critic(f"{run_dir}/tamer_h.pt", h_net, obs_dim, act_dim, env_id=args.env_id)
         if args.save_buffer:
-            day_networks = (oracle_ckpt, oracle_actor, oracle_qf, h_net, tamer_actor)
             day_stats = {**stats, "time/tamer_s": summary["time/tamer_s"], "sps/tamer": summary["sps/tamer"]}
-            save_day(f"{run_dir}/day.pt", args, buffer, day_networks, day_stats, evaluator)
+            ckpt = oracle_ckpt or oracle_checkpoint(args, oracle_actor, oracle_qf)
+            save_day(f"{run_dir}/day.pt", args, buffer, ckpt, h_net, tamer_actor, day_stats, evaluator.generator)
 
         # ---- sleep phase ("night"): offline IQ-Learn on the buffer, no environment steps
-        phase = "sleep"
-        t0 = time.time() - evaluator.seconds
+        phase, t0 = "sleep", time.time() - evaluator.seconds
         if args.sleep_seed is not None:  # another night on the same day
             torch.manual_seed(args.sleep_seed)
-        q_net, inform_actor, stats, selected = sleep_phase(
-            args, buffer, tamer_actor, evaluator, writer, device, h_net, stats["losses/tamer_entropy_coef"]
-        )
+        tamer = {"h_net": h_net, "ent_coef": stats["losses/tamer_entropy_coef"]}  # for the study's sham night
+        night = sleep or sleep_phase
+        q_net, inform_actor, stats, selected = night(args, buffer, tamer_actor, evaluator, writer, device, **tamer)
         summary.update(stats)
         summary["time/sleep_s"] = time.time() - evaluator.seconds - t0
         summary["sps/sleep"] = args.sleep_gradient_steps / max(summary["time/sleep_s"], 1e-9)
-        if args.save_model:
-            save_actor(f"{run_dir}/inform_actor.pt", inform_actor, env_id=args.env_id)
-            extra = {"gamma": args.sleep_gamma, "temperature": args.sleep_temperature}
-            save_critic(f"{run_dir}/inform_critic.pt", q_net, obs_dim, act_dim, env_id=args.env_id, **extra)
-            if selected is not None:  # the checkpoint the offline criterion picked, beside the last one
-                save_actor(f"{run_dir}/inform_selected_actor.pt", selected["actor"], env_id=args.env_id)
+        save_actor(f"{run_dir}/inform_actor.pt", inform_actor, env_id=args.env_id)
+        extra = {"env_id": args.env_id, "gamma": SLEEP_GAMMA, "temperature": args.sleep_temperature}
+        save_critic(f"{run_dir}/inform_critic.pt", q_net, obs_dim, act_dim, **extra)
+        policies = {"oracle": oracle_actor, "tamer": tamer_actor, "inform": inform_actor}
+        if selected is not None:  # the checkpoint picked offline, beside the last one
+            save_actor(f"{run_dir}/inform_selected_actor.pt", selected["actor"], env_id=args.env_id)
+            policies["inform_selected"] = selected["actor"]
 
         # ---- the recovered reward (Eq. 3), then the final evaluation and the obstacle robustness test
         phase = "eval"
-        policies = {"oracle": oracle_actor, "tamer": tamer_actor, "inform": inform_actor}
-        if selected is not None:
-            policies["inform_selected"] = selected["actor"]
         summary.update(final_evaluation(args, buffer, q_net, policies, evaluator, writer, run_dir))
     except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
-        status = "interrupted"
-        stop.broken_pipe = isinstance(e, BrokenPipeError)
+        status, stop.broken_pipe = "interrupted", isinstance(e, BrokenPipeError)
     except Diverged as e:
-        status = "diverged"
-        summary["error"] = str(e)
-    except Exception as e:  # a bug: the summary records it, then its traceback
-        status = "failed"
-        summary["error"] = f"{type(e).__name__}: {(str(e).strip() or '-').splitlines()[0]}"
-        failure = e
+        status, summary["error"] = "diverged", str(e)
+    except Exception as e:  # the summary records it; a bug then gets its traceback, a full disk its one line
+        status, summary["error"] = "failed", f"{type(e).__name__}: {(str(e).strip() or '-').splitlines()[0]}"
+        failure = None if isinstance(e, OSError) else e
     summary = end_run(args, summary, status, phase, run_dir, run_start, evaluator, (env, writer), stop)
     if failure is not None:
         raise failure
@@ -904,31 +769,23 @@ def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals", day: dict | 
 
 
 # ---------------------------------------------------------------------------------------------------------------------
-# ALGO LOGIC, below main: the evaluation protocol and the rest of the research code. The tests (deterministic and
-# sampled, the authors'), the offline checkpoint choice, the oracle's own SAC, the recovered reward (Eq. 3) as an
-# object and a Gymnasium wrapper; then Pusher's own pieces (the obstacle test and its model)
+# ALGO LOGIC, below main: the evaluation protocol (deterministic and sampled actions, the authors' test, the obstacle
+# test), the oracle's own SAC, the recovered reward (Eq. 3) as an object and a Gymnasium wrapper
 
 
 @torch.no_grad()
 def evaluate(actor: Actor, env: gym.Env, episodes: int, reset_seed, deterministic: bool, generator, outcome: Outcome):
     """Run `episodes` episodes; reset_seed(ep) gives each episode's reset seed. Returns means and per-episode data,
     each episode's observations included."""
-    returns = []
-    distances = []
-    successes = []
-    trajectories = []
+    returns, distances, successes, trajectories = [], [], [], []
     for ep in range(episodes):
         StopSignals.check()
         obs, _ = env.reset(seed=reset_seed(ep))
-        done = False
-        ep_return = 0.0
-        info = {}
-        trajectory = [obs]
+        done, ep_return, info, trajectory = False, 0.0, {}, [obs]
         while not done:
             sampled, _, mean = actor.get_action(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0), generator)
             obs, reward, terminated, truncated, info = env.step((mean if deterministic else sampled)[0].numpy())
-            ep_return = ep_return + float(reward)
-            done = terminated or truncated
+            ep_return, done = ep_return + float(reward), terminated or truncated
             trajectory.append(obs)
         distance, success, _ = outcome(info, ep_return)
         returns.append(ep_return)
@@ -936,15 +793,9 @@ def evaluate(actor: Actor, env: gym.Env, episodes: int, reset_seed, deterministi
         successes.append(success)
         trajectories.append(np.array(trajectory))
     distances = np.asarray(distances)
-    return {
-        "return": float(np.mean(returns)),
-        "final_distance": float(distances.mean()),
-        "final_distance_std": float(distances.std()),
-        "success_rate": float(np.mean(successes)),
-        "distances": distances,
-        "returns": np.asarray(returns),
-        "trajectories": trajectories,
-    }
+    res = {"return": float(np.mean(returns)), "final_distance": float(distances.mean())}
+    res.update({"final_distance_std": float(distances.std()), "success_rate": float(np.mean(successes))})
+    return {**res, "distances": distances, "returns": np.asarray(returns), "trajectories": trajectories}
 
 
 class Evaluator:
@@ -952,11 +803,9 @@ class Evaluator:
     Episodes start from the run's seed (fixed start) or from fresh seeds (`--random-starts`), the same each time."""
 
     def __init__(self, args: Args, writer: SummaryWriter | None):
-        self.env = make_env(args.env_id, args.seed)
+        self.env, self.writer = make_env(args.env_id, args.seed), writer
+        self.seed, self.random_starts = args.seed, args.random_starts
         self.generator = torch.Generator().manual_seed(args.seed + 12345)  # sampled actions, off the training RNG
-        self.writer = writer
-        self.seed = args.seed
-        self.random_starts = args.random_starts
         self.outcome = Outcome.from_args(args)
         self.seconds = 0.0  # spent evaluating
         self.final = {}  # the latest value of each tag
@@ -965,14 +814,12 @@ class Evaluator:
         return 1_000_000 + 1000 * self.seed + episode if self.random_starts else self.seed
 
     def __call__(self, name: str, actor: Actor, step: int, episodes: int) -> dict:
-        t = time.time()
-        results = {}
+        t, results = time.time(), {}
         for deterministic, suffix in ((True, ""), (False, "_sampled")):
             res = evaluate(actor, self.env, episodes, self.reset_seed, deterministic, self.generator, self.outcome)
             results.update({f"eval/{name}_{k}{suffix}": res[k] for k in ("return", "final_distance", "success_rate")})
-        if self.writer is not None:
-            for tag, value in results.items():
-                self.writer.add_scalar(tag, value, step)
+        for tag, value in results.items() if self.writer is not None else ():
+            self.writer.add_scalar(tag, value, step)
         self.final.update(results)
         self.seconds += time.time() - t
         return results
@@ -984,215 +831,104 @@ class Evaluator:
 def final_evaluation(args: Args, buffer, q_net, policies: dict, evaluator, writer, run_dir: str) -> dict:
     """After the sleep: Eq. 3 on the buffer, each policy's final evaluation, the obstacle test (Pusher only) and the
     authors' test (all logged at the run's last step), the obstacle files and, with --capture-video, the videos."""
-    results = recovered_reward_stats(args, buffer, q_net, policies["inform"])
-    end_step = args.tamer_total_timesteps + args.sleep_gradient_steps
+    results = recovered_reward_stats(buffer, q_net, policies["inform"], args.sleep_temperature)
+    end_step, outcome, boxes = args.tamer_total_timesteps + args.sleep_gradient_steps, Outcome.from_args(args), None
     print("[eval] final evaluation", flush=True)
     for name, actor in policies.items():
         evaluator(name, actor, end_step, args.eval_episodes)
     t = time.time()
-    boxes = None
-    skipped = obstacle_skipped(args)
-    if skipped:
-        results["obstacle/skipped"] = skipped
+    if obstacle_skipped(args.env_id, args.obstacle_episodes):
+        results["obstacle/skipped"] = obstacle_skipped(args.env_id, args.obstacle_episodes)
     else:
-        obstacle, distances, paths = obstacle_test(args, policies, evaluator.generator)
+        test = (args.env_id, args.seed, args.obstacle_layout, args.obstacle_episodes, outcome)
+        obstacle, distances, paths = obstacle_test(*test, policies, evaluator.generator)
         results.update(obstacle)
         np.savez(f"{run_dir}/obstacle_distances.npz", **distances)
         np.savez(f"{run_dir}/obstacle_paths.npz", **paths)
         boxes = paths["boxes"]
-    if args.authors_test_episodes > 0:
-        results.update(authors_test(args, policies, evaluator.generator))
+    if args.authors_test_episodes > 0:  # the authors' test: sampled actions, every episode from the run's start
+        env = make_env(args.env_id, args.seed)
+        for name, actor in policies.items():
+            res = evaluate(actor, env, args.authors_test_episodes, lambda ep: args.seed, False, evaluator.generator,
+                           outcome)  # fmt: skip
+            results.update(
+                {f"eval/authors_test/{name}_{k}": res[k] for k in ("return", "final_distance", "success_rate")}
+            )
+        env.close()
     for tag, value in results.items():
         if tag.startswith(("eval/obstacle/", "eval/authors_test/", "obstacle/min")):
             writer.add_scalar(tag, value, end_step)
     evaluator.seconds += time.time() - t
     if args.capture_video:  # after every number is in: filming changes none of them
-        record_videos(args, policies, boxes, evaluator.reset_seed(0), run_dir)
+        record_videos(args.env_id, args.seed, outcome, policies, boxes, evaluator.reset_seed(0), run_dir)
     return results
 
 
-def recovered_reward_stats(args: Args, buffer: ReplayBuffer, q_net: QEnsemble, inform_actor: Actor) -> dict:
+def recovered_reward_stats(buffer: ReplayBuffer, q_net: QEnsemble, inform_actor: Actor, temperature: float) -> dict:
     """Eq. 3 on the buffer: the mean recovered reward of success and of failure transitions, for the record."""
-    reward_fn = RecoveredReward(q_net, inform_actor, args.sleep_gamma, args.sleep_temperature, samples=4)
+    reward_fn = RecoveredReward(q_net, inform_actor, SLEEP_GAMMA, temperature, samples=4)
     b = [x[: buffer.size].cpu().numpy() for x in (buffer.obs, buffer.actions, buffer.next_obs, buffer.terminated)]
-    r_all = reward_fn(*b)
-    succ = buffer.success[: buffer.size].cpu().numpy()
-    return {
-        "sleep/recovered_reward_success_mean": float(r_all[succ].mean()) if succ.any() else float("nan"),
-        "sleep/recovered_reward_failure_mean": float(r_all[~succ].mean()) if (~succ).any() else float("nan"),
-    }
-
-
-def held_out(args: Args, buffer: ReplayBuffer, device) -> torch.Tensor | None:
-    """The transitions of --sleep-holdout-fraction of the day's episodes, drawn by the seed (None: no hold-out)."""
-    if args.sleep_holdout_fraction == 0:
-        return None
-    n = len(buffer.episodes)
-    k = min(n - 1, max(1, round(args.sleep_holdout_fraction * n)))
-    chosen = torch.randperm(n, generator=torch.Generator().manual_seed(args.seed + 15)).tolist()[:k]
-    return torch.cat([torch.arange(*buffer.episodes[i][:2], device=device) for i in sorted(chosen)])
-
-
-def auc(scores: torch.Tensor, positive: torch.Tensor) -> float:
-    """The probability that a positive scores above a negative, ties counted half (Mann-Whitney U); NaN without both."""
-    from scipy.stats import rankdata
-
-    n_pos = int(positive.sum())
-    n_neg = positive.numel() - n_pos
-    if n_pos == 0 or n_neg == 0:
-        return float("nan")
-    ranks = rankdata(scores.float().cpu().numpy())
-    return float((ranks[positive.cpu().numpy()].sum() - n_pos * (n_pos + 1) / 2) / (n_pos * n_neg))
-
-
-class OfflineCriterion:
-    """Choosing the sleep's checkpoint without the environment: on the held-out episodes, every evaluation of the sleep
-    logs the expert log-likelihood (mean log pi(a|s) of the held-out success transitions), the IQ-Learn terms, the drift
-    of Q(s, a~pi) and the AUC with which the recovered reward (Eq. 3) separates success from failure transitions. The
-    criterion, fixed before any test return was seen: the highest expert log-likelihood picks the checkpoint."""
-
-    def __init__(self, args: Args, buffer: ReplayBuffer, held: torch.Tensor, writer):
-        self.args = args
-        self.writer = writer
-        self.batch = buffer.batch(held)
-        self.success = buffer.success[held]
-        starts = torch.tensor([start for start, _, _ in buffer.episodes], device=held.device)
-        self.episodes = int(torch.isin(starts, held).sum())
-        self.best = -math.inf
-        self.selected = None  # {"step", "actor"} of the best checkpoint so far
-        self.last = {}
-        self.q_pi_previous = None
-
-    @torch.no_grad()
-    def __call__(self, step: int, q_net: QEnsemble, q_target: QEnsemble, actor: Actor) -> float:
-        args = self.args
-        obs, actions, next_obs, _, terminated = self.batch
-        cuda = obs.device.type == "cuda"
-        with torch.random.fork_rng(devices=[torch.cuda.current_device()] if cuda else []):  # the sleep's RNG untouched
-            expert = self.success.nonzero().squeeze(-1)
-            loglik = actor.log_prob(obs[expert], actions[expert]).mean().item() if expert.numel() else float("nan")
-            rows = self.success if args.sleep_loss_rows == "expert" else None
-            gamma = args.sleep_gamma
-            temp = args.sleep_temperature
-            chi2 = args.sleep_chi2_coef
-            loss, terms = iq_loss(
-                q_net, q_target, obs, actions, next_obs, terminated, self.success, gamma, temp, chi2, actor, rows
-            )
-            q_pi = q_net(obs, actor.get_action(obs)[0]).min(0).values.mean().item()
-            v_next = soft_value(q_net, actor, next_obs, temp)
-            reward = recover_reward(q_net(obs, actions).min(0).values, v_next, terminated, gamma)
-        values = {
-            "holdout/expert_loglik": loglik,
-            "holdout/iq_loss": loss.item(),
-            **{f"holdout/{name}": term.item() for name, term in terms.items()},
-            "holdout/q_pi": q_pi,
-            "holdout/reward_auc": auc(reward, self.success),
-        }
-        if self.q_pi_previous is not None:  # per 1,000 gradient steps
-            values["holdout/q_pi_drift"] = (q_pi - self.q_pi_previous[1]) * 1000 / (step - self.q_pi_previous[0])
-        self.q_pi_previous = (step, q_pi)
-        for tag, value in values.items():
-            self.writer.add_scalar(tag, value, step)
-        self.last = values
-        if math.isfinite(loglik) and loglik > self.best:
-            self.best = loglik
-            self.selected = {"step": step, "actor": copy.deepcopy(actor)}
-        return loglik
-
-    def stats(self) -> dict:
-        return {
-            **self.last,
-            "holdout/episodes": self.episodes,
-            "holdout/transitions": int(self.success.numel()),
-            "holdout/success_transitions": int(self.success.sum()),
-            "holdout/selected_step": self.selected["step"] if self.selected else None,
-            "holdout/selected_expert_loglik": self.best if self.selected else None,
-        }
-
-
-def authors_test(args: Args, policies: dict, generator: torch.Generator) -> dict:
-    """The authors' test: sampled actions, every episode from the run's initial state, on the plain env."""
-    env = make_env(args.env_id, args.seed)
-    outcome = Outcome.from_args(args)
-    results = {}
-    for name, actor in policies.items():
-        res = evaluate(actor, env, args.authors_test_episodes, lambda ep: args.seed, False, generator, outcome)
-        for key in ("return", "final_distance", "success_rate"):
-            results[f"eval/authors_test/{name}_{key}"] = res[key]
-    env.close()
-    return results
+    r_all, succ = reward_fn(*b), buffer.success[: buffer.size].cpu().numpy()
+    mean = lambda rows: float(r_all[rows].mean()) if rows.any() else float("nan")  # noqa: E731
+    return {"sleep/recovered_reward_success_mean": mean(succ), "sleep/recovered_reward_failure_mean": mean(~succ)}
 
 
 # the oracle: SAC on the environment reward (oracle_train.py runs the same SAC; a test keeps the two identical)
-def train_oracle(args: Args, writer: SummaryWriter, device: torch.device):
-    """SAC on the environment reward (CleanRL's, with the twin critics as one module): the simulated teacher."""
-    env = make_env(args.env_id, args.seed)
-    obs_dim = int(np.prod(env.observation_space.shape))
-    act_dim = int(np.prod(env.action_space.shape))
-    actor = Actor(obs_dim, act_dim, args.hidden_size, env.action_space.low, env.action_space.high).to(device)
-    qf = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
-    qf_target = QEnsemble(obs_dim, act_dim, args.hidden_size, n=2).to(device)
+def train_oracle(env_id: str, seed: int, n: int, outcome: Outcome, writer, device: torch.device):
+    """SAC on the environment reward (CleanRL's, with the twin critics as one module), from random starts: the
+    simulated teacher. Returns the actor, the twin critics and the steps per second."""
+    sac, env = ORACLE_SAC, make_env(env_id, seed)
+    obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
+    actor = Actor(obs_dim, act_dim, HIDDEN_SIZE, env.action_space.low, env.action_space.high).to(device)
+    qf = QEnsemble(obs_dim, act_dim, HIDDEN_SIZE, n=2).to(device)
+    qf_target = QEnsemble(obs_dim, act_dim, HIDDEN_SIZE, n=2).to(device)
     qf_target.load_state_dict(qf.state_dict())
-    amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
-    q_optimizer = torch.optim.Adam(qf.parameters(), lr=args.oracle_q_lr, foreach=True)
-    actor_optimizer = torch.optim.Adam(actor.parameters(), lr=args.oracle_policy_lr, foreach=True)
+    q_optimizer = torch.optim.Adam(qf.parameters(), lr=sac["q_lr"], foreach=True)
+    actor_optimizer = torch.optim.Adam(actor.parameters(), lr=sac["policy_lr"], foreach=True)
     log_ent_coef = torch.zeros(1, device=device, requires_grad=True)  # SAC's entropy coefficient, autotuned
-    ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.oracle_q_lr, foreach=True)
-    n = args.oracle_total_timesteps
-    b_obs = torch.zeros(n, obs_dim, device=device)
-    b_next = torch.zeros(n, obs_dim, device=device)
-    b_act = torch.zeros(n, act_dim, device=device)
-    b_rew = torch.zeros(n, device=device)
-    b_term = torch.zeros(n)
-    progress = Progress("oracle", n, warmup=args.oracle_learning_starts)
-    reset_seed = None if args.oracle_random_starts else args.seed
-    obs, _ = env.reset(seed=args.seed)
+    ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=sac["q_lr"], foreach=True)
+    b_obs, b_next = torch.zeros(n, obs_dim, device=device), torch.zeros(n, obs_dim, device=device)
+    b_act, b_rew, b_term = torch.zeros(n, act_dim, device=device), torch.zeros(n, device=device), torch.zeros(n)
+    progress = Progress("oracle", n, warmup=sac["learning_starts"])
+    obs, _ = env.reset(seed=seed)
     obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
-    ep_return = 0.0
-    last_return = float("nan")
-    outcome = Outcome.from_args(args)
+    ep_return, last_return = 0.0, float("nan")
     for step in range(n):
         StopSignals.check()
-        if step < args.oracle_learning_starts:
+        if step < sac["learning_starts"]:
             action = env.action_space.sample()
         else:
             with torch.no_grad():
                 action = actor.get_action(obs_t.unsqueeze(0))[0][0].cpu().numpy()
         next_obs, reward, terminated, truncated, info = env.step(action)
         next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
-        b_obs[step] = obs_t
-        b_next[step] = next_t
-        b_act[step] = torch.as_tensor(action)
-        b_rew[step] = float(reward)
-        b_term[step] = float(terminated)
+        b_obs[step], b_next[step], b_act[step] = obs_t, next_t, torch.as_tensor(action)
+        b_rew[step], b_term[step] = float(reward), float(terminated)
         ep_return += float(reward)
         if terminated or truncated:
             writer.add_scalar("oracle/episodic_return", ep_return, step)
             distance = outcome(info, ep_return)[0]
             if not math.isnan(distance):
                 writer.add_scalar("oracle/final_distance", distance, step)
-            last_return = ep_return
-            ep_return = 0.0
-            next_obs, _ = env.reset(seed=reset_seed)
+            ep_return, last_return = 0.0, ep_return
+            next_obs, _ = env.reset()  # random starts: an expert from any start
             next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
         obs_t = next_t
-        if step >= args.oracle_learning_starts:
-            idx = torch.randint(0, step + 1, (args.oracle_batch_size,), device=device)
-            obs_b = b_obs[idx]
-            next_b = b_next[idx]
-            with amp, torch.no_grad():
+        if step >= sac["learning_starts"]:
+            idx = torch.randint(0, step + 1, (sac["batch_size"],), device=device)
+            obs_b, next_b = b_obs[idx], b_next[idx]
+            with torch.no_grad():
                 next_a, next_logp, _ = actor.get_action(next_b)
                 v_next = qf_target(next_b, next_a).min(0).values - log_ent_coef.detach().exp() * next_logp
-                target = b_rew[idx] + (1.0 - b_term[idx]) * args.oracle_gamma * v_next
-            with amp:
-                q_loss = (qf(obs_b, b_act[idx]) - target.unsqueeze(0)).pow(2).mean(-1).sum()
+                target = b_rew[idx] + (1.0 - b_term[idx]) * sac["gamma"] * v_next
+            q_loss = (qf(obs_b, b_act[idx]) - target.unsqueeze(0)).pow(2).mean(-1).sum()
             q_optimizer.zero_grad(set_to_none=True)
             q_loss.backward()
             q_optimizer.step()
-            if step % args.oracle_policy_frequency == 0:
-                update_actor(qf, actor, obs_b, log_ent_coef, actor_optimizer, ent_coef_optimizer, args.bf16)
-            soft_update(qf_target, qf, args.tau)
-            if (step + 1) % args.log_frequency == 0:
+            if step % 2 == 0:  # the actor and entropy updates every second step
+                update_actor(qf, actor, obs_b, log_ent_coef, actor_optimizer, ent_coef_optimizer)
+            soft_update(qf_target, qf, TAU)
+            if (step + 1) % LOG_FREQUENCY == 0:
                 writer.add_scalar("oracle/qf_loss", q_loss.item(), step + 1)
                 writer.add_scalar("oracle/SPS", progress.sps(step + 1), step + 1)
         progress(step + 1, **{"return": last_return})
@@ -1205,11 +941,7 @@ class RecoveredReward:
     V(s') is averaged over `samples` actions drawn with a fixed generator, so the reward is deterministic."""
 
     def __init__(self, q_net: QEnsemble, actor: Actor, gamma: float, temperature: float, samples: int = 16):
-        self.q_net = q_net
-        self.actor = actor
-        self.gamma = gamma
-        self.temperature = temperature
-        self.samples = samples
+        self.q_net, self.actor, self.gamma, self.temperature, self.samples = q_net, actor, gamma, temperature, samples
 
     @classmethod
     def load(cls, run_dir: str, samples: int = 16) -> "RecoveredReward":  # from a run's inform_critic.pt and actor
@@ -1229,8 +961,8 @@ class RecoveredReward:
         g = torch.Generator().manual_seed(0)
         v_next = torch.stack(
             [soft_value(self.q_net, self.actor, next_t, self.temperature, g) for _ in range(self.samples)]
-        ).mean(0)
-        return recover_reward(self.q_net(obs_t, act_t).min(0).values, v_next, term_t, self.gamma).numpy()
+        )
+        return recover_reward(self.q_net(obs_t, act_t).min(0).values, v_next.mean(0), term_t, self.gamma).numpy()
 
 
 class RecoveredRewardWrapper(gym.Wrapper):
@@ -1238,8 +970,7 @@ class RecoveredRewardWrapper(gym.Wrapper):
 
     def __init__(self, env: gym.Env, reward_fn: RecoveredReward):
         super().__init__(env)
-        self.reward_fn = reward_fn
-        self._obs = None
+        self.reward_fn, self._obs = reward_fn, None
 
     def reset(self, **kwargs):
         self._obs, info = self.env.reset(**kwargs)
@@ -1247,47 +978,39 @@ class RecoveredRewardWrapper(gym.Wrapper):
 
     def step(self, action):
         next_obs, reward, terminated, truncated, info = self.env.step(action)
-        new_reward = float(self.reward_fn(self._obs, action, next_obs, terminated)[0])
-        self._obs = next_obs
+        new_reward, self._obs = float(self.reward_fn(self._obs, action, next_obs, terminated)[0]), next_obs
         return next_obs, new_reward, terminated, truncated, {**info, "env_reward": reward}
 
 
-# ---------------------------------------------------------------------------------------------------------------------
-# PUSHER ONLY: the object's and the goal's coordinates, the obstacle test and its model, the videos' camera. On any
-# other --env-id the obstacle test is skipped (the summary says so) and videos use the env's own camera.
+# ALGO LOGIC, Pusher only: the obstacle test (Fig. 5) and its boxes: three 3 cm cubes on the table (docs/protocol.md),
+# the paper's positions (layout "paper") or the paper's spacing on the bisector of the object's start and the goal
+OBSTACLE_POSITIONS = ((0.32, -0.20), (0.35, -0.23), (0.38, -0.26))
+OBSTACLE_SPACING, OBSTACLE_HALF_SIZE, OBSTACLE_Z = 0.0424, 0.015, -0.325
+OBSTACLE_LAYOUTS = ("bisector", "paper")
 
 
 def object_xy(obs: np.ndarray) -> np.ndarray:  # the object's xy in Pusher's observation (also along a trajectory)
     return obs[..., 17:19]
 
 
-def obstacle_skipped(args: Args) -> str | None:
-    """Why the obstacle test does not run, or None when it does."""
-    if args.env_id not in PUSHER_IDS:
-        return f"the obstacle test is Pusher's; {args.env_id} has none"
-    if args.obstacle_episodes == 0:
-        return "--obstacle-episodes 0"
-    return None
+def obstacle_skipped(env_id: str, episodes: int) -> str | None:  # why the obstacle test does not run (None: it does)
+    if env_id not in PUSHER_IDS:
+        return f"the obstacle test is Pusher's; {env_id} has none"
+    return "--obstacle-episodes 0" if episodes == 0 else None
 
 
-def obstacle_test(args: Args, policies: dict, generator: torch.Generator) -> tuple[dict, dict, dict]:
-    """The robustness test: each policy on the obstacle variant, every episode from the run's initial state, sampled
-    actions. Returns the metrics, the final distances, and the object's xy path of one deterministic episode per
-    policy with and without the boxes (Fig. 5a)."""
-    start, goal = start_and_goal(args.env_id, args.seed)
-    boxes = obstacle_positions(args.obstacle_layout, start, goal)
-    results = {
-        "obstacle/box_positions": boxes.round(4).tolist(),
-        "obstacle/min_box_distance_to_path": min(distance_to_segment(b, start, goal) for b in boxes),
-    }
-    distances = {}
-    paths = {"boxes": boxes, "start": start, "goal": goal}
-    env = make_env(args.env_id, args.seed, obstacles=boxes)
-    plain = make_env(args.env_id, args.seed)
-    at_start = lambda episode: args.seed  # noqa: E731
-    outcome = Outcome.from_args(args)
+def obstacle_test(env_id, seed, layout, episodes, outcome, policies: dict, generator) -> tuple[dict, dict, dict]:
+    """Each policy on the obstacle variant, every episode from the run's initial state, sampled actions. Returns the
+    metrics, the final distances, and the object's xy path of one deterministic episode per policy with and without
+    the boxes (Fig. 5a)."""
+    start, goal = start_and_goal(env_id, seed)
+    boxes = obstacle_positions(layout, start, goal)
+    results = {"obstacle/box_positions": boxes.round(4).tolist()}
+    results["obstacle/min_box_distance_to_path"] = min(distance_to_segment(b, start, goal) for b in boxes)
+    distances, paths = {}, {"boxes": boxes, "start": start, "goal": goal}
+    env, plain, at_start = make_env(env_id, seed, obstacles=boxes), make_env(env_id, seed), lambda episode: seed
     for name, actor in policies.items():
-        res = evaluate(actor, env, args.obstacle_episodes, at_start, False, generator, outcome)
+        res = evaluate(actor, env, episodes, at_start, False, generator, outcome)
         det = evaluate(actor, env, 1, at_start, True, generator, outcome)
         det_plain = evaluate(actor, plain, 1, at_start, True, torch.Generator(), outcome)
         paths[f"{name}_obstacle"] = object_xy(det["trajectories"][0])
@@ -1299,75 +1022,6 @@ def obstacle_test(args: Args, policies: dict, generator: torch.Generator) -> tup
     env.close()
     plain.close()
     return results, distances, paths
-
-
-# the robustness test's three 3 cm cubes on the table (docs/protocol.md): the paper's positions (layout "paper"), the
-# paper's distance between neighbouring boxes (kept by layout "bisector"), their half-size and height
-OBSTACLE_POSITIONS = ((0.32, -0.20), (0.35, -0.23), (0.38, -0.26))
-OBSTACLE_SPACING = 0.0424
-OBSTACLE_HALF_SIZE = 0.015
-OBSTACLE_Z = -0.325
-OBSTACLE_LAYOUTS = ("bisector", "paper")
-
-
-def pusher_with_boxes(env_id: str, obstacles, **render) -> gym.Env:
-    """Pusher's own model plus the boxes at the xy `obstacles` (None: none) and, with `render`, the videos' camera."""
-    if render:
-        render = {**render, "camera_name": "inform_video"}
-    xml = obstacle_xml(env_id, obstacles, camera=bool(render))
-    if env_id == "Pusher-v5":
-        return gym.make(env_id, xml_file=xml, **render)
-    # Pusher-v4 has no xml_file argument: the same class, with the model file swapped at construction
-    from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
-    from gymnasium.envs.mujoco.pusher_v4 import PusherEnv
-
-    space = gym.spaces.Box(-np.inf, np.inf, (23,), np.float64)
-
-    class PusherObstacleV4(PusherEnv):
-        def __init__(self, **kwargs):
-            gym.utils.EzPickle.__init__(self, **kwargs)
-            MujocoEnv.__init__(self, xml, 5, observation_space=space, **kwargs)
-
-    return gym.wrappers.TimeLimit(PusherObstacleV4(**render), max_episode_steps=100)
-
-
-_OBSTACLE_DIR: list[str] = []  # one temporary directory per process, removed at exit
-
-
-def obstacle_xml(env_id: str, positions, camera: bool = False) -> str:
-    """Pusher's own model (never modified) plus the boxes (and the videos' camera), written to a file that outlives
-    the env's construction (EzPickle re-creates the env from it); returns its path."""
-    import gymnasium.envs.mujoco as gym_mujoco
-
-    name = "pusher_v5.xml" if env_id == "Pusher-v5" else "pusher.xml"
-    tree = ET.parse(os.path.join(os.path.dirname(gym_mujoco.__file__), "assets", name))
-    h = OBSTACLE_HALF_SIZE
-    for i, (x, y) in enumerate(() if positions is None else positions):
-        ET.SubElement(
-            tree.getroot().find("worldbody"),
-            "geom",
-            {
-                "name": f"obstacle_{i}",
-                "type": "box",
-                "size": f"{h} {h} {h}",
-                "pos": f"{x:.6f} {y:.6f} {OBSTACLE_Z}",
-                "contype": "1",
-                "conaffinity": "1",
-                "rgba": "0.2 0.2 0.8 1",
-            },
-        )
-    if camera:  # the videos' camera, and no shadows: they triple the time of a frame in software OpenGL
-        ET.SubElement(tree.getroot().find("worldbody"), "camera", video_camera())
-        ET.SubElement(ET.SubElement(tree.getroot(), "visual"), "quality", {"shadowsize": "0"})
-    if not _OBSTACLE_DIR:
-        _OBSTACLE_DIR.append(tempfile.mkdtemp(prefix="inform_pusher_obstacle_"))
-        atexit.register(shutil.rmtree, _OBSTACLE_DIR[0], True)
-    fd, path = tempfile.mkstemp(
-        prefix=f"{env_id.lower().replace('-', '_')}_obstacle_", suffix=".xml", dir=_OBSTACLE_DIR[0]
-    )
-    os.close(fd)
-    tree.write(path)
-    return path
 
 
 def start_and_goal(env_id: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -1383,8 +1037,7 @@ def obstacle_positions(layout: str, start: np.ndarray, goal: np.ndarray) -> np.n
     and the goal and the other two OBSTACLE_SPACING either side of it along the perpendicular bisector."""
     if layout == "paper":
         return np.array(OBSTACLE_POSITIONS)
-    middle = (start + goal) / 2
-    along = (goal - start) / np.linalg.norm(goal - start)
+    middle, along = (start + goal) / 2, (goal - start) / np.linalg.norm(goal - start)
     across = np.array([-along[1], along[0]])
     return np.stack([middle - OBSTACLE_SPACING * across, middle, middle + OBSTACLE_SPACING * across])
 
@@ -1394,117 +1047,206 @@ def distance_to_segment(point: np.ndarray, a: np.ndarray, b: np.ndarray) -> floa
     return float(np.linalg.norm(point - (a + t * (b - a))))
 
 
+def obstacle_xml(env_id: str, positions, camera: bool = False) -> str:
+    """Pusher's own model (never modified) plus the boxes (and the videos' camera), written to a file that outlives
+    the env's construction (EzPickle re-creates the env from it); returns its path."""
+    import gymnasium.envs.mujoco as gym_mujoco
+
+    name = "pusher_v5.xml" if env_id == "Pusher-v5" else "pusher.xml"
+    tree = ET.parse(os.path.join(os.path.dirname(gym_mujoco.__file__), "assets", name))
+    world, h = tree.getroot().find("worldbody"), OBSTACLE_HALF_SIZE
+    for i, (x, y) in enumerate(() if positions is None else positions):
+        box = {"name": f"obstacle_{i}", "type": "box", "size": f"{h} {h} {h}", "pos": f"{x:.6f} {y:.6f} {OBSTACLE_Z}"}
+        ET.SubElement(world, "geom", {**box, "contype": "1", "conaffinity": "1", "rgba": "0.2 0.2 0.8 1"})
+    if camera:  # the videos' camera, and no shadows: they triple the time of a frame in software OpenGL
+        ET.SubElement(world, "camera", video_camera())
+        ET.SubElement(ET.SubElement(tree.getroot(), "visual"), "quality", {"shadowsize": "0"})
+    if not _OBSTACLE_DIR:  # one temporary directory per process, removed at exit
+        _OBSTACLE_DIR.append(tempfile.mkdtemp(prefix="inform_pusher_obstacle_"))
+        atexit.register(shutil.rmtree, _OBSTACLE_DIR[0], True)
+    fd, path = tempfile.mkstemp(prefix=f"{env_id.lower().replace('-', '_')}_", suffix=".xml", dir=_OBSTACLE_DIR[0])
+    os.close(fd)
+    tree.write(path)
+    return path
+
+
+def pusher_with_boxes(env_id: str, obstacles, **render) -> gym.Env:
+    """Pusher's own model plus the boxes at the xy `obstacles` (None: none) and, with `render`, the videos' camera."""
+    render = {**render, "camera_name": "inform_video"} if render else render
+    xml = obstacle_xml(env_id, obstacles, camera=bool(render))
+    if env_id == "Pusher-v5":
+        return gym.make(env_id, xml_file=xml, **render)
+    from gymnasium.envs.mujoco.mujoco_env import MujocoEnv  # Pusher-v4 has no xml_file: its class, another model
+    from gymnasium.envs.mujoco.pusher_v4 import PusherEnv
+
+    class PusherObstacleV4(PusherEnv):
+        def __init__(self, **kwargs):
+            gym.utils.EzPickle.__init__(self, **kwargs)
+            space = gym.spaces.Box(-np.inf, np.inf, (23,), np.float64)
+            MujocoEnv.__init__(self, xml, 5, observation_space=space, **kwargs)
+
+    return gym.wrappers.TimeLimit(PusherObstacleV4(**render), max_episode_steps=100)
+
+
+_OBSTACLE_DIR: list[str] = []
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# TRY NOT TO MODIFY: plumbing. The videos, progress lines, checkpoints, saved days, input checks, the command line
+
+
 # the videos' camera (--capture-video): a fixed camera added to the model (mujoco 2.3.7 cannot set a free camera's
 # lookat) looks down on the table from behind the goal: arm, object (white), goal (red), boxes (blue)
 VIDEO_CAMERA = {"lookat": (0.42, -0.2, -0.3), "distance": 1.0, "elevation": -75.0}  # metres, degrees
+VIDEO_SIZE = 480  # pixels, square; a multiple of 16, as H.264 wants
 
 
 def video_camera() -> dict:
     """The camera's MJCF attributes: VIDEO_CAMERA's distance from its lookat, seen from +x (image up is -x)."""
-    x, y, z = VIDEO_CAMERA["lookat"]
-    d = VIDEO_CAMERA["distance"]
-    el = math.radians(VIDEO_CAMERA["elevation"])
+    (x, y, z), d, el = VIDEO_CAMERA["lookat"], VIDEO_CAMERA["distance"], math.radians(VIDEO_CAMERA["elevation"])
     pos = f"{x + d * math.cos(el):.4f} {y} {z - d * math.sin(el):.4f}"
-    xyaxes = f"0 1 0 {math.sin(el):.4f} 0 {math.cos(el):.4f}"
-    return {"name": "inform_video", "mode": "fixed", "pos": pos, "xyaxes": xyaxes}
+    return {
+        "name": "inform_video",
+        "mode": "fixed",
+        "pos": pos,
+        "xyaxes": f"0 1 0 {math.sin(el):.4f} 0 {math.cos(el):.4f}",
+    }
 
 
-# ---------------------------------------------------------------------------------------------------------------------
-# TRY NOT TO MODIFY: plumbing. Progress lines, checkpoints, saved days, input checks, signals and the run's end,
-# --evaluate, videos
+def check_video(env_id: str) -> None:
+    """Before anything is written: pick the headless GL backend (egl when MUJOCO_GL is unset and there is no display)
+    and render one frame; InputError, one line, if it cannot."""
+    import warnings
+
+    if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+        os.environ["MUJOCO_GL"] = "egl"
+    if importlib.util.find_spec("imageio_ffmpeg") is None:
+        raise InputError("--capture-video writes mp4 with imageio-ffmpeg: pip install imageio-ffmpeg")
+    gl, frame = f"MUJOCO_GL={os.environ.get('MUJOCO_GL')}", None
+    with contextlib.suppress(Exception), warnings.catch_warnings():  # a failing backend warns, then raises
+        warnings.simplefilter("ignore")
+        env = make_env(env_id, 0, render_mode="rgb_array", width=16, height=16)
+        env.reset(seed=0)
+        frame = env.render()
+        env.close()
+    if not isinstance(frame, np.ndarray) or frame.shape != (16, 16, 3):
+        hint = "install EGL (Debian: apt-get install libegl1 libegl-mesa0) or OSMesa (libosmesa6, MUJOCO_GL=osmesa)"
+        raise InputError(f"--capture-video: MuJoCo cannot render with {gl}; {hint}")
+
+
+def video_env(env_id: str, seed: int, obstacles=None, size: int = VIDEO_SIZE) -> gym.Env:
+    """The evaluation env, rendering every reset and step into a list (Gymnasium's RenderCollection)."""
+    env = make_env(env_id, seed, obstacles, render_mode="rgb_array", width=size, height=size)
+    return gym.wrappers.RenderCollection(env)
+
+
+def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
+    """H.264 mp4 by imageio-ffmpeg (Gymnasium's RecordVideo needs moviepy), under a temporary name, then renamed."""
+    import imageio_ffmpeg
+
+    tmp = path[: -len(".mp4")] + ".tmp.mp4"  # ffmpeg reads the container from the extension
+    try:
+        options = {"fps": fps, "codec": "libx264", "quality": 6, "macro_block_size": 16, "ffmpeg_log_level": "error"}
+        writer = imageio_ffmpeg.write_frames(tmp, frames[0].shape[1::-1], **options)
+        writer.send(None)
+        for frame in frames:
+            writer.send(np.ascontiguousarray(frame))
+        writer.close()
+        os.replace(tmp, path)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(tmp)
+
+
+def record_videos(env_id, seed, outcome, policies: dict, boxes, reset_seed: int, run_dir: str) -> None:
+    """--capture-video: each policy's deterministic episode as the final evaluation runs it (from `reset_seed`) and,
+    with the boxes, as the obstacle test does, by the same `evaluate` with a generator of its own. Writes
+    videos/{policy}[_obstacle].mp4 and videos/videos.json (frames, final distance, reset seed)."""
+    os.makedirs(f"{run_dir}/videos", exist_ok=True)
+    record, t = {}, time.time()
+    films = [("", None, reset_seed)] + ([("_obstacle", boxes, seed)] if boxes is not None else [])
+    for suffix, obstacles, start in films:
+        env = video_env(env_id, seed, obstacles)
+        for name, actor in policies.items():
+            res = evaluate(actor, env, 1, lambda ep, s=start: s, True, torch.Generator(), outcome)
+            frames, key = env.render(), f"{name}{suffix}"
+            write_video(f"{run_dir}/videos/{key}.mp4", frames, env.metadata["render_fps"])
+            record[key] = {"file": f"{key}.mp4", "frames": len(frames), "size": list(frames[0].shape)}
+            record[key].update({"final_distance": res["final_distance"], "reset_seed": start})
+        env.close()
+    write_json_atomic(f"{run_dir}/videos/videos.json", record)
+    print(f"[video] {len(record)} episodes filmed in {time.time() - t:.1f}s: {run_dir}/videos/", flush=True)
 
 
 class Progress:
-    """One line per ~5% of a phase: steps, SPS and ETA, plus whatever the phase reports. The clock stops while the
-    `evaluator` runs. The first line comes early (`warmup` + 500 steps), and the ETA counts only the steps after
-    `warmup` (random-action steps before learning starts are much faster than the rest)."""
+    """One line per ~5% of a phase: steps, SPS, ETA and what the phase reports (the first line early, at `warmup` +
+    500 steps; the ETA from the steps after `warmup`). The clock stops while the `evaluator` runs."""
 
     def __init__(self, phase: str, total: int, warmup: int = 0, evaluator=None):
-        self.phase = phase
-        self.total = total
-        self.every = max(total // 20, 1)
-        self.warmup = min(warmup, total)
-        self.early = min(warmup + 500, total)
-        self.evaluator = evaluator
+        self.phase, self.total, self.every, self.evaluator = phase, total, max(total // 20, 1), evaluator
+        self.warmup, self.early, self.warm_start = min(warmup, total), min(warmup + 500, total), None
         self.start = self.clock()
-        self.warm_start = None
 
-    def clock(self) -> float:
-        """Seconds, without those spent in evaluations."""
+    def clock(self) -> float:  # seconds, without those spent in evaluations
         return time.time() - (self.evaluator.seconds if self.evaluator is not None else 0.0)
 
     def sps(self, step: int) -> float:
         return step / max(self.clock() - self.start, 1e-9)
 
     def __call__(self, step: int, **info):
-        if step == self.warmup:
-            self.warm_start = self.clock()
-        if step % self.every == 0 or step == self.total or step == self.early:
-            sps = self.sps(step)
-            rate = sps
+        self.warm_start = self.clock() if step == self.warmup else self.warm_start
+        if step % self.every == 0 or step in (self.total, self.early):
+            sps = rate = self.sps(step)
             if self.warm_start is not None and step > self.warmup:
                 rate = (step - self.warmup) / max(self.clock() - self.warm_start, 1e-9)
             eta = (self.total - step) / max(rate, 1e-9)
-            info = {k: v for k, v in info.items() if v is not None and v == v}  # not measured yet: not shown (nan)
-            extra = "".join(f" | {k} {v:.4g}" if isinstance(v, float) else f" | {k} {v}" for k, v in info.items())
-            print(
-                f"[{self.phase}] {step}/{self.total} {100 * step // self.total}% | {sps:,.0f} SPS | "
-                f"ETA {int(eta // 60)}m{int(eta % 60):02d}s{extra}",
-                flush=True,
-            )
+            shown = {k: v for k, v in info.items() if v is not None and v == v}  # not measured yet: not shown
+            extra = "".join(f" | {k} {v:.4g}" if isinstance(v, float) else f" | {k} {v}" for k, v in shown.items())
+            head = f"[{self.phase}] {step}/{self.total} {100 * step // self.total}% | {sps:,.0f} SPS"
+            print(f"{head} | ETA {int(eta // 60)}m{int(eta % 60):02d}s{extra}", flush=True)
 
 
 def env_shapes(env_id: str) -> tuple[int, int]:
     env = gym.make(env_id)
-    shapes = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
     env.close()
-    return shapes
+    return int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
 
 
 def read_checkpoint(path: str, flag: str, env_id: str) -> dict:
     """An oracle (--oracle-path) or a saved actor (--evaluate: tamer_actor.pt, inform_actor.pt or an oracle) that fits
     env_id, read with torch.load(weights_only=True): tensors and plain values only, never code. InputError otherwise."""
+    oracle, where = flag == "--oracle-path", f"{flag} {path}"
     if not os.path.isfile(path):
-        hint = " (train one with oracle_train.py)" if flag == "--oracle-path" else ""
-        raise InputError(f"{flag} {path}: no such file{hint}")
+        raise InputError(f"{where}: no such file" + (" (train one with oracle_train.py)" if oracle else ""))
     try:
         ckpt = torch.load(path, weights_only=True, map_location="cpu")
     except Exception as e:
-        message = f"cannot be read as a weights-only torch checkpoint ({type(e).__name__})"
-        raise InputError(f"{flag} {path}: {message}") from None
-    oracle = flag == "--oracle-path"
-    networks = (
-        ("actor_state_dict", "qf_state_dict")
-        if oracle
-        else ("actor_state_dict" if "actor_state_dict" in ckpt else "state_dict",)
-    )
-    required = ("env_id", "kwargs", *networks, "action_low", "action_high")
+        raise InputError(f"{where}: cannot be read as a weights-only torch checkpoint ({type(e).__name__})") from None
+    nets = ["actor_state_dict", "qf_state_dict"] if oracle else ["actor_state_dict"]
+    nets = ["state_dict"] if not oracle and isinstance(ckpt, dict) and "actor_state_dict" not in ckpt else nets
+    required = ("env_id", "kwargs", *nets, "action_low", "action_high")
     if not isinstance(ckpt, dict) or any(k not in ckpt for k in required) or not isinstance(ckpt["kwargs"], dict):
-        raise InputError(
-            f"{flag} {path}: not an {'oracle' if oracle else 'actor'} checkpoint (needs keys {', '.join(required)})"
-        )
+        raise InputError(f"{where}: not an {'oracle' if oracle else 'actor'} checkpoint (needs {', '.join(required)})")
     if ckpt["env_id"] != env_id:
-        raise InputError(f"{flag} {path}: trained on {ckpt['env_id']}, not {env_id}; pass --env-id")
-    kw = ckpt["kwargs"]
-    obs_dim, act_dim = env_shapes(env_id)
-    if (kw.get("obs_dim"), kw.get("act_dim")) != (obs_dim, act_dim):
+        raise InputError(f"{where}: trained on {ckpt['env_id']}, not {env_id}; pass --env-id")
+    shapes, (obs_dim, act_dim) = (ckpt["kwargs"].get("obs_dim"), ckpt["kwargs"].get("act_dim")), env_shapes(env_id)
+    if shapes != (obs_dim, act_dim):
         raise InputError(
-            f"{flag} {path}: shapes obs {kw.get('obs_dim')} act {kw.get('act_dim')} do not match "
-            f"{env_id} (obs {obs_dim}, act {act_dim})"
+            f"{where}: shapes obs {shapes[0]} act {shapes[1]} do not match {env_id} (obs {obs_dim}, act {act_dim})"
         )
     try:
-        oracle_from_checkpoint(ckpt, torch.device("cpu")) if oracle else actor_from_checkpoint(ckpt)
+        nets = oracle_from_checkpoint(ckpt, torch.device("cpu")) if oracle else (actor_from_checkpoint(ckpt),)
     except Exception as e:
         raise InputError(
-            f"{flag} {path}: the networks do not load ({type(e).__name__}: {' '.join(str(e).split())[:100]})"
+            f"{where}: the networks do not load ({type(e).__name__}: {' '.join(str(e).split())[:80]})"
         ) from None
+    if not all(torch.isfinite(p).all() for net in nets for p in net.state_dict().values()):
+        raise InputError(f"{where}: its networks hold NaN or inf")
     return ckpt
 
 
 def oracle_from_checkpoint(ckpt: dict, device: torch.device) -> tuple[Actor, QEnsemble]:
-    kw = ckpt["kwargs"]
-    actor = Actor(kw["obs_dim"], kw["act_dim"], kw["hidden"], ckpt["action_low"], ckpt["action_high"]).to(device)
-    actor.load_state_dict(ckpt["actor_state_dict"])
+    actor, kw = actor_from_checkpoint(ckpt).to(device), ckpt["kwargs"]
     qf = QEnsemble(kw["obs_dim"], kw["act_dim"], kw["hidden"], n=2).to(device)
     qf.load_state_dict(ckpt["qf_state_dict"])
     return actor, qf
@@ -1517,46 +1259,23 @@ def actor_from_checkpoint(ckpt: dict) -> Actor:  # a saved actor, or an oracle's
     return actor
 
 
-def shipped_oracle_paths(env_id: str) -> list[str]:
-    """Where the shipped teacher may be: beside the script (a clone) and under the working directory (a copy)."""
-    name = os.path.join("oracles", f"{env_id}__sac_oracle.pt")
-    return list(dict.fromkeys([os.path.join(REPO_DIR, name), os.path.abspath(name)]))
-
-
 def load_oracle(args: Args) -> dict | None:
     """The oracle checkpoint to use (--oracle-path, else the shipped one), or None to train one here."""
-    path = args.oracle_path
+    path, name = args.oracle_path, os.path.join("oracles", f"{args.env_id}__sac_oracle.pt")
+    places = list(dict.fromkeys([os.path.join(REPO_DIR, name), os.path.abspath(name)]))  # beside the script, or cwd
     if path is None and not args.train_oracle:
-        path = next((p for p in shipped_oracle_paths(args.env_id) if os.path.isfile(p)), None)
+        path = next((p for p in places if os.path.isfile(p)), None)
         if path is None:  # a copied script: say so before an hour of training starts
-            print(
-                f"[oracle] no shipped teacher found (looked for {' and '.join(shipped_oracle_paths(args.env_id))}); "
-                f"training one here for {args.oracle_total_timesteps} env steps, about "
-                f"{args.oracle_total_timesteps / 100 / 60:.0f} min on one core at ~100 steps/s. To skip this, pass "
-                "--oracle-path PATH (a checkpoint of oracle_train.py, e.g. the repo's oracles/), or --train-oracle "
-                "to silence this note",
-                file=sys.stderr,
-                flush=True,
+            hint = (
+                "pass --oracle-path PATH (a checkpoint of oracle_train.py, e.g. the repo's oracles/), or --train-oracle"
             )
-    if path is not None:
-        return {**read_checkpoint(path, "--oracle-path", args.env_id), "path": path}
-    if args.oracle_batch_size > args.oracle_total_timesteps:
-        raise InputError(
-            f"--oracle-batch-size ({args.oracle_batch_size}) exceeds --oracle-total-timesteps "
-            f"({args.oracle_total_timesteps})"
-        )
-    if args.oracle_learning_starts >= args.oracle_total_timesteps:
-        raise InputError(
-            f"--oracle-learning-starts ({args.oracle_learning_starts}) must be below "
-            f"--oracle-total-timesteps ({args.oracle_total_timesteps})"
-        )
-    return None
-
-
-def save_atomic(obj: dict, path: str) -> None:
-    """torch.save to a temporary file, then rename: an interrupted save never leaves a half-written checkpoint."""
-    torch.save(obj, path + ".tmp")
-    os.replace(path + ".tmp", path)
+            where = " and ".join(places)
+            say(
+                f"[oracle] no shipped teacher found (looked for {where}); training one here for "
+                f"{args.oracle_total_timesteps} env steps (~100 steps/s on one core). To skip this, {hint}",
+                sys.stderr,
+            )
+    return None if path is None else {**read_checkpoint(path, "--oracle-path", args.env_id), "path": path}
 
 
 def state_dict_cpu(net: nn.Module) -> dict:
@@ -1565,8 +1284,7 @@ def state_dict_cpu(net: nn.Module) -> dict:
 
 def save_actor(path: str, actor: Actor, **extra) -> None:
     kwargs = {"obs_dim": actor.fc1.in_features, "act_dim": actor.fc_mean.out_features, "hidden": actor.fc1.out_features}
-    low = (actor.action_bias - actor.action_scale).cpu()
-    high = (actor.action_bias + actor.action_scale).cpu()
+    low, high = (actor.action_bias - actor.action_scale).cpu(), (actor.action_bias + actor.action_scale).cpu()
     save_atomic(
         {"state_dict": state_dict_cpu(actor), "kwargs": kwargs, "action_low": low, "action_high": high, **extra}, path
     )
@@ -1577,80 +1295,52 @@ def save_critic(path: str, q_net: QEnsemble, obs_dim: int, act_dim: int, **extra
     save_atomic({"state_dict": state_dict_cpu(q_net), "kwargs": kwargs, **extra}, path)
 
 
-def save_oracle(path: str, args: Args, actor: Actor, qf: QEnsemble, action_space: gym.spaces.Box) -> None:
-    save_atomic(oracle_checkpoint(args, actor, qf, action_space.low, action_space.high), path)
-
-
-def oracle_checkpoint(args: Args, actor: Actor, qf: QEnsemble, action_low, action_high) -> dict:
-    """oracle_train.py's format, so --oracle-path loads either."""
-    obs_dim = actor.fc1.in_features
-    act_dim = actor.fc_mean.out_features
-    return {
-        "algorithm": "sac",
-        "env_id": args.env_id,
-        "obs_shape": [obs_dim],
-        "act_shape": [act_dim],
-        "kwargs": {"obs_dim": obs_dim, "act_dim": act_dim, "hidden": args.hidden_size},
-        "action_low": torch.as_tensor(action_low),
-        "action_high": torch.as_tensor(action_high),
-        "actor_state_dict": state_dict_cpu(actor),
-        "qf_state_dict": state_dict_cpu(qf),
-        "training_steps": args.oracle_total_timesteps,
-        "training_seed": args.seed,
-        "random_starts": args.oracle_random_starts,
-    }
+def oracle_checkpoint(args: Args, actor: Actor, qf: QEnsemble) -> dict:  # oracle_train.py's format
+    obs_dim, act_dim = actor.fc1.in_features, actor.fc_mean.out_features
+    ckpt = {"algorithm": "sac", "env_id": args.env_id, "obs_shape": [obs_dim], "act_shape": [act_dim]}
+    ckpt["kwargs"] = {"obs_dim": obs_dim, "act_dim": act_dim, "hidden": HIDDEN_SIZE}
+    ckpt["action_low"] = (actor.action_bias - actor.action_scale).cpu()
+    ckpt["action_high"] = (actor.action_bias + actor.action_scale).cpu()
+    ckpt.update(actor_state_dict=state_dict_cpu(actor), qf_state_dict=state_dict_cpu(qf), random_starts=True)
+    return {**ckpt, "training_steps": args.oracle_total_timesteps, "training_seed": args.seed}
 
 
 # saved days (--save-buffer, --sleep-from): a day is deterministic, so it is saved once and slept on many times
 DAY_FORMAT = "inform-day-2"
-DAY_FIELDS = ("env_id", "seed", "random_starts", "train_oracle", "hidden_size", "eval_frequency", "credit_window")
-DAY_FIELDS += ("budget_ends_forward_phase", "success_distance", "success_info_key", "success_return")
+DAY_FIELDS = (
+    "env_id",
+    "seed",
+    "random_starts",
+    "train_oracle",
+    "credit_window",
+    "budget_ends_forward_phase",
+    "success_",
+)
 DAY_PREFIXES = ("oracle_", "tamer_", "feedback_", "teacher_")
 DAY_TENSORS = ("obs", "actions", "next_obs", "feedback", "terminated", "success")
+# what shaped a day and is a constant now, under the flag names that days record it by
+DAY_CONSTANTS = {"hidden_size": HIDDEN_SIZE, "eval_frequency": EVAL_FREQUENCY, "tamer_policy_lr": TAMER_POLICY_LR}
+DAY_CONSTANTS["tamer_policy_frequency"] = 1
 
 
-def day_fields(args: Args) -> dict:
-    """The flags that shape the day: the env, the seed, the teacher and TAMER."""
-    return {
-        f.name: getattr(args, f.name) for f in fields(args) if f.name in DAY_FIELDS or f.name.startswith(DAY_PREFIXES)
-    }
-
-
-def save_day(path: str, args: Args, buffer: ReplayBuffer, networks: tuple, stats: dict, evaluator) -> None:
+def save_day(path, args: Args, buffer: ReplayBuffer, oracle_ckpt, h_net, tamer_actor, stats, generator) -> None:
     """The day as plain tensors and values (torch.load(weights_only=True) reads it): the memories, the episode table,
     the teacher, TAMER's H and actor, the day's stats and the random states the night goes on from."""
-    oracle_ckpt, oracle_actor, oracle_qf, h_net, tamer_actor = networks
-    if oracle_ckpt is None:  # trained here: the same format as oracle_train.py's
-        low = tamer_actor.action_bias - tamer_actor.action_scale
-        high = tamer_actor.action_bias + tamer_actor.action_scale
-        oracle_ckpt = oracle_checkpoint(args, oracle_actor, oracle_qf, low.cpu(), high.cpu())
-    n = buffer.size
-    day = {key: getattr(buffer, key)[:n].cpu().clone() for key in DAY_TENSORS}
+    day = {key: getattr(buffer, key)[: buffer.size].cpu().clone() for key in DAY_TENSORS}
     starts, ends, shortfalls = zip(*buffer.episodes, strict=True)
-    day.update(
-        format=DAY_FORMAT,
-        script=os.path.basename(__file__),
-        env_id=args.env_id,
-        seed=args.seed,
-        day_args=day_fields(args),
-        day_stats=stats,
-        episode_start=torch.tensor(starts, dtype=torch.int64),
-        episode_end=torch.tensor(ends, dtype=torch.int64),
-        episode_shortfall=torch.tensor(shortfalls, dtype=torch.float64),  # the final distance, or minus the return
-        episode_success=buffer.success[list(starts)].cpu(),
-        oracle={k: v for k, v in oracle_ckpt.items() if k != "path"},
-        oracle_path=oracle_ckpt.get("path"),
-        tamer_h={"state_dict": state_dict_cpu(h_net), "n": h_net.n},
-        tamer_actor={"state_dict": state_dict_cpu(tamer_actor)},
-        torch_rng=torch.get_rng_state(),
-        cuda_rng=torch.cuda.get_rng_state() if buffer.obs.is_cuda else None,
-        evaluator_rng=evaluator.generator.get_state(),
-    )
-    save_atomic(day, path)
+    day_args = {f.name: getattr(args, f.name) for f in fields(Args) if f.name.startswith(DAY_PREFIXES + DAY_FIELDS)}
+    day.update(format=DAY_FORMAT, script=os.path.basename(__file__), env_id=args.env_id, seed=args.seed)
+    day.update(day_args={**day_args, **DAY_CONSTANTS}, day_stats=stats, episode_success=buffer.success[list(starts)])
+    day.update(episode_start=torch.tensor(starts), episode_end=torch.tensor(ends))
+    day["episode_shortfall"] = torch.tensor(shortfalls, dtype=torch.float64)  # the final distance, or minus the return
+    day.update(oracle={k: v for k, v in oracle_ckpt.items() if k != "path"}, oracle_path=oracle_ckpt.get("path"))
+    day.update(tamer_h={"state_dict": state_dict_cpu(h_net), "n": h_net.n})
+    day.update(tamer_actor={"state_dict": state_dict_cpu(tamer_actor)}, torch_rng=torch.get_rng_state())
+    save_atomic({**day, "cuda_rng": None, "evaluator_rng": generator.get_state()}, path)
 
 
 def load_day(run_dir: str) -> dict:
-    """--sleep-from: RUN_DIR/day.pt, read with weights_only=True and checked; InputError otherwise."""
+    """--sleep-from: RUN_DIR/day.pt, read with weights_only=True and checked (check_day); InputError otherwise."""
     path = os.path.join(run_dir, "day.pt")
     if not os.path.isfile(path):
         raise InputError(f"--sleep-from {run_dir}: no day.pt there (make one with --save-buffer)")
@@ -1667,174 +1357,88 @@ def load_day(run_dir: str) -> dict:
         raise InputError(f"--sleep-from {path}: not a day saved by this script's --save-buffer ({DAY_FORMAT})")
     if day["env_id"] == "Pusher-v4" and mujoco_major() >= 3:
         raise InputError(f"--sleep-from {path}: the day is on Pusher-v4, which needs mujoco<3 (a separate venv)")
+    ran = {k: day["day_args"].get(k, v) for k, v in DAY_CONSTANTS.items()}
+    if ran != DAY_CONSTANTS:
+        raise InputError(f"--sleep-from {path}: the day ran with {ran}, this script has {DAY_CONSTANTS}")
+    check_day(day, path)
     day["oracle"]["path"] = day["oracle_path"] or f"the oracle saved in {path}"
+    names = {f.name for f in fields(Args)}  # the day's flags that are constants now, or gone with the oracle it holds
+    day["day_args"] = {k: v for k, v in day["day_args"].items() if k in names}
     return day
+
+
+def check_day(day: dict, path: str) -> None:
+    """A day as --save-buffer writes it: tensors of shapes that fit its env, finite values, 0/1 terminal flags, and
+    episodes that tile the buffer. InputError, naming the first part that is not."""
+    try:
+        n, (obs_dim, act_dim), table = day["obs"].shape[0], env_shapes(day["env_id"]), day["episode_start"].shape
+        starts, ends, term = day["episode_start"], day["episode_end"], day["terminated"]
+        shapes = {"obs": (n, obs_dim), "next_obs": (n, obs_dim), "actions": (n, act_dim), "feedback": (n,)}
+        shapes.update({"terminated": (n,), "success": (n,), "episode_end": table, "episode_shortfall": table})
+        checks = {"shapes": all(day[k].shape == shape for k, shape in shapes.items()) and len(table) == 1}
+        checks["values"] = all(torch.isfinite(day[k]).all() for k in ("obs", "next_obs", "actions", "feedback"))
+        checks["terminated flags"] = bool(((term == 0) | (term == 1)).all())
+        tiled = starts[0] == 0 and ends[-1] == n and torch.equal(starts[1:], ends[:-1]) and bool((starts < ends).all())
+        checks["episode table"] = bool(day["episode_success"].shape == table and tiled)
+    except (KeyError, AttributeError, TypeError, IndexError, RuntimeError, ValueError) as e:
+        raise InputError(f"--sleep-from {path}: not a day as --save-buffer writes it ({type(e).__name__})") from None
+    bad = [what for what, ok in checks.items() if not ok]
+    if bad:
+        raise InputError(f"--sleep-from {path}: the day's {bad[0]} are not what --save-buffer writes")
 
 
 def restore_day(day: dict, buffer: ReplayBuffer, evaluator, device) -> tuple:
     """The saved day back in place of the forward phase: the buffer, TAMER's H and actor, the day's stats, and last
     the random states (building networks draws from them)."""
-    n = day["obs"].shape[0]
+    n, obs_dim, act_dim = day["obs"].shape[0], buffer.obs.shape[1], buffer.actions.shape[1]
     for key in DAY_TENSORS:
         getattr(buffer, key)[:n] = day[key].to(device)
-    buffer.size = n
-    table = (day["episode_start"], day["episode_end"], day["episode_shortfall"])
-    buffer.episodes = list(zip(*(column.tolist() for column in table), strict=True))
-    obs_dim = buffer.obs.shape[1]
-    act_dim = buffer.actions.shape[1]
-    o = day["oracle"]
-    hidden = day["day_args"]["hidden_size"]
-    h_net = QEnsemble(obs_dim, act_dim, hidden, day["tamer_h"]["n"])
+    table = (day["episode_start"].tolist(), day["episode_end"].tolist(), day["episode_shortfall"].tolist())
+    buffer.size, buffer.episodes = n, list(zip(*table, strict=True))
+    h_net = QEnsemble(obs_dim, act_dim, HIDDEN_SIZE, day["tamer_h"]["n"])
     h_net.load_state_dict(day["tamer_h"]["state_dict"])
-    tamer_actor = Actor(obs_dim, act_dim, hidden, o["action_low"], o["action_high"])
+    tamer_actor = Actor(obs_dim, act_dim, HIDDEN_SIZE, day["oracle"]["action_low"], day["oracle"]["action_high"])
     tamer_actor.load_state_dict(day["tamer_actor"]["state_dict"])
     torch.set_rng_state(day["torch_rng"])
-    if day["cuda_rng"] is not None and device.type == "cuda":
-        torch.cuda.set_rng_state(day["cuda_rng"])
     evaluator.generator.set_state(day["evaluator_rng"])
     print(f"[day] {n} transitions, {len(buffer.episodes)} episodes from the saved day", flush=True)
     return h_net.to(device), tamer_actor.to(device), dict(day["day_stats"])
 
 
-def sleep_variant(args: Args) -> str:
-    """The sleep's settings in one line, for summary.json and the study's tables."""
-    start = "tamer" if args.sleep_init_actor_from_tamer else "scratch"
-    parts = [f"protocol={args.sleep_protocol}", f"control={args.sleep_control}", f"actor_start={start}"]
-    parts += [f"actor_states={args.sleep_actor_states}", f"policy_frequency={args.sleep_policy_frequency}"]
-    parts += [f"loss_rows={args.sleep_loss_rows}", f"twin_critics={args.sleep_twin_critics}"]
-    parts += [f"bc_coef={args.sleep_bc_coef}", f"temperature={args.sleep_temperature}"]
-    parts += [f"steps={args.sleep_gradient_steps}", f"seed={args.sleep_seed}"]
-    parts += [f"holdout_fraction={args.sleep_holdout_fraction}"]
-    return " ".join(parts)
-
-
-def apply_sleep_protocol(args: Args) -> Args:
-    """--sleep-protocol authors: the authors' sleep (a fresh actor on replay + expert states, two updates every second
-    step, tested at 100k gradient steps; their lr 5e-6, temperature 0.01, one critic and chi2 0.5 are our defaults)."""
-    if args.sleep_protocol != "authors":
-        return args
-    authors = {
-        "sleep_init_actor_from_tamer": False,
-        "sleep_actor_states": "replay+expert",
-        "sleep_policy_frequency": 2,
-        "sleep_gradient_steps": 100000,
-    }
-    print(f"[sleep] --sleep-protocol authors sets {' '.join(f'{k}={v}' for k, v in authors.items())}", flush=True)
-    return dataclasses.replace(args, **authors)
-
-
-class InputError(Exception):
-    """Bad input from the user: a flag value, a file. Reported as one line, before anything is written."""
-
-
-# The range of every flag that has one (InputError outside it). A flag not listed has none, so a new flag is never
-# refused for its default. Counts start at 1 unless 0 means something.
-RANGES = {
-    **dict.fromkeys(
-        (
-            "num_threads",
-            "oracle_total_timesteps",
-            "oracle_learning_starts",
-            "oracle_batch_size",
-            "oracle_policy_frequency",
-            "hidden_size",
-            "tamer_total_timesteps",
-            "tamer_learning_starts",
-            "tamer_batch_size",
-            "tamer_policy_frequency",
-            "credit_window",
-            "feedback_budget",
-            "sleep_gradient_steps",
-            "sleep_batch_size",
-            "sleep_policy_frequency",
-            "eval_episodes",
-            "eval_frequency",
-            "sleep_eval_frequency",
-            "periodic_eval_episodes",
-            "log_frequency",
-        ),
-        "[1, inf)",
-    ),
-    **dict.fromkeys(("seed", "teacher_delay", "sleep_seed", "obstacle_episodes", "authors_test_episodes"), "[0, inf)"),
-    **dict.fromkeys(
-        (
-            "success_distance",
-            "oracle_q_lr",
-            "oracle_policy_lr",
-            "tamer_h_lr",
-            "tamer_policy_lr",
-            "sleep_q_lr",
-            "sleep_policy_lr",
-            "sleep_temperature",
-        ),
-        "(0, inf)",
-    ),
-    **dict.fromkeys(
-        (
-            "sleep_chi2_coef",
-            "sleep_bc_coef",
-        ),
-        "[0, inf)",
-    ),
-    "tau": "(0, 1]",
-    **dict.fromkeys(
-        (
-            "feedback_alpha_start",
-            "feedback_alpha_end",
-            "sleep_gamma",
-            "oracle_gamma",
-            "teacher_noise",
-            "teacher_sparsity",
-            "sleep_holdout_fraction",
-        ),
-        "[0, 1]",
-    ),
-}
-
-
-def in_range(value: float, interval: str) -> bool:
-    """Whether `value` lies in an interval written as "[0, 1]", "(0, inf)", ...; NaN never does."""
-    low, high = (float(bound) for bound in interval[1:-1].split(", "))
-    above = value >= low if interval[0] == "[" else value > low
-    below = value <= high if interval[-1] == "]" else value < high
-    return above and below
-
-
 def check_args(args: Args) -> None:
-    """What tyro cannot know: the env id, ranges, flags that exclude each other. Raises InputError."""
+    """What tyro cannot know: ranges (declared beside each flag), the run name, the env id, flags that exclude each
+    other. Raises InputError."""
+    hints = typing.get_type_hints(type(args), include_extras=True)
+    for f in fields(args):
+        value, spec = (
+            getattr(args, f.name),
+            [m for m in getattr(hints[f.name], "__metadata__", ()) if isinstance(m, In)],
+        )
+        if spec and value is not None and value not in spec[0]:
+            integer = isinstance(value, int)  # a count: ">= 1"; a float: its interval
+            must = (
+                f">= {spec[0].low}" + (f" and < {spec[0].high}" if spec[0].high < math.inf else "")
+                if integer
+                else spec[0]
+            )
+            raise InputError(f"--{f.name.replace('_', '-')} must be {must}, got {value}")
+    check_run_name(args.env_id, args.exp_name, args.seed)
     if args.track and importlib.util.find_spec("wandb") is None:
         raise InputError("--track needs Weights & Biases: `pip install wandb`, or run without --track")
     if args.env_id == "Pusher-v4" and mujoco_major() >= 3:
-        raise InputError(
-            "Pusher-v4 needs mujoco<3 (Gymnasium issue 950); use --env-id Pusher-v5, or run in a "
-            "separate venv with `pip install mujoco==2.3.7`"
-        )
-    for f in fields(args):
-        value = getattr(args, f.name)
-        interval = RANGES.get(f.name)
-        if interval is not None and value is not None and not in_range(value, interval):
-            flag = "--" + f.name.replace("_", "-")
-            counts = isinstance(value, int) and interval.endswith(", inf)")  # "[1, inf)": must be >= 1
-            must = f"be >= {interval[1:-6]}" if counts else f"be in {interval}"
-            raise InputError(f"{flag} must {must}, got {value}")
+        raise InputError("Pusher-v4 needs mujoco<3 (Gymnasium issue 950); use --env-id Pusher-v5, or run in a separate "
+                         "venv with `pip install mujoco==2.3.7`")  # fmt: skip
     check_env(args)
+    steps = f"--tamer-total-timesteps ({args.tamer_total_timesteps})"
     if args.tamer_learning_starts >= args.tamer_total_timesteps:
-        raise InputError(
-            f"--tamer-learning-starts ({args.tamer_learning_starts}) must be below "
-            f"--tamer-total-timesteps ({args.tamer_total_timesteps}), or H is never trained"
-        )
+        raise InputError(f"--tamer-learning-starts ({args.tamer_learning_starts}) must be below {steps}")
     if max(args.tamer_batch_size, args.sleep_batch_size) > args.tamer_total_timesteps:
-        raise InputError(
-            f"--tamer-batch-size ({args.tamer_batch_size}) and --sleep-batch-size "
-            f"({args.sleep_batch_size}) must not exceed --tamer-total-timesteps "
-            f"({args.tamer_total_timesteps}), the size of the buffer"
-        )
+        batches = f"--tamer-batch-size ({args.tamer_batch_size}) and --sleep-batch-size ({args.sleep_batch_size})"
+        raise InputError(f"{batches} must not exceed {steps}, the size of the buffer")
     if args.oracle_path is not None and args.train_oracle:
         raise InputError("--oracle-path and --train-oracle exclude each other; pass one of them")
     if args.sleep_from is not None and args.save_buffer:
         raise InputError("--save-buffer and --sleep-from exclude each other: a night on a saved day saves no new day")
-    if args.sleep_holdout_fraction >= 1:
-        raise InputError(f"--sleep-holdout-fraction must be below 1, got {args.sleep_holdout_fraction}")
 
 
 def check_env(args: Args) -> None:
@@ -1846,22 +1450,20 @@ def check_env(args: Args) -> None:
         first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
         raise InputError(f"--env-id {args.env_id}: Gymnasium cannot make it ({first})") from None
     try:
-        obs_space, act_space = env.observation_space, env.action_space
+        obs_space, act_space, key = env.observation_space, env.action_space, args.success_info_key
         if not isinstance(act_space, gym.spaces.Box):
-            raise InputError(
-                f"--env-id {args.env_id}: its actions are {type(act_space).__name__}, not continuous (Box); "
-                "discrete tasks run in inform_dqn_gridworld.py"
-            )
+            raise InputError(f"--env-id {args.env_id}: its actions are {type(act_space).__name__}, not continuous "
+                             "(Box); discrete tasks run in inform_dqn_gridworld.py")  # fmt: skip
         if not isinstance(obs_space, gym.spaces.Box) or len(obs_space.shape) != 1:
             raise InputError(f"--env-id {args.env_id}: needs a flat Box observation, not {obs_space}")
         if args.success_return is None:
             env.reset(seed=0)
             info = env.step(act_space.sample())[4]
-            if args.success_info_key not in info:
-                keys = ", ".join(sorted(info)) or "none"
+            if key not in info:
+                has = f"it has: {', '.join(sorted(info)) or 'none'}"
+                hint = "pass --success-info-key KEY, or --success-return R to judge episodes by return"
                 raise InputError(
-                    f"--env-id {args.env_id}: its info has no {args.success_info_key!r} to measure a final distance "
-                    f"(it has: {keys}); pass --success-info-key KEY, or --success-return R to judge episodes by return"
+                    f"--env-id {args.env_id}: its info has no {key!r} for a final distance ({has}); {hint}"
                 )
     finally:
         env.close()
@@ -1873,148 +1475,14 @@ def mujoco_major() -> int:
     return int(mujoco.__version__.split(".")[0])
 
 
-class Diverged(Exception):
-    """The sleep loss became NaN or inf."""
-
-
-class StopSignals:
-    """SIGINT (Ctrl-C; unless ignored: nohup, `&`), SIGTERM (kill, Slurm) and SIGHUP (a closed terminal) stop the
-    run. The handler only records the signal. `StopSignals.check()`, at the head of every loop, then raises
-    KeyboardInterrupt in our own code, never inside a library call (one raised inside TensorBoard's queue put could
-    leave close() waiting up to 120 s), and main catches it to save what finished. Only a wait for a person's answer
-    (`waiting()`: the maze's person at the terminal), which may never come, is interrupted at once. Signals after the
-    first, and any after the summary, are only noted."""
-
-    current = None  # the run's StopSignals, which check() and waiting() read
-
-    def __init__(self):
-        self.received = []
-        self.raised = False
-        self.waiting_for_input = False
-        self.finished = False
-        self.broken_pipe = False
-        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-            if signal.getsignal(sig) is not signal.SIG_IGN:
-                signal.signal(sig, self.handler)
-        StopSignals.current = self
-
-    def handler(self, signum, frame):
-        self.received.append(signal.Signals(signum).name)
-        if self.waiting_for_input:
-            StopSignals.check()
-
-    @classmethod
-    def check(cls) -> None:
-        """KeyboardInterrupt if a stop signal came (once: main then saves what finished, and says so)."""
-        stop = cls.current
-        if stop is not None and stop.received and not (stop.raised or stop.finished):
-            stop.raised = True
-            raise KeyboardInterrupt
-
-    @classmethod
-    @contextlib.contextmanager
-    def waiting(cls):
-        """A wait for a person: a stop signal that comes before it or during it raises at once."""
-        stop = cls.current
-        if stop is None:  # none installed (the script imported, not run): a plain wait
-            yield
-            return
-        stop.waiting_for_input = True
-        try:
-            cls.check()
-            yield
-        finally:
-            stop.waiting_for_input = False
-
-    def reason(self) -> str:
-        """What stopped the run: the first signal; else SIGPIPE if the reader of our output died, else Ctrl-C."""
-        return self.received[0] if self.received else "SIGPIPE" if self.broken_pipe else "SIGINT"
-
-    def exit_code(self, status: str) -> int:
-        """128 + the signal (130 SIGINT, 143 SIGTERM, 129 SIGHUP, 141 a dead reader), as a shell reports a kill;
-        a signal after the summary still says the person wanted the run to stop (a shell loop then stops too)."""
-        if status == "interrupted" or self.received:
-            return 128 + signal.Signals[self.reason()].value
-        return {"completed": 0, "diverged": 1}[status]
-
-
-def say(text: str, file=None) -> None:
-    """print, except that a dead reader (a broken pipe) is not an error: what follows goes to /dev/null."""
-    file = file or sys.stdout
-    try:
-        print(text, file=file, flush=True)
-    except OSError:  # BrokenPipeError, or a closed terminal
-        with contextlib.suppress(OSError):
-            os.dup2(os.open(os.devnull, os.O_WRONLY), file.fileno())  # the exit's final flush then succeeds too
-
-
-def make_run_dir(run_name: str) -> str:
-    """runs/{run_name}, never an existing directory: a clash gets a numeric suffix."""
-    path = f"runs/{run_name}"
-    n = 0
-    while True:
-        try:
-            os.makedirs(path)
-            return path
-        except FileExistsError:
-            n += 1
-            path = f"runs/{run_name}_{n}"
-
-
-def write_json_atomic(path: str, data: dict) -> None:
-    # strict JSON: a metric that does not exist in this run (e.g. no success episodes) is null, not NaN
-    data = {k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in data.items()}
-    with open(path + ".tmp", "w") as f:
-        json.dump(data, f, indent=2, allow_nan=False)
-    os.replace(path + ".tmp", path)
-
-
-def end_run(args, summary, status, phase, run_dir, run_start, evaluator, closing, stop) -> dict:
-    """The summary first, then the messages: no signal cuts this short (StopSignals only notes the later ones)."""
-    stop.finished = True
-    if run_dir is not None:
-        summary = {
-            **(evaluator.final if evaluator else {}),
-            **summary,
-            "time/eval_s": evaluator.seconds if evaluator else 0.0,
-            "wall_time_s": time.time() - run_start,
-            "seed": args.seed,
-            "script": os.path.basename(__file__),
-            "status": status,
-            "args": asdict(args),
-        }
-        if status != "completed":
-            summary["phase"] = phase
-        if status == "interrupted":
-            summary["signal"] = stop.reason()
-        write_json_atomic(f"{run_dir}/summary.json", summary)
-    for thing in (*closing, evaluator):
-        if thing is not None:
-            thing.close()
-    if status == "interrupted":
-        saved = f"what finished is saved in {run_dir}" if run_dir else "no run was made"
-        say(f"interrupted ({stop.reason()}) during the {phase} phase; {saved}", sys.stderr)
-    elif status == "diverged":
-        say(f"error: {summary['error']}", sys.stderr)
-    if run_dir is not None:
-        print_results(summary, run_dir)
-    summary.setdefault("status", status)
-    return summary
-
-
 def print_results(summary: dict, run_dir: str) -> None:
+    for p in POLICIES if summary["status"] == "completed" else ():
+        e = {k[len("eval/") :].replace(p, "@"): v for k, v in summary.items() if k.startswith("eval/")}
+        obstacle, std = e.get("obstacle/@_final_distance"), e.get("obstacle/@_final_distance_std")
+        obstacle = "" if obstacle is None else f" | obstacle distance {obstacle:.3f} +- {std:.3f}"
+        say(f"{p:>6}: return {e['@_return']:.2f} (sampled {e['@_return_sampled']:.2f}) | final distance "
+            f"{e['@_final_distance']:.3f} | success {e['@_success_rate']:.2f}{obstacle}")  # fmt: skip
     if summary["status"] == "completed":
-        for p in POLICIES:
-            e = {k[len("eval/") :].replace(p, "@"): v for k, v in summary.items() if k.startswith("eval/")}
-            obstacle = (
-                f" | obstacle distance {e['obstacle/@_final_distance']:.3f} +- {e['obstacle/@_final_distance_std']:.3f}"
-                if "obstacle/@_final_distance" in e
-                else ""
-            )
-            say(
-                f"{p:>6}: return {e['@_return']:.2f} (sampled {e['@_return_sampled']:.2f}) | final distance "
-                f"{e['@_final_distance']:.3f} | success {e['@_success_rate']:.2f}{obstacle}"
-            )
         say(" | ".join(f"{k} {v:.0f}" for k, v in summary.items() if k.startswith(("time/", "sps/"))))
     say(f"{summary['status']} in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json")
 
@@ -2027,139 +1495,190 @@ def evaluate_saved(args: Args) -> dict:
     actor = actor_from_checkpoint(read_checkpoint(args.evaluate, "--evaluate", args.env_id))
     evaluator = Evaluator(args, writer=None)
     metrics = evaluator("policy", actor, 0, args.eval_episodes)
-    skipped = obstacle_skipped(args)
-    if skipped:
-        obstacle = {"obstacle/skipped": skipped}
-    else:
-        obstacle, _, _ = obstacle_test(args, {"policy": actor}, evaluator.generator)
+    obstacle = {"obstacle/skipped": obstacle_skipped(args.env_id, args.obstacle_episodes)}
+    if obstacle["obstacle/skipped"] is None:
+        test = (args.env_id, args.seed, args.obstacle_layout, args.obstacle_episodes, Outcome.from_args(args))
+        obstacle, _, _ = obstacle_test(*test, {"policy": actor}, evaluator.generator)
     evaluator.close()
     return {**metrics, **obstacle}
 
 
-# --capture-video: headless MuJoCo frames (MUJOCO_GL, as MuJoCo documents it) written as mp4 by imageio-ffmpeg, the
-# ffmpeg that Gymnasium's RecordVideo reaches through moviepy. Pusher films with a fixed
-# camera of its own (the Pusher block above); other envs with their default one.
-VIDEO_SIZE = 480  # pixels, square; a multiple of 16, as H.264 wants
-
-
-def check_video(env_id: str) -> None:
-    """Before anything is written: pick the headless GL backend (egl when MUJOCO_GL is unset and there is no display),
-    render one frame, and find ffmpeg. InputError, one line, if either is missing."""
-    import warnings
-
-    if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
-        os.environ["MUJOCO_GL"] = "egl"
-    try:
-        import imageio_ffmpeg
-
-        imageio_ffmpeg.get_ffmpeg_exe()
-    except Exception as e:
-        raise InputError(
-            f"--capture-video writes mp4 with imageio-ffmpeg, which is missing ({type(e).__name__}): "
-            "pip install imageio-ffmpeg==0.8.1"
-        ) from None
-    try:
-        with warnings.catch_warnings():  # a failing backend warns before it raises: one line is enough
-            warnings.simplefilter("ignore")
-            env = make_env(env_id, 0, render_mode="rgb_array", width=16, height=16)
-            env.reset(seed=0)
-            frame = env.render()
-            env.close()
-    except Exception as e:
-        raise InputError(
-            f"--capture-video: MuJoCo cannot render with MUJOCO_GL={os.environ.get('MUJOCO_GL')} "
-            f"({type(e).__name__}); install EGL (Debian: apt-get install libegl1 libegl-mesa0) or "
-            "OSMesa (apt-get install libosmesa6, then MUJOCO_GL=osmesa)"
-        ) from None
-    if not isinstance(frame, np.ndarray) or frame.shape != (16, 16, 3):
-        raise InputError(f"--capture-video: MuJoCo rendered no image with MUJOCO_GL={os.environ.get('MUJOCO_GL')}")
-
-
-def video_env(env_id: str, seed: int, obstacles=None, size: int = VIDEO_SIZE) -> gym.Env:
-    """The evaluation env, rendering every reset and step into a list (Gymnasium's RenderCollection)."""
-    return gym.wrappers.RenderCollection(
-        make_env(env_id, seed, obstacles, render_mode="rgb_array", width=size, height=size)
-    )
-
-
-def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
-    """H.264 mp4, written to a temporary name and renamed: an interrupted write leaves no half-written video."""
-    import imageio_ffmpeg
-
-    tmp = path[: -len(".mp4")] + ".tmp.mp4"  # ffmpeg reads the container from the extension
-    try:
-        writer = imageio_ffmpeg.write_frames(
-            tmp,
-            frames[0].shape[1::-1],
-            fps=fps,
-            codec="libx264",
-            quality=6,
-            macro_block_size=16,
-            ffmpeg_log_level="error",
-        )
-        writer.send(None)
-        for frame in frames:
-            writer.send(np.ascontiguousarray(frame))
-        writer.close()
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-
-
-def record_videos(args: Args, policies: dict, boxes: np.ndarray | None, reset_seed: int, run_dir: str) -> dict:
-    """--capture-video: each policy's deterministic episode as the final evaluation runs it (from `reset_seed`) and,
-    when the obstacle test ran (`boxes`), as it runs it (the run's start, the boxes), by the same `evaluate`, with a
-    generator of its own so no other random stream moves. Writes videos/{policy}[_obstacle].mp4 and
-    videos/videos.json (frames, final distance and reset seed of each)."""
-    os.makedirs(f"{run_dir}/videos", exist_ok=True)
-    record = {}
-    t = time.time()
-    outcome = Outcome.from_args(args)
-    films = [("", None, reset_seed)] + ([("_obstacle", boxes, args.seed)] if boxes is not None else [])
-    for suffix, obstacles, seed in films:
-        env = video_env(args.env_id, args.seed, obstacles)
-        for name, actor in policies.items():
-            res = evaluate(actor, env, 1, lambda ep, s=seed: s, True, torch.Generator(), outcome)
-            frames = env.render()
-            write_video(f"{run_dir}/videos/{name}{suffix}.mp4", frames, env.metadata["render_fps"])
-            record[f"{name}{suffix}"] = {
-                "file": f"{name}{suffix}.mp4",
-                "frames": len(frames),
-                "size": list(frames[0].shape),
-                "final_distance": res["final_distance"],
-                "reset_seed": seed,
-            }
-        env.close()
-    write_json_atomic(f"{run_dir}/videos/videos.json", record)
-    print(f"[video] {len(record)} episodes filmed in {time.time() - t:.1f}s: {run_dir}/videos/", flush=True)
-    return record
-
-
-if __name__ == "__main__":
-    args = tyro.cli(Args)  # a malformed flag: tyro's own message, exit 2
+def cli(args: Args, sleep=None) -> int:
+    """The command line after tyro: a saved day, the checks, --evaluate or the run; returns the exit code. The study
+    module (inform_utils/sleep_variants_pusher.py) runs it with its own Args and `sleep`."""
     day = None
     try:
-        args = apply_sleep_protocol(args)
         if args.sleep_from is not None:  # the day's flags replace this run's: its numbers are the day's
             day = load_day(args.sleep_from)
             args = dataclasses.replace(args, **day["day_args"])
-            print(
-                f"[day] sleeping on the day saved in {args.sleep_from} ({args.env_id}, seed {args.seed}, "
-                f"{day['obs'].shape[0]} steps); its day flags replace this run's",
-                flush=True,
-            )
+            print(f"[day] sleeping on the day saved in {args.sleep_from} ({args.env_id}, seed {args.seed}, "
+                  f"{day['obs'].shape[0]} steps); its day flags replace this run's", flush=True)  # fmt: skip
         check_args(args)
         if args.capture_video:
             check_video(args.env_id)
         if args.evaluate is not None:  # writes nothing: a stop meanwhile ends it with one line (see the top)
             print(json.dumps(evaluate_saved(args), indent=2))
-            sys.exit(0)
+            return 0
         oracle_ckpt = load_oracle(args) if day is None else None
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
+        return 2
     stop = StopSignals()
-    summary = main(args, oracle_ckpt, stop, day)
+    summary = main(args, oracle_ckpt, stop, day, sleep)
     gc.freeze()  # the interpreter's last collections over torch's objects take seconds on a busy machine; skip them
-    sys.exit(stop.exit_code(summary["status"]))
+    return stop.exit_code(summary["status"])
+
+
+# --- shared plumbing: the same in inform_dqn_gridworld.py ---
+class InputError(Exception):
+    """Bad input (a flag, a file): one `error:` line and exit 2, before anything is written."""
+
+
+class Diverged(Exception):
+    """A loss became NaN or inf; the message names the phase and the flag that helps."""
+
+
+class StopSignals:
+    """SIGINT (unless ignored: nohup, `&`), SIGTERM and SIGHUP stop the run. The handler only records the signal;
+    `StopSignals.check()`, at the head of every loop, raises KeyboardInterrupt in our own code (never inside a library
+    call) and main saves what finished. Only a wait for a person (`waiting()`) is interrupted at once. Signals after
+    the first, and any after the summary, are only noted."""
+
+    current = None  # the run's StopSignals, which check() and waiting() read
+
+    def __init__(self):
+        self.received, self.raised, self.finished = [], False, False
+        self.waiting_for_input = self.broken_pipe = False
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+            if signal.getsignal(sig) is not signal.SIG_IGN:
+                signal.signal(sig, self.handler)
+        StopSignals.current = self
+
+    def handler(self, signum, frame):
+        self.received.append(signal.Signals(signum).name)
+        if self.waiting_for_input:
+            StopSignals.check()
+
+    @classmethod
+    def check(cls) -> None:  # KeyboardInterrupt if a stop signal came (once: main then saves what finished)
+        stop = cls.current
+        if stop is not None and stop.received and not (stop.raised or stop.finished):
+            stop.raised = True
+            raise KeyboardInterrupt
+
+    @classmethod
+    @contextlib.contextmanager
+    def waiting(cls):  # a wait for a person: a stop signal before it or during it raises at once
+        stop = cls.current
+        if stop is None:  # none installed (the script imported, not run): a plain wait
+            yield
+            return
+        stop.waiting_for_input = True
+        try:
+            cls.check()
+            yield
+        finally:
+            stop.waiting_for_input = False
+
+    def reason(self) -> str:  # the first signal; else SIGPIPE if the reader of our output died, else Ctrl-C
+        return self.received[0] if self.received else "SIGPIPE" if self.broken_pipe else "SIGINT"
+
+    def exit_code(self, status: str) -> int:  # 128 + the signal, as a shell reports a kill (even after the summary)
+        if status == "interrupted" or self.received:
+            return 128 + signal.Signals[self.reason()].value
+        return 0 if status == "completed" else 1
+
+
+def say(text: str, file=None) -> None:  # print; a dead reader (a broken pipe) is no error: the rest goes to /dev/null
+    file = file or sys.stdout
+    try:
+        print(text, file=file, flush=True)
+    except OSError:  # BrokenPipeError, or a closed terminal
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), file.fileno())  # the exit's final flush then succeeds too
+
+
+def check_run_name(env_id: str, exp_name: str, seed: int) -> None:  # one plain, short directory name inside runs/
+    name = f"{env_id}__{exp_name}__{seed}__{int(time.time())}_99.tmp"  # the longest a run's files get
+    if not exp_name or exp_name in (".", "..") or any(c in name for c in "/\\\0") or len(name.encode()) > 255:
+        raise InputError(f"--exp-name {exp_name!r}: a run name must be one short directory name inside runs/")
+
+
+def make_run_dir(run_name: str) -> str:  # runs/{run_name}, never an existing directory: a clash gets a suffix
+    for n in range(100):
+        path = f"runs/{run_name}" + (f"_{n}" if n else "")
+        with contextlib.suppress(FileExistsError):
+            os.makedirs(path)
+            return path
+    raise FileExistsError(f"runs/{run_name}: 100 runs of this name in the same second")
+
+
+@contextlib.contextmanager
+def atomic(path: str):
+    """A temporary name for `path`, renamed once written; a failed write leaves no partial file (the summary may need
+    its space)."""
+    tmp = path + ".tmp"
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(tmp)
+
+
+def save_atomic(obj: dict, path: str) -> None:
+    with atomic(path) as tmp, open(tmp, "wb") as f:  # our own file object: closed for sure, its space freed
+        try:
+            torch.save(obj, f)
+        except RuntimeError as e:  # torch reports a failed write (a full disk) so: an OSError, as open() would
+            raise OSError(f"{path}: {' '.join(str(e).split())[-120:]}") from None
+
+
+def strict_json(value):  # NaN and inf as null, at any depth (a metric this run does not have, e.g. no successes)
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: strict_json(v) for k, v in value.items()}
+    return [strict_json(v) for v in value] if isinstance(value, list | tuple) else value
+
+
+def write_json_atomic(path: str, data: dict) -> None:
+    with atomic(path) as tmp, open(tmp, "w") as f:
+        json.dump(strict_json(data), f, indent=2, allow_nan=False)
+
+
+def end_run(args, summary, status, phase, run_dir, run_start, evaluator, closing, stop) -> dict:
+    """The summary first, then the messages: no signal cuts this short (StopSignals only notes the later ones)."""
+    stop.finished = True
+    if run_dir is not None:
+        final = {"time/eval_s": evaluator.seconds if evaluator else 0.0, "wall_time_s": time.time() - run_start}
+        final.update(seed=args.seed, script=os.path.basename(__file__), status=status, args=vars(args))
+        summary = {**(evaluator.final if evaluator else {}), **summary, **final}
+        summary.update({"phase": phase} if status != "completed" else {})
+        summary.update({"signal": stop.reason()} if status == "interrupted" else {})
+        try:
+            write_json_atomic(f"{run_dir}/summary.json", summary)
+        except OSError as e:
+            say(f"error: {run_dir}/summary.json not written: {e}", sys.stderr)
+    for thing in (thing for thing in (*closing, evaluator) if thing is not None):
+        thing.close()
+    if status == "interrupted":
+        saved = f"what finished is saved in {run_dir}" if run_dir else "no run was made"
+        say(f"interrupted ({stop.reason()}) during the {phase} phase; {saved}", sys.stderr)
+    elif status in ("diverged", "failed"):
+        say(f"error: {summary.get('error')}", sys.stderr)
+    if run_dir is not None:
+        print_results(summary, run_dir)
+    summary.setdefault("status", status)
+    if status == "interrupted" and getattr(sys.modules.get("wandb"), "run", None) is not None:
+        sys.stdout.flush()  # --track: wandb's exit would wait ~10 s for its upload; a stop must not
+        sys.stderr.flush()
+        os._exit(stop.exit_code(status))
+    return summary
+
+
+# --- end of shared plumbing ---
+
+
+if __name__ == "__main__":
+    sys.exit(cli(tyro.cli(Args)))  # a malformed flag: tyro's own message, exit 2

@@ -53,7 +53,7 @@ def traced_run(delay: int, window: int, seed: int, total: int):
     """A real run of the maze script (its `main`, in a temporary directory, no sleep), with a teacher that records
     (step about, steps labelled) for each +1 and the replay buffer kept for the trace."""
     args = inform.Args(seed=seed, teacher_delay=delay, credit_window=window, tamer_total_timesteps=total,
-                       sleep_gradient_steps=1, sleep_eval_frequency=1, save_model=False)  # fmt: skip
+                       sleep_gradient_steps=1)  # fmt: skip
     inform.check_args(args)
     signals, buffers = [], []
 
@@ -90,7 +90,7 @@ def traced_run(delay: int, window: int, seed: int, total: int):
             for sig, handler in handlers.items():
                 signal.signal(sig, handler)
     (buffer,) = buffers
-    q_star = gridworld_env.optimal_q("plain", args.oracle_gamma)
+    q_star = gridworld_env.optimal_q("plain")  # the script's oracle: gamma 0.99
     cells = buffer.obs[: buffer.size].argmax(1).numpy()
     next_cells = buffer.next_obs[: buffer.size].argmax(1).numpy()
     actions = buffer.actions[: buffer.size].numpy()

@@ -21,9 +21,12 @@ import os
 import sys
 from dataclasses import dataclass
 
+import gymnasium as gym
 import numpy as np
 import torch
 import tyro
+from matplotlib.figure import Figure
+from matplotlib.patches import Rectangle
 from PIL import Image, ImageDraw, ImageFont
 
 import gridworld_env
@@ -146,6 +149,64 @@ def pusher_gif(run_dir: str, out_dir: str, size: int, frame_step: int) -> str:
     return os.path.join(out_dir, name)
 
 
+MAZE_IDS = {"plain": "KnoxStoneMaze-v0", "wall": "KnoxStoneMazeWall-v0"}  # gridworld_env registers both
+
+
+def greedy_episode(policy: np.ndarray, variant: str, start: int) -> tuple[list[int], int, bool]:
+    """One greedy episode in the registered maze, as `evaluate` runs it: the cells to draw (the start, then each
+    step's, up to G or the first cell seen before: a deterministic policy then loops until the time limit), the
+    episode length, and whether G was reached."""
+    env = gym.make(MAZE_IDS[variant])
+    obs, _ = env.reset(options={"start_cell": start})
+    cells = [start]
+    length = 0
+    terminated = False
+    truncated = False
+    while not (terminated or truncated):
+        obs, _, terminated, truncated, info = env.step(policy[int(obs.argmax())])
+        length += 1
+        if cells[-1] != gridworld_env.GOAL and cells.count(cells[-1]) == 1:  # no loop yet: draw this step too
+            cells.append(info["cell"])
+    env.close()
+    return cells, length, bool(terminated)
+
+
+def maze_frames(cells: list[int], variant: str, title: str, length: int, reached: bool) -> list[np.ndarray]:
+    """RGB frames of the agent walking `cells` (its path so far as a line); the last frame says how it ended."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig = Figure(figsize=(3.2, 3.4), dpi=80)
+    canvas = FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    fig.subplots_adjust(0.02, 0.02, 0.98, 0.86)
+    for r, c in gridworld_env.CELLS:
+        ax.add_patch(Rectangle((c, r), 1, 1, facecolor="white", edgecolor="0.85"))
+    for r, c in gridworld_env.BLOCKED:
+        ax.add_patch(Rectangle((c, r), 1, 1, facecolor="0.25"))
+    for wall in gridworld_env.VARIANT_WALLS[variant]:
+        (r1, c1), (r2, c2) = sorted(wall)
+        xs, ys = ([c2, c2], [r1, r1 + 1]) if r1 == r2 else ([c1, c1 + 1], [r2, r2])
+        ax.plot(xs, ys, color="black", lw=3)
+    for cell, label in ((gridworld_env.START, "S"), (gridworld_env.GOAL, "G")):
+        r, c = gridworld_env.CELLS[cell]
+        ax.text(c + 0.5, r + 0.5, label, ha="center", va="center", fontsize=12, weight="bold", color="0.55")
+    ax.set(xlim=(0, gridworld_env.COLS), ylim=(gridworld_env.ROWS, 0), aspect="equal", xticks=[], yticks=[])
+    (path,) = ax.plot([], [], color="tab:blue", lw=2, alpha=0.6)
+    (agent,) = ax.plot([], [], "o", color="tab:red", ms=14)
+    heading = ax.set_title("", fontsize=9)
+    frames = []
+    for t in range(len(cells)):
+        xs = [gridworld_env.CELLS[cell][1] + 0.5 for cell in cells[: t + 1]]
+        ys = [gridworld_env.CELLS[cell][0] + 0.5 for cell in cells[: t + 1]]
+        path.set_data(xs, ys)
+        agent.set_data(xs[-1:], ys[-1:])
+        ending = f"reaches G in {length} steps" if reached else f"loops: never reaches G ({length} steps)"
+        heading.set_text(f"{title}\n" + (ending if t == len(cells) - 1 else f"step {t}"))
+        canvas.draw()
+        frames.append(np.asarray(canvas.buffer_rgba())[..., :3].copy())
+    return frames
+
+
 def maze_gif(run_dir: str, out_dir: str) -> str:
     summary = read_summary(run_dir, "inform_dqn_gridworld.py")
     a = summary["args"]
@@ -159,9 +220,9 @@ def maze_gif(run_dir: str, out_dir: str) -> str:
     for variant in ("plain", "wall"):
         panels = []
         for p, policy in policies.items():
-            cells, length, reached = maze.greedy_episode(policy, variant, gridworld_env.START)
+            cells, length, reached = greedy_episode(policy, variant, gridworld_env.START)
             title = f"{p.upper()}, {'wall maze' if variant == 'wall' else 'maze'}, from S"
-            panels.append(maze.maze_frames(cells, variant, title, length, reached))
+            panels.append(maze_frames(cells, variant, title, length, reached))
         episode = side_by_side(panels)
         frames += episode
         durations += [250] * (len(episode) - 1) + [2000]

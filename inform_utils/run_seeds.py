@@ -40,7 +40,7 @@ import tyro
 @dataclass
 class Args:
     script: str = "inform_dqn_gridworld.py"
-    """the script to run (it must take --seed, --exp-name and --num-threads)"""
+    """the script to run (it must take --seed and --exp-name; --num-threads is passed if its Args has it)"""
     exp_name: str = "seeds"
     """the experiment name: runs are runs/{env_id}__{exp_name}__{seed}__{time}; it is how finished runs are found"""
     seeds: list[int] = field(default_factory=lambda: [1, 2, 3, 4, 5])
@@ -198,9 +198,16 @@ def newest_summary(args: Args, run: Run, completed: bool = True, since: float = 
     return None
 
 
+def takes_num_threads(script: str) -> bool:
+    """Whether the script's Args has a num_threads flag (the maze, single-threaded by design, has none)."""
+    with open(script) as f:
+        return re.search(r"^    num_threads\s*:", f.read(), re.M) is not None
+
+
 def command(args: Args, run: Run, threads: int) -> list[str]:
-    cmd = [sys.executable, os.path.abspath(args.script), "--seed", str(run.seed), "--exp-name", args.exp_name,
-           "--num-threads", str(threads), *args.script_args]  # fmt: skip
+    cmd = [sys.executable, os.path.abspath(args.script), "--seed", str(run.seed), "--exp-name", args.exp_name]
+    cmd += ["--num-threads", str(threads)] if takes_num_threads(args.script) else []
+    cmd += args.script_args
     for name, value in run.point:
         cmd += [f"--{name}", value]
     return cmd

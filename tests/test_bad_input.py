@@ -141,5 +141,12 @@ def test_a_new_flag_is_never_refused_for_its_default(module):
     script.check_args(extended())  # no InputError
     with pytest.raises(script.InputError, match="--tamer-total-timesteps must be >= 1, got 0"):
         script.check_args(extended(tamer_total_timesteps=0))
-    assert script.in_range(0.0, "[0, 1]") and not script.in_range(0.0, "(0, 1]")
-    assert script.in_range(1.0, "(0, 1]") and not script.in_range(float("nan"), "[0, inf)")
+    if module == "inform_sac_pusher":  # its ranges sit beside the flags (Annotated[..., In(...)])
+        assert 0.0 in script.In(0, 1, "[]") and 0.0 not in script.In(0, 1, "(]")
+        assert 1.0 in script.In(0, 1, "(]") and float("nan") not in script.In(0)
+    else:  # its ranges sit beside the flags too (Annotated[..., Range("[0, 1]")]), read by check_args
+        script.check_args(extended(teacher_noise=0.0, teacher_sparsity=1.0, sleep_chi2_coef=0.0))  # the closed ends
+        with pytest.raises(script.InputError, match=r"--sleep-q-lr must be in \(0, inf\), got 0.0"):
+            script.check_args(extended(sleep_q_lr=0.0))
+        with pytest.raises(script.InputError, match=r"--sleep-chi2-coef must be in \[0, inf\), got nan"):
+            script.check_args(extended(sleep_chi2_coef=float("nan")))

@@ -31,15 +31,11 @@ TINY = [
     "--tamer-batch-size", "64",
     "--sleep-gradient-steps", "200",
     "--sleep-batch-size", "64",
-    "--hidden-size", "64",
-    "--eval-frequency", "300",
-    "--sleep-eval-frequency", "100",
     "--eval-episodes", "2",
-    "--periodic-eval-episodes", "1",
     "--obstacle-episodes", "3",
     "--authors-test-episodes", "3",
-    "--log-frequency", "100",
 ]  # fmt: skip
+TINY_ORACLE = ["--train-oracle", "--oracle-total-timesteps", "5300"]  # SAC learns after 5,000 random steps
 
 
 def run(cwd, *flags, timeout=120):
@@ -218,11 +214,11 @@ def check_run(tmp_path, proc):
 
 
 def test_smoke_in_script_oracle(tmp_path):
-    proc = run(tmp_path, "--train-oracle", "--oracle-total-timesteps", "400", "--oracle-learning-starts", "200", *TINY)
+    proc = run(tmp_path, *TINY_ORACLE, *TINY)
     run_dir, summary = check_run(tmp_path, proc)
     assert summary["oracle_path"] is None
     ckpt = torch.load(os.path.join(run_dir, "oracle.pt"), weights_only=True)
-    assert ckpt["env_id"] == "Pusher-v5" and ckpt["training_steps"] == 400
+    assert ckpt["env_id"] == "Pusher-v5" and ckpt["training_steps"] == 5300
 
 
 @pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")
@@ -277,8 +273,8 @@ def test_a_copied_script_finds_the_teacher_or_says_where_it_looked(tmp_path):
     copy.parent.mkdir()
     shutil.copy(SCRIPT, copy)
     (tmp_path / "a").mkdir()  # no oracles/ here either: a note names both places, then a tiny oracle is trained
-    proc = subprocess.run([sys.executable, str(copy), "--oracle-total-timesteps", "400", "--oracle-learning-starts",
-                           "200", *TINY], cwd=tmp_path / "a", capture_output=True, text=True, timeout=300)  # fmt: skip
+    proc = subprocess.run([sys.executable, str(copy), *TINY_ORACLE[1:], *TINY], cwd=tmp_path / "a", capture_output=True,
+                          text=True, timeout=300)  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "no shipped teacher found" in proc.stderr and "--oracle-path" in proc.stderr
     assert str(copy.parent / "oracles") in proc.stderr and str(tmp_path / "a" / "oracles") in proc.stderr
@@ -310,7 +306,7 @@ def test_save_load_same_actions(tmp_path):
 @pytest.mark.parametrize(("phase", "sig"), [("tamer", "SIGINT"), ("sleep", "SIGINT"), ("sleep", "SIGTERM")])
 def test_signal_ends_the_run_cleanly(tmp_path, phase, sig):
     flags = [*TINY, "--tamer-total-timesteps", "100000" if phase == "tamer" else "600"]
-    flags += ["--sleep-gradient-steps", "100000", "--sleep-eval-frequency", "100000"]
+    flags += ["--sleep-gradient-steps", "100000"]
     child = Child([sys.executable, SCRIPT, *flags], tmp_path)
     child.wait_for_line(f"[{phase}]", timeout=120)
     child.proc.send_signal(getattr(signal, sig))
@@ -328,7 +324,7 @@ def test_signal_ends_the_run_cleanly(tmp_path, phase, sig):
 @pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")
 def test_sigterm_stops_a_run_started_in_the_background(tmp_path):
     # a background job of a non-interactive shell ignores SIGINT; SIGTERM (kill, Slurm) must still stop it cleanly
-    flags = [*TINY, "--sleep-gradient-steps", "100000", "--sleep-eval-frequency", "100000"]
+    flags = [*TINY, "--sleep-gradient-steps", "100000"]
     shell = 'trap "" INT; "$0" "$@" & echo "pid $!"; wait $!'
     child = Child(["bash", "-c", shell, sys.executable, SCRIPT, *flags], tmp_path)
     pid = int(child.wait_for_line("pid ", timeout=120).split()[1])
@@ -465,13 +461,17 @@ BAD_FLAGS = [
     (["--oracle-path", "{wrong_env}"], "wrong_env.pt"),
     (["--oracle-path", "{wrong_shape}"], "wrong_shape.pt"),
     (["--oracle-path", "{wrong_weights}"], "wrong_weights.pt"),
-    (["--train-oracle", "--oracle-total-timesteps", "100", "--oracle-batch-size", "256"], "oracle-batch-size"),
+    (["--train-oracle", "--oracle-total-timesteps", "100"], "--oracle-total-timesteps must be >= 5001"),
     (["--teacher-noise", "1.5"], "teacher-noise"),
     (["--teacher-sparsity", "-0.1"], "teacher-sparsity"),
     (["--teacher-delay", "-1"], "teacher-delay"),
     (["--credit-window", "0"], "credit-window"),
     (["--feedback-budget", "-3"], "feedback-budget"),
-    (["--tau", "nan"], "--tau must be in (0, 1], got nan"),
+    (["--success-return", "nan"], "--success-return must be in (-inf, inf), got nan"),
+    (["--sleep-temperature", "inf"], "--sleep-temperature must be in (0, inf), got inf"),
+    (["--seed", str(2**32)], "--seed must be >= 0 and < 4294967296"),
+    (["--sleep-seed", "-1"], "--sleep-seed must be >= 0 and < 4294967296"),
+    (["--exp-name", "../x"], "one short directory name inside runs/"),
     (["--sleep-chi2-coef", "-0.1"], "--sleep-chi2-coef must be in [0, inf)"),
     (["--oracle-path", "x.pt", "--train-oracle"], "exclude each other"),
 ]
@@ -542,7 +542,7 @@ def test_both_scripts_carry_the_same_networks_and_judge_episodes_alike():
 
     import oracle_train
 
-    for name in ("BatchedLinear", "QEnsemble", "Actor", "soft_update", "video_camera", "write_video", "Outcome"):
+    for name in ("BatchedLinear", "QEnsemble", "Actor", "soft_update", "Outcome"):
         assert inspect.getsource(getattr(isp, name)) == inspect.getsource(getattr(oracle_train, name)), name
 
 
@@ -552,17 +552,14 @@ def test_both_scripts_train_the_same_oracle_and_load_each_others(tmp_path):
     into the other script's networks and passes --oracle-path's checks."""
     import oracle_train
 
-    sac = {"seed": "4", "hidden-size": "32"}
-    proc = run(tmp_path, *[x for k, v in sac.items() for x in (f"--{k}", v)], "--train-oracle",
-               "--oracle-total-timesteps", "400", "--oracle-learning-starts", "200", "--oracle-batch-size", "64",
-               "--tamer-total-timesteps", "300", "--tamer-learning-starts", "200", "--tamer-batch-size", "32",
-               "--sleep-gradient-steps", "10", "--sleep-batch-size", "32", "--eval-episodes", "1",
-               "--periodic-eval-episodes", "1", "--obstacle-episodes", "1", "--authors-test-episodes", "1")  # fmt: skip
+    proc = run(tmp_path, "--seed", "4", *TINY_ORACLE, "--tamer-total-timesteps", "300", "--tamer-learning-starts",
+               "200", "--tamer-batch-size", "32", "--sleep-gradient-steps", "10", "--sleep-batch-size", "32",
+               "--eval-episodes", "1", "--obstacle-episodes", "1", "--authors-test-episodes", "1")  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-2000:]
     (in_script,) = glob.glob(str(tmp_path / "runs" / "*" / "oracle.pt"))
-    proc = subprocess.run([sys.executable, os.path.join(REPO, "oracle_train.py"),
-                           *[x for k, v in sac.items() for x in (f"--{k}", v)], "--total-timesteps", "400",
-                           "--learning-starts", "200", "--batch-size", "64", "--eval-frequency", "150",
+    proc = subprocess.run([sys.executable, os.path.join(REPO, "oracle_train.py"), "--seed", "4", "--hidden-size", "256",
+                           "--total-timesteps", "5300", "--learning-starts", "5000", "--batch-size", "256",
+                           "--eval-frequency", "2650",
                            "--eval-episodes", "1", "--final-eval-episodes", "1", "--output-path", "trained.pt"],
                           cwd=tmp_path, capture_output=True, text=True, timeout=300)  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-2000:]
@@ -575,7 +572,7 @@ def test_both_scripts_train_the_same_oracle_and_load_each_others(tmp_path):
         for name in a[key]:
             assert torch.equal(a[key][name], b[key][name]), (key, name)
     assert a["kwargs"] == b["kwargs"] and torch.equal(a["action_low"], b["action_low"])
-    assert a["training_steps"] == b["training_steps"] == 400
+    assert a["training_steps"] == b["training_steps"] == 5300
     for ckpt in (a, b):  # each loads into oracle_train.py's networks too
         oracle_train.Actor(**ckpt["kwargs"]).load_state_dict(ckpt["actor_state_dict"])
         oracle_train.QEnsemble(**ckpt["kwargs"]).load_state_dict(ckpt["qf_state_dict"])
@@ -599,7 +596,7 @@ def test_smoke_pusher_v4(tmp_path):
     proc = run(
         tmp_path,
         "--env-id", "Pusher-v4",
-        "--train-oracle", "--oracle-total-timesteps", "400", "--oracle-learning-starts", "200",
+        *TINY_ORACLE,
         *TINY,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-2000:]

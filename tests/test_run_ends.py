@@ -17,13 +17,12 @@ from conftest import REPO, Child, default_signals
 MAZE = os.path.join(REPO, "inform_dqn_gridworld.py")
 PUSHER = os.path.join(REPO, "inform_sac_pusher.py")
 # phases long enough that a signal sent on their first progress line lands in them (see test_inform_gridworld.py)
-MAZE_TAMER = [MAZE, "--tamer-total-timesteps", "40000", "--eval-frequency", "2000"]
+MAZE_TAMER = [MAZE, "--tamer-total-timesteps", "40000"]
 MAZE_SLEEP = [MAZE, "--tamer-total-timesteps", "2000", "--tamer-learning-starts", "500", "--sleep-gradient-steps",
-              "20000", "--sleep-eval-frequency", "1000"]  # fmt: skip
+              "20000"]  # fmt: skip
 PUSHER_TINY = ["--tamer-total-timesteps", "600", "--tamer-learning-starts", "300", "--tamer-batch-size", "64",
-               "--sleep-gradient-steps", "200", "--sleep-batch-size", "64", "--hidden-size", "64",
-               "--eval-frequency", "300", "--sleep-eval-frequency", "100", "--eval-episodes", "2",
-               "--periodic-eval-episodes", "1", "--authors-test-episodes", "3", "--log-frequency", "100"]  # fmt: skip
+               "--sleep-gradient-steps", "200", "--sleep-batch-size", "64", "--eval-episodes", "2",
+               "--authors-test-episodes", "3"]  # fmt: skip
 SIGNALS = [signal.SIGINT, signal.SIGTERM, signal.SIGHUP]
 
 
@@ -125,7 +124,7 @@ def test_a_signal_after_the_end(tmp_path, sig):
     """After the summary is written the run is complete: a signal then only sets the exit code (if the process is
     still there to get it) and never a traceback."""
     child = Child([sys.executable, MAZE, "--tamer-total-timesteps", "1500", "--tamer-learning-starts", "500",
-                   "--sleep-gradient-steps", "100", "--sleep-eval-frequency", "100"], tmp_path)  # fmt: skip
+                   "--sleep-gradient-steps", "100"], tmp_path)  # fmt: skip
     child.wait_for_line("oracle: 19 steps")  # printed after summary.json is written
     child.proc.send_signal(sig)
     returncode, _, stderr = child.finish(timeout=60)
@@ -309,7 +308,8 @@ def test_the_hang_is_an_interrupt_between_the_queue_put_and_its_notify(tmp_path)
 @pytest.mark.parametrize("script", ["pusher", "maze"])
 def test_an_error_after_the_run_directory_exists_still_leaves_a_summary(tmp_path, monkeypatch, script):
     """A bug in the final evaluation: summary.json says failed with the error's line, then the error goes on up (a bug
-    deserves its traceback). In-process, with the final evaluation replaced by one that raises."""
+    deserves its traceback). In-process, with a piece of the final evaluation (the Pusher's final_evaluation, the
+    maze's reward table) replaced by one that raises."""
     sys.path.insert(0, REPO)
     import inform_dqn_gridworld as maze
     import inform_sac_pusher as pusher
@@ -319,13 +319,13 @@ def test_an_error_after_the_run_directory_exists_still_leaves_a_summary(tmp_path
     def broken(*args, **kwargs):
         raise RuntimeError("a bug in the final evaluation\nsecond line")
 
-    monkeypatch.setattr(module, "final_evaluation", broken)
+    monkeypatch.setattr(module, {"pusher": "final_evaluation", "maze": "reward_table"}[script], broken)
     monkeypatch.chdir(tmp_path)
     handlers = {sig: signal.getsignal(sig) for sig in SIGNALS}
     try:
         if script == "pusher":
             flags = dict(zip(PUSHER_TINY[::2], PUSHER_TINY[1::2], strict=True))
-            args = pusher.Args(**{k[2:].replace("-", "_"): int(v) for k, v in flags.items()}, save_model=False)
+            args = pusher.Args(**{k[2:].replace("-", "_"): int(v) for k, v in flags.items()})
             with pytest.raises(RuntimeError, match="a bug in the final evaluation"):
                 pusher.main(args, pusher.load_oracle(args), pusher.StopSignals())
         else:

@@ -178,8 +178,7 @@ def finish(proc, seconds: float) -> tuple[str, str]:
         pytest.fail(f"no exit within {seconds}s after the signal\nstdout:\n{out}\nstderr:\n{err}")
 
 
-TINY_BUT_LONG = ["--", "--tamer-total-timesteps", "100000", "--sleep-gradient-steps", "100", "--eval-frequency",
-                 "100000"]  # fmt: skip
+TINY_BUT_LONG = ["--", "--tamer-total-timesteps", "100000", "--sleep-gradient-steps", "100"]
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
