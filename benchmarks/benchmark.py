@@ -55,6 +55,7 @@ import torch.nn.functional as F
 import tyro
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ORACLE_RANDOM_STEPS = 5000  # inform_sac_pusher.py's ORACLE_SAC["learning_starts"]: its oracle's random steps
 
 
 @dataclass
@@ -563,13 +564,15 @@ def run_measured(cmd: list[str], cwd: str) -> tuple[int, float, str]:
 
 def measure_ours(args: Args, workdir: str) -> dict:
     """One real, small inform_sac_pusher.py run that trains its oracle in-script; its own per-phase throughput."""
+    # the script's oracle takes its 5,000 random steps first (ORACLE_SAC, no longer a flag): it gets as many update
+    # steps as the reference's, and its steps/s counts the random ones too. The periodic evaluations (fixed now) are
+    # off the phases' clocks.
+    oracle_steps = ORACLE_RANDOM_STEPS + args.oracle_steps - args.learning_starts
     cmd = [sys.executable, os.path.join(REPO, "inform_sac_pusher.py"), "--env-id", args.env_id, "--train-oracle",
-           "--exp-name", "bench", "--num-threads", str(args.num_threads), "--no-save-model",
-           "--oracle-total-timesteps", str(args.oracle_steps), "--oracle-learning-starts", str(args.learning_starts),
+           "--exp-name", "bench", "--num-threads", str(args.num_threads), "--oracle-total-timesteps", str(oracle_steps),
            "--tamer-total-timesteps", str(args.tamer_steps), "--tamer-learning-starts", str(args.learning_starts),
-           "--sleep-gradient-steps", str(args.sleep_steps), "--eval-episodes", "1", "--periodic-eval-episodes", "1",
-           "--obstacle-episodes", "1", "--eval-frequency", str(10 * args.tamer_steps),
-           "--sleep-eval-frequency", str(10 * args.sleep_steps)]  # fmt: skip
+           "--sleep-gradient-steps", str(args.sleep_steps), "--eval-episodes", "1",
+           "--obstacle-episodes", "1"]  # fmt: skip
     code, peak_mb, out = run_measured(cmd, workdir)
     runs = sorted(glob.glob(os.path.join(workdir, "runs", "*__bench__*", "summary.json")), key=os.path.getmtime)
     if code != 0 or not runs:

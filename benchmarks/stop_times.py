@@ -5,7 +5,7 @@ random) goes out a random 0..D seconds after the marker. Prints one JSON line pe
 summary.json's status and phase, a traceback or not) and the longest time per part. Each run in stops/<i>/.
 
     python benchmarks/stop_times.py 50 inform_dqn_gridworld.py --tamer-total-timesteps 2500 \
-        --tamer-learning-starts 500 --sleep-gradient-steps 2000 --sleep-eval-frequency 500 --eval-frequency 500
+        --tamer-learning-starts 500 --sleep-gradient-steps 2000
     LAST="oracle: return" python benchmarks/stop_times.py 15 inform_sac_pusher.py <tests/test_pusher.py's TINY flags>
 """
 
