@@ -70,36 +70,57 @@ def test_tamer_loss_eq1():
 
 
 # Eq. 2 -----------------------------------------------------------------------------------------------------------
+def soft_v(row, temp):
+    """V = temp * logsumexp(Q / temp) of one row of Q values, by hand."""
+    return temp * math.log(sum(math.exp(x / temp) for x in row))
+
+
 def test_iq_loss_eq2_by_hand():
-    q_net = TableQ([[1.0, 0.0], [0.0, 2.0]])
-    target = TableQ([[1.0, 0.0], [0.0, 2.0]])
-    # row 0: expert, s=0 a=0 s'=1, not terminated; row 1: replay, s=1 a=1 s'=0, terminated
-    obs, next_obs = one_hot([0, 1], 2), one_hot([1, 0], 2)
-    actions, terminated = torch.tensor([0, 1]), torch.tensor([0.0, 1.0])
-    is_expert = torch.tensor([True, False])
-    gamma, temp, chi2 = 0.5, 1.0, 0.5
+    """Eq. 2 term by term, with a target network unlike the online one: y(s') = (1 - terminated) gamma V_target(s'),
+    V(s) from the online network on s."""
+    online, target_table = [[1.0, 0.0], [0.0, 2.0]], [[0.5, -1.0], [3.0, 1.0]]
+    q_net, target = TableQ(online), TableQ(target_table)
+    # row 0: expert, s=0 a=0 s'=1; row 1: replay, s=1 a=1 s'=0, terminated; row 2: replay, s=0 a=1 s'=0
+    cells, actions_, next_cells, done = [0, 1, 0], [0, 1, 1], [1, 0, 0], [0.0, 1.0, 0.0]
+    obs, next_obs = one_hot(cells, 2), one_hot(next_cells, 2)
+    actions, terminated = torch.tensor(actions_), torch.tensor(done)
+    is_expert = torch.tensor([True, False, False])
+    gamma, temp, chi2 = 0.5, 0.5, 0.5
     loss, terms = inform.iq_loss(q_net, target, obs, actions, next_obs, terminated, is_expert, gamma, temp, chi2)
-    v0, v1 = math.log(math.e + 1.0), math.log(1.0 + math.e**2)  # temp * logsumexp(Q / temp)
-    y = [gamma * v1, 0.0]  # V_target of s' (not of s); nothing after a terminal transition
-    td = [1.0 - y[0], 2.0 - y[1]]
+    y = [(1 - d) * gamma * soft_v(target_table[c], temp) for c, d in zip(next_cells, done, strict=True)]
+    assert y[1] == 0.0 and y[0] != gamma * soft_v(online[1], temp)  # the target's V, and not the online one's
+    q_sa = [online[c][a] for c, a in zip(cells, actions_, strict=True)]  # 1, 2, 0
+    td = [q - t for q, t in zip(q_sa, y, strict=True)]
+    value = sum(soft_v(online[c], temp) - t for c, t in zip(cells, y, strict=True)) / 3  # V(s): online, on s
     expert_term, value_term, chi2_term = terms["iq_expert_term"], terms["iq_value_term"], terms["iq_chi2_term"]
     assert expert_term.item() == pytest.approx(-td[0], rel=1e-5)
-    assert value_term.item() == pytest.approx(((v0 - y[0]) + (v1 - y[1])) / 2, rel=1e-5)
-    assert chi2_term.item() == pytest.approx(chi2 * (td[0] ** 2 + td[1] ** 2) / 2, rel=1e-5)
-    assert loss.item() == pytest.approx(expert_term.item() + value_term.item() + chi2_term.item(), rel=1e-6)
+    assert value_term.item() == pytest.approx(value, rel=1e-5)
+    assert chi2_term.item() == pytest.approx(chi2 * sum(x * x for x in td) / 3, rel=1e-5)
+    assert loss.item() == pytest.approx(-td[0] + value + chi2 * sum(x * x for x in td) / 3, rel=1e-5)
 
 
 def test_iq_loss_uses_target_network_on_next_state_without_gradient():
-    q_net = TableQ([[1.0, 0.0], [0.0, 2.0]])
-    target = TableQ([[5.0, 5.0], [-3.0, 7.0]])
-    obs, next_obs = one_hot([0], 2), one_hot([1], 2)
-    loss, terms = inform.iq_loss(
-        q_net, target, obs, torch.tensor([0]), next_obs, torch.tensor([0.0]), torch.tensor([True]), 0.9, 1.0, 0.0
-    )
-    y = 0.9 * math.log(math.exp(-3.0) + math.exp(7.0))
+    """y(s') from the target on s', a constant: the gradient reaches the online network only, and it is Eq. 2's by
+    hand: -1/N_expert on each expert (s, a), plus softmax(Q(s, .) / temp) / N on each row's s (the value term)."""
+    online, target_table = [[1.0, 0.0], [0.0, 2.0]], [[5.0, 5.0], [-3.0, 7.0]]
+    q_net, target = TableQ(online), TableQ(target_table)
+    obs, next_obs = one_hot([0, 1], 2), one_hot([1, 1], 2)
+    actions, terminated, is_expert = torch.tensor([0, 1]), torch.tensor([0.0, 0.0]), torch.tensor([True, False])
+    gamma, temp = 0.9, 0.5
+    loss, terms = inform.iq_loss(q_net, target, obs, actions, next_obs, terminated, is_expert, gamma, temp, 0.0)
+    y = gamma * soft_v([-3.0, 7.0], temp)  # both rows go to s' = 1
     assert terms["iq_expert_term"].item() == pytest.approx(-(1.0 - y), rel=1e-5)
+    assert terms["iq_value_term"].item() == pytest.approx(
+        (soft_v(online[0], temp) + soft_v(online[1], temp)) / 2 - y, rel=1e-5
+    )
+    assert terms["iq_chi2_term"].item() == 0.0
     loss.backward()
     assert target.table.grad is None
+    expected = torch.zeros(2, 2)
+    expected[0, 0] -= 1.0  # the one expert row, s=0 a=0
+    for cell in (0, 1):
+        expected[cell] += torch.softmax(torch.tensor(online[cell]) / temp, 0) / 2
+    assert torch.allclose(q_net.table.grad, expected, atol=1e-6), q_net.table.grad
 
 
 def test_chi2_flag_turns_the_regulariser_off():
