@@ -14,6 +14,7 @@ check_args, StopSignals, Teacher, ReplayBuffer, tamer_loss, iq_loss, greedy_acti
     python inform_dqn_gridworld.py --seed 1
     python inform_dqn_gridworld.py --teacher-noise 0.2 --teacher-delay 1 --credit-window 2   # a human-like teacher
     python inform_dqn_gridworld.py --teacher human   # teach it yourself (docs/teachers.md)
+    python inform_dqn_gridworld.py --teacher browser --participant P01   # teach it through a web page
     python inform_dqn_gridworld.py --env-id FrozenLake-v1 --success-max-steps 100   # a toy-text task (slippery ice)
 """
 
@@ -27,6 +28,7 @@ import math
 import os
 import random
 import signal
+import socket
 import sys
 import tempfile
 import time
@@ -69,7 +71,7 @@ POLICIES = ("oracle", "tamer", "inform")
 GAMMA = 0.99  # the discount of the oracle's Q* and of the sleep (non-myopic, unlike TAMER's 0)
 TAU = 1.0  # soft-update rate of the sleep's target Q per step (1 copies it every step, as the authors did)
 EXPLORATION_FRACTION = 0.2  # of the forward phase, over which epsilon decays from start_e to end_e
-HUMAN_UPDATES_PER_ANSWER = 20  # --teacher human: H's gradient steps after each answer (Deep TAMER's remedies)
+HUMAN_UPDATES_PER_ANSWER = 20  # a person teaches: H's gradient steps after each answer (Deep TAMER's remedies)
 EVAL_FREQUENCY = 500  # env steps of the day, gradient steps of the night, between greedy evaluations
 TOY_TEXT_MAX_STEPS = 200  # the step limit of a toy-text env registered without one (CliffWalking), as the maze's
 SEED_RANGE = "[0, 4294967296)"  # what numpy's seeding takes
@@ -77,8 +79,9 @@ SEED_RANGE = "[0, 4294967296)"  # what numpy's seeding takes
 TEACHER_DEFAULTS = {
     "oracle": {"tamer_learning_starts": 1000, "start_e": 1.0, "end_e": 0.05},
     "human": {"tamer_learning_starts": 1, "start_e": 0.0, "end_e": 0.0},
+    "browser": {"tamer_learning_starts": 1, "start_e": 0.0, "end_e": 0.0},
 }
-LOG_FREQUENCY = {"oracle": 100, "human": 1}  # steps between scalar logs (a person's every answer)
+LOG_FREQUENCY = {"oracle": 100, "human": 1, "browser": 1}  # steps between scalar logs (a person's every answer)
 
 
 class Range(str):
@@ -124,8 +127,13 @@ class Args:
     """an episode is tagged success if it reaches the goal (the terminal with the task's top reward) in fewer steps"""
 
     # The teacher as a person (docs/protocol.md); the defaults are the paper's perfect, instant, tireless teacher
-    teacher: Literal["oracle", "human"] = "oracle"
-    """who answers: "oracle" (Eq. 4, distorted by the flags below) or "human" (you, in the terminal: y, Enter, q)"""
+    teacher: Literal["oracle", "human", "browser"] = "oracle"
+    """who answers: "oracle" (Eq. 4, distorted by the flags below), "human" (you, in the terminal: y, Enter, q) or
+    "browser" (a person at the web page whose address the run prints: Yes, No, End the day)"""
+    participant: str | None = None
+    """--teacher browser: the person's ID, written with each answer into runs/{run}/answers.jsonl"""
+    host: str = "127.0.0.1"
+    """--teacher browser: where the page listens, HOST or HOST:PORT (0.0.0.0: other machines too; no port: any)"""
     teacher_noise: Annotated[float, Range("[0, 1]")] = 0.0
     """probability that the teacher's judgement is flipped (+1 <-> no feedback)"""
     teacher_sparsity: Annotated[float, Range("[0, 1]")] = 1.0
@@ -374,16 +382,16 @@ class ReplayBuffer:
 # ALGO LOGIC: the day (forward phase) and the person at the terminal
 
 
-def forward_phase(args: Args, env, q_star: np.ndarray, buffer: ReplayBuffer, evaluator, writer, device):
+def forward_phase(args: Args, env, q_star: np.ndarray, buffer: ReplayBuffer, evaluator, writer, device, page=None):
     """The day: TAMER (Eq. 1, gamma = 0) acts on H and fits it to the teacher's yes/no feedback (Eq. 4 through the
-    Teacher, or a person at the terminal); every transition is remembered, every episode tagged."""
+    Teacher, or a person at the terminal or the web page); every transition is remembered, every episode tagged."""
     h_net = QNetwork(buffer.obs.shape[1], int(env.action_space.n)).to(device)
     h_optimizer = torch.optim.Adam(h_net.parameters(), lr=args.tamer_h_lr, fused=True)
     teacher = Teacher(args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window,
                       args.feedback_budget, seed=args.seed + 7919)  # fmt: skip
     human = None
-    if args.teacher == "human":  # you, at the terminal
-        human = HumanTeacher(env.unwrapped.variant, args.success_max_steps, h_net, device)
+    if args.teacher in ("human", "browser"):  # you, at the terminal or at the web page
+        human = HumanTeacher(env.unwrapped.variant, args.success_max_steps, h_net, device, page)
     n, log_every = args.tamer_total_timesteps, LOG_FREQUENCY[args.teacher]
     progress = Progress("tamer", n, evaluator)
     h_loss = torch.zeros((), device=device)
@@ -479,16 +487,19 @@ def forward_phase(args: Args, env, q_star: np.ndarray, buffer: ReplayBuffer, eva
 class HumanTeacher:
     """You as the teacher (docs/teachers.md). The maze is drawn with the agent and its move; you answer on standard
     input: y (+1), Enter (no feedback) or q (stop teaching: the sleep starts). The end of the input counts as q, so
-    a pipe or a file of answers works as well as a keyboard."""
+    a pipe or a file of answers works as well as a keyboard. With a `page` (browser_teacher.BrowserTeacher) you answer
+    on the web page instead: Yes (+1), No (no feedback), no answer (space: the move goes by unjudged), End the day."""
 
-    def __init__(self, variant: str, success_max_steps: int, h_net: QNetwork, device: torch.device):
-        self.variant, self.h_net, self.device = variant, h_net, device
+    def __init__(self, variant: str, success_max_steps: int, h_net: QNetwork, device: torch.device, page=None):
+        self.variant, self.h_net, self.device, self.page = variant, h_net, device, page
         self.own_way = self.greedy_length()  # the length of the agent's own (greedy) way from S; 200: it never ends
         self.next_cell = gridworld_env.transition_table(variant)
         self.answers = self.agreement = 0  # answers given, and how many Eq. 4 (the oracle) would have given too
         self.refused = np.zeros((gridworld_env.N_CELLS, gridworld_env.N_ACTIONS))  # Enter answers per (cell, move)
         self.answers_to_goal = None  # answers given when the agent's own (greedy) way from S first reached G
-        self.echo = not sys.stdin.isatty()  # piped answers are not echoed by a terminal: print them
+        self.echo = page is None and not sys.stdin.isatty()  # piped answers are not echoed by a terminal: print them
+        if page is not None:
+            return
         say("You are the teacher. The agent A must reach G by the shortest path (19 steps from S).\nFor each move "
             "answer: y = good (+1), Enter = no feedback, q = stop teaching (the sleep starts).\nA move you answer "
             "with Enter is not proposed again in that cell while it has moves you have not judged.\nThe sleep learns "
@@ -505,6 +516,8 @@ class HumanTeacher:
         way = f"reaches G in {self.own_way} steps" if self.own_way < 200 else "does not reach G yet"
         maze = gridworld_env.draw_maze(self.variant, agent=cell, arrows={cell: action})
         move = gridworld_env.ACTION_NAMES[action]
+        if self.page is not None:
+            return self.ask_page(cell, action, step, maze, f"{move}{how}", way, positives, successes, h_oracle)
         say(f"\nstep {step} | answers {self.answers} | positives given {positives} | its own way from S: {way} | "
             f"walks to G in time: {successes}\n{maze}the agent moves {move}{how}")  # fmt: skip
         while True:
@@ -523,6 +536,21 @@ class HumanTeacher:
                 self.refused[cell, action] += 1.0 - h
                 return h
             say(f"{answer!r}? type y for +1, press Enter for no feedback, or type q to stop teaching")
+
+    def ask_page(self, cell, action, step, maze, move, way, positives, successes, h_oracle) -> float | None:
+        """The move on the web page; None once the day is over (End the day, or the page closed)."""
+        info = {"step": step, "answers": self.answers, "positives given": positives, "the agent moves": move,
+                "its own way from S": way, "walks to G in time": successes}  # fmt: skip
+        with StopSignals.waiting():  # Ctrl-C while the person thinks stops the run at once
+            h = self.page.ask(step, gridworld_env.ACTION_NAMES[action], state_text=maze, info=info)
+        if self.page.ended is not None:
+            return None
+        if h is None:
+            return 0.0  # no answer: the move goes by without feedback and is not counted as an answer
+        self.answers += 1
+        self.agreement += int(h == h_oracle)
+        self.refused[cell, action] += 1.0 - h
+        return h
 
     def greedy_length(self) -> int:
         return gridworld_env.greedy_episode_length(greedy_actions(self.h_net, self.device), self.variant)
@@ -709,7 +737,7 @@ class Evaluator:
 def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict | None = None) -> dict:
     run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
     run_start = time.time()
-    run_dir = writer = env = evaluator = None
+    run_dir = writer = env = evaluator = page = None
     summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
     summary["sleep_from"] = os.path.abspath(args.sleep_from) if args.sleep_from else None  # a saved day's run
     summary["sleep_variant"] = args.sleep_variant()
@@ -738,7 +766,8 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
             # ---- forward phase ("day"): TAMER with the teacher's feedback, every transition remembered and tagged
             phase, t0 = "tamer", time.time() - evaluator.seconds  # the phase's clock stops during its evaluations
             buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, device)
-            h_net, stats = forward_phase(args, env, q_star, buffer, evaluator, writer, device)
+            page = open_page(args, run_dir) if args.teacher == "browser" else None
+            h_net, stats = forward_phase(args, env, q_star, buffer, evaluator, writer, device, page)
             summary.update(stats)
             summary["time/tamer_s"] = time.time() - evaluator.seconds - t0
             if args.save_buffer:  # the day as it ended, for later nights (--sleep-from)
@@ -760,7 +789,7 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
         q_net = None
         if summary["sleep_skipped"]:  # no success: nothing to consolidate, no INFORM policy
             how = "raise --tamer-total-timesteps"
-            if args.teacher == "human":
+            if args.teacher in ("human", "browser"):
                 how = "next time keep teaching until the agent has walked from S to G in time at least once"
             say(f"warning: the sleep is skipped and no INFORM policy is made: no episode reached G in fewer than "
                 f"{args.success_max_steps} steps, so there is nothing to consolidate; {how}", sys.stderr)  # fmt: skip
@@ -789,10 +818,13 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
             evaluator(name, policy, args.sleep_gradient_steps if name == "inform" else summary["feedback/steps"])
         if args.capture_video:  # after the evaluation: drawing changes no number
             record_videos(run_dir, {name: policy for name, policy in policies.items() if name != "oracle"})
-        if args.teacher == "human":
-            for name, title in (("tamer", "TAMER (what you taught)"), ("inform", "INFORM (after the sleep)")):
-                if name in policies:
-                    say(f"\n{title}, greedy from S:\n" + draw_greedy_path(policies[name], env.unwrapped.variant))
+        if args.teacher in ("human", "browser"):
+            drawn = [f"{title}, greedy from S:\n" + draw_greedy_path(policies[name], env.unwrapped.variant)
+                     for name, title in (("tamer", "TAMER (what you taught)"), ("inform", "INFORM (after the sleep)"))
+                     if name in policies]  # fmt: skip
+            say("\n" + "\n\n".join(drawn))
+            if page is not None:
+                page.show_outcome("\n\n".join(drawn))
     except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
         status = "interrupted"
         stop.broken_pipe = isinstance(e, BrokenPipeError)
@@ -803,7 +835,7 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
         status = "failed"
         summary["error"] = f"{type(e).__name__}: {(str(e).strip() or '-').splitlines()[0]}"
         failure = None if isinstance(e, OSError) else e
-    summary = end_run(args, summary, status, phase, run_dir, run_start, evaluator, (env, writer), stop)
+    summary = end_run(args, summary, status, phase, run_dir, run_start, evaluator, (env, writer, page), stop)
     if failure is not None:
         raise failure
     return summary
@@ -877,8 +909,9 @@ class Progress:
             sps, shown = self.sps(step), "".join(f" | {k} {v:.4g}" if isinstance(v, float) else f" | {k} {v}"
                                                  for k, v in report.items() if v is not None)  # fmt: skip
             eta = (self.total - step) / max(sps, 1e-9)
-            say(f"[{self.phase}] {step}/{self.total} {100 * step // self.total}% | {sps:,.0f} SPS | "
-                f"ETA {int(eta // 60)}m{int(eta % 60):02d}s{shown}")  # fmt: skip
+            # print, not say: with a dead reader (`| head`) the run stops here, saving what finished (exit 141)
+            print(f"[{self.phase}] {step}/{self.total} {100 * step // self.total}% | {sps:,.0f} SPS | "
+                  f"ETA {int(eta // 60)}m{int(eta % 60):02d}s{shown}", flush=True)  # fmt: skip
 
 
 def print_results(summary: dict, run_dir: str) -> None:
@@ -1136,7 +1169,7 @@ def check_args(args: Args) -> None:
                 raise InputError(f"--{f.name.replace('_', '-')} must {must}, got {value}")
     check_run_name(args.env_id, args.exp_name, args.seed)
     check_env(args.env_id)
-    maze_only = {"--teacher human": args.teacher == "human", "--capture-video": args.capture_video,
+    maze_only = {f"--teacher {args.teacher}": args.teacher != "oracle", "--capture-video": args.capture_video,
                  "--oracle-path": args.oracle_path is not None}  # fmt: skip
     if args.env_id not in MAZE_IDS and any(maze_only.values()):
         used = ", ".join(flag for flag, on in maze_only.items() if on)
@@ -1151,12 +1184,49 @@ def check_args(args: Args) -> None:
         raise InputError("--save-buffer saves a run's own day; a --sleep-from run has none (it sleeps on another's)")
     distortions = {"teacher_noise": 0.0, "teacher_sparsity": 1.0, "teacher_delay": 0, "credit_window": 1}
     changed = [f"--{k.replace('_', '-')}" for k, v in distortions.items() if getattr(args, k) != v]
-    if args.teacher == "human" and changed:
-        raise InputError(f"--teacher human takes your answers as they are; drop {', '.join(changed)} "
+    if args.teacher != "oracle" and changed:
+        raise InputError(f"--teacher {args.teacher} takes the answers as they are; drop {', '.join(changed)} "
                          "(they distort the simulated teacher only)")  # fmt: skip
+    page_flags = [f for f, default in (("--participant", None), ("--host", "127.0.0.1"))
+                  if getattr(args, f[2:]) != default]  # fmt: skip
+    if args.teacher != "browser" and page_flags:
+        raise InputError(f"{', '.join(page_flags)}: the web page's (--teacher browser); drop it, or add that")
+    if args.teacher == "browser" and not args.sleep_from:
+        if importlib.util.find_spec("browser_teacher") is None:
+            raise InputError("--teacher browser needs browser_teacher.py (the web page) beside this script")
+        check_address(*host_and_port(args.host))
     if args.teacher == "human" and not args.sleep_from and (sys.stdin is None or sys.stdin.closed):
         raise InputError("--teacher human reads your answers from standard input, which is closed; "
                          "run it in a terminal, or pipe the answers in")  # fmt: skip
+
+
+def host_and_port(address: str) -> tuple[str, int]:
+    """--host as (host, port): HOST, HOST:PORT, [IPv6]:PORT or a bare IPv6 address; port 0 takes a free one."""
+    if address.startswith("["):
+        host, _, port = address[1:].partition("]")
+        port = port.removeprefix(":")
+    else:
+        host, port = address.split(":") if address.count(":") == 1 else (address, "")
+    if not host or not (port == "" or port.isdigit() and int(port) < 65536):
+        raise InputError(f"--host must be HOST or HOST:PORT (a port below 65536), e.g. 0.0.0.0:8000; got {address!r}")
+    return host, int(port or 0)
+
+
+def check_address(host: str, port: int) -> None:
+    """The page's address is free and ours to take, said before the run starts (nothing is written)."""
+    try:
+        with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
+            s.bind((host, port))
+    except OSError as e:
+        raise InputError(f"--host {host}:{port}: cannot listen there ({e.strerror or e}); pick another") from None
+
+
+def open_page(args: Args, run_dir: str):
+    """--teacher browser: the web page the person teaches at (browser_teacher.py, imported only here)."""
+    import browser_teacher
+
+    host, port = host_and_port(args.host)
+    return browser_teacher.BrowserTeacher(run_dir, "maze", host, port, participant=args.participant)
 
 
 def check_writable(directory: str) -> None:

@@ -15,7 +15,6 @@ import http.client
 import io
 import json
 import os
-import re
 import signal
 import socket
 import subprocess
@@ -609,17 +608,10 @@ def test_the_pusher_streams_and_answers_arrive_with_their_step(new_page, tmp_pat
     assert [row["mode"] for row in rows] == ["stream", "stream"] and rows[0]["step"] == first.step
 
 
-def maze_script_takes_the_page() -> bool:
-    with open(MAZE_SCRIPT) as f:
-        return re.search(r'teacher: Literal\[[^\]]*"browser"', f.read()) is not None
-
-
 def test_through_the_page_the_scripted_person_teaches_tamer_the_19_steps_from_s(new_page, tmp_path):
     """The maze script itself under --teacher browser: the scripted person answers each move as the oracle would
     until the page says the agent's own way from S takes 19 steps, then ends the day; the night runs, the page shows
     the outcome, and the run completes with every answer kept."""
-    if not maze_script_takes_the_page():
-        pytest.skip("inform_dqn_gridworld.py takes no --teacher browser yet")
     flags = ["--teacher", "browser", "--participant", "scripted", "--seed", "1", "--tamer-total-timesteps", "300",
              "--sleep-gradient-steps", "300"]  # fmt: skip
     child = Child([sys.executable, MAZE_SCRIPT, *flags], cwd=tmp_path)
@@ -650,3 +642,30 @@ def test_through_the_page_the_scripted_person_teaches_tamer_the_19_steps_from_s(
     with open(run_dir / "answers.jsonl") as f:
         rows = [row for row in map(json.loads, f) if row["event"] == "answer"]
     assert len(rows) == answers and all(row["participant"] == "scripted" for row in rows)
+
+
+@pytest.mark.parametrize(
+    ("flags", "phrase"),
+    [
+        (["--participant", "P01"], "--participant: the web page's (--teacher browser)"),
+        (["--host", "0.0.0.0"], "--host: the web page's (--teacher browser)"),
+        (["--teacher", "browser", "--host", "127.0.0.1:99999"], "--host must be HOST or HOST:PORT"),
+        (["--teacher", "browser", "--host", "no-such-host.invalid"], "--host no-such-host.invalid:0: cannot listen"),
+        (["--teacher", "browser", "--host", "127.0.0.1:{port}"], "cannot listen there"),
+        (["--teacher", "browser", "--teacher-noise", "0.1"], "--teacher browser takes the answers as they are"),
+        (["--teacher", "browser", "--env-id", "FrozenLake-v1"], "--teacher browser: the maze's only"),
+    ],
+)
+def test_the_maze_scripts_page_flags_are_refused_in_one_line_before_any_file(tmp_path, flags, phrase):
+    """The page's flags without the page, a bad or taken address, a distorted person, another task: one line, exit 2,
+    no run directory, before the page is opened."""
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        flags = [f.format(port=taken.getsockname()[1]) for f in flags]
+        proc = subprocess.run([sys.executable, MAZE_SCRIPT, *flags], cwd=tmp_path, capture_output=True, text=True,
+                              timeout=120)  # fmt: skip
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: "), proc.stderr[-2000:]
+    assert phrase in lines[0], lines[0]
+    assert not os.listdir(tmp_path), os.listdir(tmp_path)
