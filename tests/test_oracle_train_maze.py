@@ -1,5 +1,6 @@
 import json
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
@@ -7,6 +8,19 @@ import torch
 import gridworld_env as g
 import inform_dqn_gridworld as inform
 import oracle_train as ot
+
+
+def walked_length(policy: np.ndarray, env_id: str) -> int:
+    """A greedy table policy's episode length from S, walked in the Gymnasium env itself (not through the maze's
+    transition table, as greedy_episode_length does): 200, the time limit, if it never reaches G."""
+    env = gym.make(env_id)
+    obs, _ = env.reset(seed=0)
+    steps, terminated, truncated = 0, False, False
+    while not (terminated or truncated):  # the env's time limit is 200 steps
+        obs, _, terminated, truncated, _ = env.step(int(policy[int(obs.argmax())]))
+        steps += 1
+    env.close()
+    return steps if terminated else 200
 
 
 def test_value_iteration_oracle_round_trips(run_script):
@@ -26,7 +40,7 @@ def test_q_learning_oracle_is_a_usable_imperfect_teacher(run_script):
     assert ckpt["training_steps"] > 0 and ckpt["q_table"].shape == (30, 4)
     q = ckpt["q_table"].numpy()
     assert not np.allclose(q, g.optimal_q("plain"))  # a half-trained table, not Q*
-    assert g.greedy_episode_length(q.argmax(1), "plain") == ckpt["evaluation"]["episode_length"]
+    assert walked_length(q.argmax(1), "KnoxStoneMaze-v0") == ckpt["evaluation"]["episode_length"]
     result = run_script(
         "inform_dqn_gridworld.py", "--oracle-path", "ql.pt", "--tamer-total-timesteps", "2000",
         "--tamer-learning-starts", "500", "--sleep-gradient-steps", "100",
@@ -64,7 +78,7 @@ def test_dqn_oracle_round_trips_and_teaches(run_script):
     assert ckpt["q_table"].dtype == torch.float64 and torch.equal(ckpt["q_table"], q_net)
     q = inform.load_oracle(str(run_script.cwd / "dqn.pt"), "KnoxStoneMaze-v0")
     assert np.array_equal(q, q_net.numpy())
-    length = g.greedy_episode_length(q.argmax(1), "plain")
+    length = walked_length(q.argmax(1), "KnoxStoneMaze-v0")
     assert length == ckpt["evaluation"]["episode_length"]
     assert length < 30  # a successful teacher (the success tag), learned in well under a minute
     result = run_script(
@@ -108,7 +122,7 @@ def test_every_maze_checkpoint_holds_env_shapes_steps_and_evaluation(tmp_path, m
         assert 5 <= steps <= 5 * 200  # 5 episodes of at most 200 steps (the time limit)
     else:
         assert steps == {"value-iteration": 0, "dqn": 600}[method]
-    length = g.greedy_episode_length(ckpt["q_table"].numpy().argmax(1), "wall")
+    length = walked_length(ckpt["q_table"].numpy().argmax(1), "KnoxStoneMazeWall-v0")
     assert ckpt["evaluation"] == {"episode_length": float(length)}
     assert ("state_dict" in ckpt) == (method == "dqn")
     assert not (tmp_path / "o.pt.tmp").exists()

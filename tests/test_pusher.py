@@ -203,7 +203,8 @@ def check_run(tmp_path, proc):
     assert len(summary["obstacle/box_positions"]) == 3
     assert summary["obstacle/min_box_distance_to_path"] < 1e-6  # the default bisector layout: on the path
     for p in isp.POLICIES:
-        assert 0.0 <= summary[f"eval/authors_test/{p}_success_rate"] <= 1.0
+        rate = summary[f"eval/authors_test/{p}_success_rate"]
+        assert rate * 3 == pytest.approx(round(rate * 3)) and 0 <= round(rate * 3) <= 3  # a mean over its 3 episodes
         assert np.isfinite(summary[f"eval/authors_test/{p}_return"])
     # the recovered reward loads from the run directory and drives a wrapped env
     env = isp.RecoveredRewardWrapper(gym.make("Pusher-v5"), isp.RecoveredReward.load(run_dir))

@@ -89,7 +89,12 @@ def test_blocked_move_uses_s_prime_equal_s_by_hand():
 def test_the_network_reward_on_the_plain_maze_is_the_saved_table(tmp_path):
     net = make_gridworld_run(tmp_path / "run")
     saved, _ = qrr.load_reward_table(str(tmp_path / "run" / "recovered_reward.pt"))
-    assert np.allclose(qrr.transition_reward_table(net, PLAIN, 0.99, 0.1), saved, atol=1e-6)
+    with torch.no_grad():  # Eq. 3 written out cell by cell: r = Q(s, a) - gamma V(s'), no V(s') on entering G
+        q = net(torch.eye(30)).double().numpy()
+    v = 0.1 * np.log(np.exp(q / 0.1).sum(1))
+    by_hand = np.array([[q[s, a] - (0.0 if PLAIN[s, a] == g.GOAL else 0.99 * v[PLAIN[s, a]]) for a in range(4)]
+                        for s in range(30)])  # fmt: skip
+    assert np.allclose(saved, by_hand, atol=1e-5)
     (source,) = qrr.resolve_sources(args_for(reward_path=(str(tmp_path / "run"),)))
     assert np.array_equal(source["reward"]["next_cell"], WALL)  # default --env-id: the wall maze's s'
     assert not np.allclose(source["reward"]["table"], saved)

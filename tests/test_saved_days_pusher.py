@@ -165,7 +165,7 @@ def test_the_sleep_study_runs_a_night_tests_it_on_random_starts_and_tabulates_it
     summary = json.loads((night_dir / "summary.json").read_text())
     assert summary["args"]["sleep_seed"] == 3 and summary["args"]["sleep_holdout_fraction"] == 0.15
     random_starts = json.loads((night_dir / "random_starts.json").read_text())
-    assert 0 <= random_starts["random_starts/inform_success_rate"] <= 1
+    assert random_starts["random_starts/inform_success_rate"] in (0.0, 0.5, 1.0)  # a mean over the 2 episodes
     assert "random_starts/tamer_return" in random_starts
     assert "| default | 1 |" in proc.stdout and "| tamer | 1 days |" in proc.stdout
     again = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=300)  # resumes: nothing runs
