@@ -19,13 +19,14 @@ script) runs in this process for two budgets past learning starts, and the diffe
 - `roofline/{phase}_fraction` = achieved / peak, and the top ops (self time) of the longer profiled run (its setup
   and random-action steps included).
 `--baseline-script` measures another copy of the script (e.g. the previous commit's) side by side, interleaved, and
-`--variants bf16 threads` the opt-in speed (`--bf16`, two threads; any boolean flag of the script) against the
-default, interleaved.
+`--variants threads` the opt-in speed (two threads; or any boolean flag of the script) against the default,
+interleaved. The baseline must have the same phase functions as the script (the refactored ones: commit 1009352 on).
 
     python benchmarks/benchmark.py                # about 5 minutes on 2 cores
     python benchmarks/benchmark.py --repeats 1 --oracle-steps 600 --tamer-steps 600 --sleep-steps 200   # a smoke run
     git show HEAD~1:inform_sac_pusher.py > /tmp/before/inform_sac_pusher.py && ln -s $PWD/oracles /tmp/before/
-    python benchmarks/benchmark.py --no-side-by-side --baseline-script /tmp/before/inform_sac_pusher.py --variants bf16
+    python benchmarks/benchmark.py --no-side-by-side --baseline-script /tmp/before/inform_sac_pusher.py \
+        --variants threads
 
 Writes benchmarks/results.json (keys `{phase}_ratio` = ours / reference for oracle, tamer, sleep,
 `gridworld_pipeline_s`, and `roofline/...`) and prints tables.
@@ -97,7 +98,7 @@ class Args:
     baseline_script: str | None = None
     """another inform_sac_pusher.py (e.g. the previous commit's, oracles/ beside it), timed interleaved with ours"""
     variants: tuple[str, ...] = ()
-    """opt-in speed to time against the default, interleaved: bf16 (any boolean flag of the script), threads (two)"""
+    """opt-in speed to time against the default, interleaved: threads (two), or any boolean flag of the script"""
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -354,9 +355,8 @@ class NullEvaluator:
 def phase_runner(module, args: Args, phase: str, flags: dict):
     """run(steps): the script's `phase` code for `steps` steps past learning starts, output swallowed."""
     cpu = torch.device("cpu")
-    common = dict(env_id=args.env_id, oracle_learning_starts=args.learning_starts,
-                  tamer_learning_starts=args.learning_starts, eval_frequency=10**9, sleep_eval_frequency=10**9,
-                  log_frequency=10**9, **flags)  # fmt: skip
+    # the phases' evaluations (every EVAL_FREQUENCY / SLEEP_EVAL_FREQUENCY steps) go to NullEvaluator: no episodes
+    common = dict(env_id=args.env_id, tamer_learning_starts=args.learning_starts, **flags)
     oracle_ckpt = torch.load(os.path.join(os.path.dirname(module.__file__), "oracles", f"{args.env_id}__sac_oracle.pt"),
                              weights_only=True)  # fmt: skip
     oracle_actor, oracle_qf = module.oracle_from_checkpoint(oracle_ckpt, cpu)
@@ -368,9 +368,9 @@ def phase_runner(module, args: Args, phase: str, flags: dict):
     def run(steps: int):
         torch.manual_seed(1)
         with contextlib.redirect_stdout(io.StringIO()):
-            if phase == "oracle":
-                module.train_oracle(module.Args(**common, oracle_total_timesteps=args.learning_starts + steps),
-                                    NullWriter(), cpu)  # fmt: skip
+            if phase == "oracle":  # the script's SAC starts learning after its own fixed random steps
+                n = module.ORACLE_SAC["learning_starts"] + steps
+                module.train_oracle(args.env_id, 1, n, module.Outcome(), NullWriter(), cpu)
             elif phase == "tamer":
                 n = args.learning_starts + steps
                 buffer = module.ReplayBuffer(n, obs_dim, act_dim, cpu)

@@ -62,15 +62,16 @@ class Sleep:
         a = script.Args()
         torch.manual_seed(seed)
         obs_dim, act_dim = buffer["obs"].shape[1], buffer["actions"].shape[1]
-        self.q_net = script.QEnsemble(obs_dim, act_dim, a.hidden_size, n=1)
-        self.q_target = script.QEnsemble(obs_dim, act_dim, a.hidden_size, n=1)
+        self.q_net = script.QEnsemble(obs_dim, act_dim, script.HIDDEN_SIZE, n=1)
+        self.q_target = script.QEnsemble(obs_dim, act_dim, script.HIDDEN_SIZE, n=1)
         self.q_target.load_state_dict(self.q_net.state_dict())
         self.actor = script.Actor(
-            obs_dim, act_dim, a.hidden_size, -2.0 * torch.ones(act_dim), 2.0 * torch.ones(act_dim)
+            obs_dim, act_dim, script.HIDDEN_SIZE, -2.0 * torch.ones(act_dim), 2.0 * torch.ones(act_dim)
         )
         self.q_optimizer = torch.optim.Adam(self.q_net.parameters(), lr=a.sleep_q_lr, foreach=True)
         self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=a.sleep_policy_lr, foreach=True)
         self.a, self.buffer, self.soft_update = a, buffer, script.soft_update
+        self.gamma, self.tau = script.SLEEP_GAMMA, script.TAU  # constants of the script, not flags
         self.iq_loss, self.actor_loss = script.iq_loss, script.actor_loss
         self.q_step, self.actor_step = self.q_optimizer.step, self.actor_optimizer.step
         if variant.startswith("compile"):
@@ -89,7 +90,7 @@ class Sleep:
         idx = torch.cat([replay, expert])
         obs, actions, next_obs, terminated = b["obs"][idx], b["actions"][idx], b["next_obs"][idx], b["terminated"][idx]
         loss, _ = self.iq_loss(
-            self.q_net, self.q_target, obs, actions, next_obs, terminated, self.is_expert, a.sleep_gamma,
+            self.q_net, self.q_target, obs, actions, next_obs, terminated, self.is_expert, self.gamma,
             a.sleep_temperature, a.sleep_chi2_coef, self.actor,
         )  # fmt: skip
         self.q_optimizer.zero_grad(set_to_none=True)
@@ -101,7 +102,7 @@ class Sleep:
         pi_loss.backward()
         self.q_net.requires_grad_(True)
         self.actor_step()
-        self.soft_update(self.q_target, self.q_net, a.tau)
+        self.soft_update(self.q_target, self.q_net, self.tau)
 
 
 def main(args: Args) -> dict:
