@@ -32,10 +32,8 @@ from conftest import REPO, Child, default_signals
 
 import gridworld_env
 from browser_teacher import BrowserTeacher, credit_weights, png_bytes
+from inform_utils.scripted_person_browser import CHROMIUM, CHROMIUM_ARGS, browser_missing, on_the_page
 
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = ["--no-sandbox", "--headless", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--disable-sync", "--no-first-run"]  # fmt: skip
 SCREENSHOT = os.path.join(REPO, "docs", "figures", "browser_teacher.png")
 MAZE_SCRIPT = os.path.join(REPO, "inform_dqn_gridworld.py")
 WAIT_S = 20.0  # the bound on every wait for a condition (a loaded machine; a pass takes far less)
@@ -425,16 +423,6 @@ def test_ctrl_c_while_waiting_ends_the_day_as_interrupted(tmp_path):
 # a real browser: Playwright driving Debian's chromium, headless
 
 
-def browser_missing() -> str | None:
-    if not os.path.exists(CHROMIUM):
-        return f"no {CHROMIUM}: apt-get install chromium"
-    try:
-        import playwright.sync_api  # noqa: F401
-    except ImportError:
-        return "no playwright: pip install the pin in requirements.txt"
-    return None
-
-
 @pytest.fixture(scope="module")
 def browser():
     why = browser_missing()
@@ -470,17 +458,6 @@ def new_page(browser):
     assert not errors, errors
 
 
-def maze_on_the_page(text: str) -> tuple[int, int]:
-    """(cell, move) read off the drawing as a person reads it: where A stands, and its arrow."""
-    rows = text.split("\n")
-    for r in range(gridworld_env.ROWS):
-        for c in range(gridworld_env.COLS):
-            content = rows[1 + 2 * r][1 + 4 * c : 4 + 4 * c]
-            if content[1] == "A":
-                return gridworld_env.CELL_INDEX[(r, c)], gridworld_env.ARROWS.index(content[2])
-    raise AssertionError(f"no agent on the page:\n{text}")
-
-
 def wait_for_question(page, number: int):
     page.wait_for_selector(f'#day[data-open="1"][data-question="{number}"]')
 
@@ -495,7 +472,7 @@ def test_a_scripted_person_teaches_the_maze_through_the_page(new_page, tmp_path)
         expected = []
         for number in range(1, 13):
             wait_for_question(page, number)
-            cell, move = maze_on_the_page(page.text_content("#maze"))
+            cell, move = on_the_page(page.text_content("#maze"))
             assert (cell, move) == loop.asked[number - 1][1:3]  # the page shows the move the loop proposes
             good = q[cell, move] >= q[cell].max() - 1e-9
             if number == 5:
@@ -623,7 +600,7 @@ def test_through_the_page_the_scripted_person_teaches_tamer_the_19_steps_from_s(
     while "its own way from S: reaches G in 19 steps" not in page.text_content("#info"):
         assert answers < 200, "TAMER never reached 19 steps from S"
         number = page.get_attribute("#day", "data-question")
-        cell, move = maze_on_the_page(page.text_content("#maze"))
+        cell, move = on_the_page(page.text_content("#maze"))
         if answers == 20 and os.environ.get("INFORM_WRITE_SCREENSHOT") == "1":  # the README's: the script mid-day
             page.screenshot(path=SCREENSHOT, full_page=True)
         page.keyboard.press("y" if q[cell, move] >= q[cell].max() - 1e-9 else "n")
