@@ -530,11 +530,7 @@ class HumanTeacher:
             if answer == "q":
                 return None
             if answer in ("y", ""):
-                h = float(answer == "y")
-                self.answers += 1
-                self.agreement += int(h == h_oracle)
-                self.refused[cell, action] += 1.0 - h
-                return h
+                return self.counted(cell, action, float(answer == "y"), h_oracle)
             say(f"{answer!r}? type y for +1, press Enter for no feedback, or type q to stop teaching")
 
     def ask_page(self, cell, action, step, maze, move, way, positives, successes, h_oracle) -> float | None:
@@ -547,6 +543,10 @@ class HumanTeacher:
             return None
         if h is None:
             return 0.0  # no answer: the move goes by without feedback and is not counted as an answer
+        return self.counted(cell, action, h, h_oracle)
+
+    def counted(self, cell: int, action: int, h: float, h_oracle: float) -> float:
+        """An answer h (1.0 or 0.0), counted: as the oracle's or not, and a refused move not proposed again first."""
         self.answers += 1
         self.agreement += int(h == h_oracle)
         self.refused[cell, action] += 1.0 - h
