@@ -9,7 +9,8 @@ their id alone: exact Q* by value iteration on `env.unwrapped.P`, one-hot observ
 ends on the task's goal (the terminal that earns its top reward); the maze's own tests are skipped there.
 
 Imported by inform_utils/, the only names other code may use (a test holds it to them): Args, Sleep, cli, main,
-check_args, StopSignals, Teacher, ReplayBuffer, tamer_loss, iq_loss, greedy_actions, load_q_network, InputError.
+check_args, Evaluator, StopSignals, Teacher, ReplayBuffer, tamer_loss, iq_loss, greedy_actions, load_q_network,
+InputError. inform_utils/evaluate_maze.py re-evaluates a saved network.
 
     python inform_dqn_gridworld.py --seed 1
     python inform_dqn_gridworld.py --teacher-noise 0.2 --teacher-delay 1 --credit-window 2   # a human-like teacher
@@ -97,6 +98,8 @@ class Args:
     capture_video: bool = False
     """draw TAMER's and INFORM's final greedy episodes (plain maze, wall maze, a few start cells) as GIFs into
     runs/{run}/videos/"""
+    cuda: bool = False
+    """if toggled, the networks train on the GPU when one is available"""
     track: bool = False
     """mirror the TensorBoard events to Weights & Biases (CleanRL's --track; `pip install wandb`; WANDB_PROJECT,
     default inform, and WANDB_ENTITY choose where; WANDB_MODE=offline keeps the run on this machine)"""
@@ -171,8 +174,6 @@ class Args:
     eval_episodes: Annotated[int, Range("[1, inf)")] = 20
     """greedy episodes of each evaluation on a toy-text env, on fixed reset seeds (the maze's tests are one episode
     from each of their start cells)"""
-    evaluate: str | None = None
-    """re-evaluate a saved tamer_h.pt or inform_q.pt, print its episode lengths as JSON, train nothing"""
 
     def sleep_learner(self, obs_dim: int, n_actions: int, h_net: nn.Module, device) -> "Sleep":
         """The night's learner (the study module's Args returns its variants here)."""
@@ -747,9 +748,10 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
         say(f"run directory: {run_dir}")
         StopSignals.check()  # a stop while starting ends here, with a summary in the run directory
         seed_everything(args.seed)
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # CUDA matmuls refuse determinism without it
         torch.use_deterministic_algorithms(True)
         torch.set_num_threads(1)  # one thread is fastest for networks this small
-        device = torch.device("cpu")
+        device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
         writer = make_writer(run_dir, args)
         env = make_env(args.env_id)
         env.action_space.seed(args.seed)
@@ -849,12 +851,6 @@ def cli(args_type: type = Args) -> int:
         if gridworld_env is None:
             raise InputError("gridworld_env.py (the maze) is not importable: copy it next to this script")
         check_args(args)
-        if args.evaluate:
-            evaluator = Evaluator(args.env_id, args.success_max_steps, args.eval_episodes, args.seed)
-            n_states = evaluator.envs["plain"].observation_space.shape[0]
-            net = load_q_network(args.evaluate, n_states)
-            say(json.dumps(evaluator("policy", greedy_actions(net, torch.device("cpu"), n_states), 0), indent=2))
-            return 0
         oracle_q = day = None
         if args.sleep_from:  # a saved day: no oracle, no forward phase; its day flags replace these
             day = load_day(args.sleep_from, args)
@@ -1011,7 +1007,7 @@ def load_oracle(path: str, env_id: str) -> np.ndarray:
     return q_table.double().numpy()
 
 
-def load_q_network(path: str, n_states: int = 30, flag: str = "--evaluate") -> QNetwork:
+def load_q_network(path: str, n_states: int = 30, flag: str = "the network") -> QNetwork:
     """Rebuild a saved H or Q network (tamer_h.pt, inform_q.pt) for `n_states`-d one-hot observations."""
     ckpt = read_checkpoint(path, flag)
     try:
@@ -1030,7 +1026,7 @@ def save_network(path: str, net: QNetwork, **extra) -> None:
 
 # Saved days (--save-buffer, --sleep-from): one forward phase, many nights
 DAY_FORMAT = "inform-day-1"
-NOT_OF_THE_DAY = ("exp_name", "capture_video", "track", "save_buffer", "evaluate")  # and the sleep's flags
+NOT_OF_THE_DAY = ("exp_name", "capture_video", "cuda", "track", "save_buffer")  # and the sleep's flags
 DAY_ARGS = tuple(f.name for f in fields(Args) if not f.name.startswith("sleep_") and f.name not in NOT_OF_THE_DAY)
 DAY_TENSORS = ("obs", "actions", "next_obs", "feedback", "terminated", "success")  # the buffer, one row a transition
 EPISODE_TABLE = ("episode_start", "episode_end", "episode_length", "episode_success", "episode_ended")
@@ -1054,6 +1050,7 @@ def save_day(path: str, args: Args, buffer: ReplayBuffer, h_net: QNetwork, q_sta
         "episode_success": buffer.success[:n].cpu()[start], "episode_ended": ended.bool(),
         "h_net": {"state_dict": h_net.state_dict(), "kwargs": h_net.kwargs}, "q_star": torch.tensor(q_star),
         "rng": {"torch": torch.get_rng_state(), "python": [version, list(internal), gauss],
+                "torch_cuda": torch.cuda.get_rng_state() if buffer.obs.is_cuda else None,
                 "numpy": [np_state[0], torch.from_numpy(np_state[1].astype(np.int64)), *np_state[2:]]},
         "day_stats": day_stats,
     }, path)  # fmt: skip
@@ -1062,6 +1059,8 @@ def save_day(path: str, args: Args, buffer: ReplayBuffer, h_net: QNetwork, q_sta
 def set_rng_state(rng: dict) -> None:
     """The random streams as a saved day left them."""
     torch.set_rng_state(rng["torch"])
+    if rng.get("torch_cuda") is not None and torch.cuda.is_available():
+        torch.cuda.set_rng_state(rng["torch_cuda"])
     name, keys, pos, has_gauss, cached_gaussian = rng["numpy"]
     np.random.set_state((name, keys.numpy().astype(np.uint32), int(pos), int(has_gauss), float(cached_gaussian)))
     version, internal, gauss = rng["python"]

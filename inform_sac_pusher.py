@@ -7,13 +7,14 @@ the paper leaves open is in docs/protocol.md. Episodes start from the run's seed
 (--train-oracle). Read top to bottom: Args, make_env, the networks, Eq. 1-4 and the teacher, the buffer, the day, the
 night, main; below main the evaluation protocol, then the plumbing. Other continuous-action tasks run from their id
 (`--env-id Reacher-v5`), judged by a final distance in `info` or by --success-return; the obstacle test is Pusher's.
-The sleep study's variants of the night are in inform_utils/sleep_variants_pusher.py, which imports this script.
+The sleep study's variants of the night are in inform_utils/sleep_variants_pusher.py, which imports this script;
+inform_utils/evaluate_pusher.py re-evaluates a saved policy.
 
 Imported by inform_utils/, the only names other code may use (a test holds it to them): Args, main, cli, evaluate,
-read_checkpoint, actor_from_checkpoint, check_video, video_env, mujoco_major, InputError, Outcome, object_xy, In,
-QEnsemble, Actor, iq_loss, actor_loss, tamer_loss, update_actor, soft_update, soft_value, recover_reward,
-sleep_recipe, sleep_batch, check_finite, StopSignals, Progress, HIDDEN_SIZE, TAU, SLEEP_GAMMA, TAMER_POLICY_LR,
-SLEEP_EVAL_FREQUENCY, PERIODIC_EVAL_EPISODES, LOG_FREQUENCY.
+check_args, Evaluator, obstacle_test, obstacle_skipped, read_checkpoint, actor_from_checkpoint, check_video,
+video_env, mujoco_major, InputError, Outcome, object_xy, In, QEnsemble, Actor, iq_loss, actor_loss, tamer_loss,
+update_actor, soft_update, soft_value, recover_reward, sleep_recipe, sleep_batch, check_finite, StopSignals, Progress,
+HIDDEN_SIZE, TAU, SLEEP_GAMMA, TAMER_POLICY_LR, SLEEP_EVAL_FREQUENCY, PERIODIC_EVAL_EPISODES, LOG_FREQUENCY.
 
     python inform_sac_pusher.py --seed 1                            # Pusher-v5, the authors' budget
     python inform_sac_pusher.py --env-id Pusher-v4 --seed 1         # the paper's Pusher (needs mujoco==2.3.7)
@@ -24,6 +25,7 @@ SLEEP_EVAL_FREQUENCY, PERIODIC_EVAL_EPISODES, LOG_FREQUENCY.
 import atexit
 import collections
 import contextlib
+import copy
 import dataclasses
 import gc
 import importlib.util
@@ -112,6 +114,8 @@ class Args:
     """seed of the experiment (also the reset seed of every episode under the fixed-start protocol)"""
     num_threads: Annotated[int, COUNT] = 1
     """torch CPU threads (these small networks are fastest on one)"""
+    cuda: bool = False
+    """if toggled, the networks train on the GPU when one is available (evaluation and the env stay on the CPU)"""
     capture_video: bool = False
     """film the final deterministic episodes, plain and with the boxes, into runs/{run}/videos/ (headless MUJOCO_GL)"""
     track: bool = False
@@ -197,8 +201,6 @@ class Args:
     """bisector: on the bisector of the object's start and the goal, the middle box on the path; paper: the paper's"""
     authors_test_episodes: Annotated[int, In(0)] = 100
     """episodes of the authors' test: sampled actions from the run's initial state (eval/authors_test/...)"""
-    evaluate: str | None = None
-    """re-evaluate a saved tamer_actor.pt, inform_actor.pt or oracle (and the obstacle test); print JSON, no run"""
 
 
 def make_env(env_id: str, seed: int, obstacles=None, **render) -> gym.Env:
@@ -312,6 +314,11 @@ class Actor(nn.Module):
         z = (torch.atanh(y) - mean) / log_std.exp()
         log_prob = -0.5 * z.pow(2) - log_std - 0.5 * math.log(2 * math.pi)
         return (log_prob - torch.log(self.action_scale * (1 - y.pow(2)) + 1e-6)).sum(-1)
+
+
+def on_cpu(net: nn.Module) -> nn.Module:
+    """The network, or a CPU copy of one on the GPU (evaluation runs on the CPU, as the env does)."""
+    return net if next(net.parameters()).device.type == "cpu" else copy.deepcopy(net).cpu()
 
 
 def soft_update(target: nn.Module, source: nn.Module, tau: float) -> None:
@@ -585,9 +592,10 @@ def sleep_recipe(args) -> dict:
 def sleep_batch(buffer: ReplayBuffer, batch_size: int, expert_idx: torch.Tensor, replay_idx=None):
     """The sleep's batch: `batch_size` replay rows (drawn from replay_idx; None: the whole buffer), then as many
     expert rows."""
-    replay = torch.randint(0, buffer.size if replay_idx is None else replay_idx.numel(), (batch_size,))
+    device = expert_idx.device
+    replay = torch.randint(0, buffer.size if replay_idx is None else replay_idx.numel(), (batch_size,), device=device)
     replay = replay if replay_idx is None else replay_idx[replay]
-    expert = expert_idx[torch.randint(0, expert_idx.numel(), (batch_size,))]
+    expert = expert_idx[torch.randint(0, expert_idx.numel(), (batch_size,), device=device)]
     return buffer.batch(torch.cat([replay, expert]))
 
 
@@ -685,9 +693,10 @@ def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals", day: dict | 
         np.random.seed(args.seed)
         torch.manual_seed(args.seed)
         torch.backends.cudnn.deterministic = True
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # CUDA matmuls refuse determinism without it
         torch.use_deterministic_algorithms(True)
         torch.set_num_threads(args.num_threads)
-        device = torch.device("cpu")  # these small networks run faster on one CPU thread than on a GPU
+        device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
         if args.track:  # Weights & Biases mirrors the TensorBoard events (CleanRL's --track); before the writer
             import wandb
 
@@ -776,7 +785,8 @@ def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals", day: dict | 
 @torch.no_grad()
 def evaluate(actor: Actor, env: gym.Env, episodes: int, reset_seed, deterministic: bool, generator, outcome: Outcome):
     """Run `episodes` episodes; reset_seed(ep) gives each episode's reset seed. Returns means and per-episode data,
-    each episode's observations included."""
+    each episode's observations included. On the CPU, as the env and `generator` are: a GPU actor is copied there."""
+    actor = on_cpu(actor)
     returns, distances, successes, trajectories = [], [], [], []
     for ep in range(episodes):
         StopSignals.check()
@@ -888,7 +898,8 @@ def train_oracle(env_id: str, seed: int, n: int, outcome: Outcome, writer, devic
     log_ent_coef = torch.zeros(1, device=device, requires_grad=True)  # SAC's entropy coefficient, autotuned
     ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=sac["q_lr"], foreach=True)
     b_obs, b_next = torch.zeros(n, obs_dim, device=device), torch.zeros(n, obs_dim, device=device)
-    b_act, b_rew, b_term = torch.zeros(n, act_dim, device=device), torch.zeros(n, device=device), torch.zeros(n)
+    b_act, b_rew = torch.zeros(n, act_dim, device=device), torch.zeros(n, device=device)
+    b_term = torch.zeros(n, device=device)
     progress = Progress("oracle", n, warmup=sac["learning_starts"])
     obs, _ = env.reset(seed=seed)
     obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
@@ -938,10 +949,12 @@ def train_oracle(env_id: str, seed: int, n: int, outcome: Outcome, writer, devic
 
 class RecoveredReward:
     """The reward INFORM recovers (Eq. 3), imitation-style: reward(obs, action, next_obs, terminated) -> array.
-    V(s') is averaged over `samples` actions drawn with a fixed generator, so the reward is deterministic."""
+    V(s') is averaged over `samples` actions drawn with a fixed generator, so the reward is deterministic. On the CPU
+    (copies of networks trained on the GPU)."""
 
     def __init__(self, q_net: QEnsemble, actor: Actor, gamma: float, temperature: float, samples: int = 16):
-        self.q_net, self.actor, self.gamma, self.temperature, self.samples = q_net, actor, gamma, temperature, samples
+        self.q_net, self.actor, self.gamma, self.temperature = on_cpu(q_net), on_cpu(actor), gamma, temperature
+        self.samples = samples
 
     @classmethod
     def load(cls, run_dir: str, samples: int = 16) -> "RecoveredReward":  # from a run's inform_critic.pt and actor
@@ -1213,7 +1226,8 @@ def env_shapes(env_id: str) -> tuple[int, int]:
 
 
 def read_checkpoint(path: str, flag: str, env_id: str) -> dict:
-    """An oracle (--oracle-path) or a saved actor (--evaluate: tamer_actor.pt, inform_actor.pt or an oracle) that fits
+    """An oracle (--oracle-path) or a saved actor (tamer_actor.pt, inform_actor.pt or an oracle: inform_utils/
+    evaluate_pusher.py) that fits
     env_id, read with torch.load(weights_only=True): tensors and plain values only, never code. InputError otherwise."""
     oracle, where = flag == "--oracle-path", f"{flag} {path}"
     if not os.path.isfile(path):
@@ -1336,7 +1350,8 @@ def save_day(path, args: Args, buffer: ReplayBuffer, oracle_ckpt, h_net, tamer_a
     day.update(oracle={k: v for k, v in oracle_ckpt.items() if k != "path"}, oracle_path=oracle_ckpt.get("path"))
     day.update(tamer_h={"state_dict": state_dict_cpu(h_net), "n": h_net.n})
     day.update(tamer_actor={"state_dict": state_dict_cpu(tamer_actor)}, torch_rng=torch.get_rng_state())
-    save_atomic({**day, "cuda_rng": None, "evaluator_rng": generator.get_state()}, path)
+    cuda_rng = torch.cuda.get_rng_state() if buffer.obs.is_cuda else None
+    save_atomic({**day, "cuda_rng": cuda_rng, "evaluator_rng": generator.get_state()}, path)
 
 
 def load_day(run_dir: str) -> dict:
@@ -1400,6 +1415,8 @@ def restore_day(day: dict, buffer: ReplayBuffer, evaluator, device) -> tuple:
     tamer_actor = Actor(obs_dim, act_dim, HIDDEN_SIZE, day["oracle"]["action_low"], day["oracle"]["action_high"])
     tamer_actor.load_state_dict(day["tamer_actor"]["state_dict"])
     torch.set_rng_state(day["torch_rng"])
+    if day.get("cuda_rng") is not None and device.type == "cuda":
+        torch.cuda.set_rng_state(day["cuda_rng"])
     evaluator.generator.set_state(day["evaluator_rng"])
     print(f"[day] {n} transitions, {len(buffer.episodes)} episodes from the saved day", flush=True)
     return h_net.to(device), tamer_actor.to(device), dict(day["day_stats"])
@@ -1487,24 +1504,8 @@ def print_results(summary: dict, run_dir: str) -> None:
     say(f"{summary['status']} in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json")
 
 
-def evaluate_saved(args: Args) -> dict:
-    """--evaluate: a saved policy under the final evaluation's protocol (--eval-episodes, deterministic and sampled
-    actions, the run's start or random starts) and the obstacle test; writes nothing."""
-    torch.manual_seed(args.seed)
-    torch.set_num_threads(args.num_threads)
-    actor = actor_from_checkpoint(read_checkpoint(args.evaluate, "--evaluate", args.env_id))
-    evaluator = Evaluator(args, writer=None)
-    metrics = evaluator("policy", actor, 0, args.eval_episodes)
-    obstacle = {"obstacle/skipped": obstacle_skipped(args.env_id, args.obstacle_episodes)}
-    if obstacle["obstacle/skipped"] is None:
-        test = (args.env_id, args.seed, args.obstacle_layout, args.obstacle_episodes, Outcome.from_args(args))
-        obstacle, _, _ = obstacle_test(*test, {"policy": actor}, evaluator.generator)
-    evaluator.close()
-    return {**metrics, **obstacle}
-
-
 def cli(args: Args, sleep=None) -> int:
-    """The command line after tyro: a saved day, the checks, --evaluate or the run; returns the exit code. The study
+    """The command line after tyro: a saved day, the checks, then the run; returns the exit code. The study
     module (inform_utils/sleep_variants_pusher.py) runs it with its own Args and `sleep`."""
     day = None
     try:
@@ -1516,9 +1517,6 @@ def cli(args: Args, sleep=None) -> int:
         check_args(args)
         if args.capture_video:
             check_video(args.env_id)
-        if args.evaluate is not None:  # writes nothing: a stop meanwhile ends it with one line (see the top)
-            print(json.dumps(evaluate_saved(args), indent=2))
-            return 0
         oracle_ckpt = load_oracle(args) if day is None else None
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)

@@ -5,8 +5,8 @@ table.
 Each night runs `python -m inform_utils.sleep_variants_pusher --sleep-from DAY` (the core script's night plus the
 study's switches) with the variant's flags, a 15% hold-out (so every night
 logs the offline criterion on the same held-out episodes), any flags given after `--`, and a sleep seed; then its
-INFORM actor (and the one the offline criterion picked) is tested on 50 random starts with `--evaluate`. What a
-night leaves is copied to {results_dir}/{campaign}/{day}/{variant}__sleep{seed}/ (summary.json,
+INFORM actor (and the one the offline criterion picked) is tested on 50 random starts by `inform_utils.evaluate_pusher`.
+What a night leaves is copied to {results_dir}/{campaign}/{day}/{variant}__sleep{seed}/ (summary.json,
 obstacle_distances.npz, random_starts.json), and a night already there is not run again: the study resumes.
 --table prints the table from the results alone.
 
@@ -155,26 +155,21 @@ def completed(path: str) -> bool:
         return False
 
 
+def child_env() -> dict:  # a child finds the repository's modules from any working directory
+    return {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [REPO, os.environ.get("PYTHONPATH")]))}
+
+
 def random_starts(run_dir: str, seed: int, env_id: str, episodes: int) -> dict:
-    """--evaluate of each saved policy on random starts (deterministic actions; the obstacle part is cut short)."""
+    """inform_utils.evaluate_pusher of each saved policy on random starts (deterministic actions; a short obstacle
+    part)."""
     out = {}
     for name in ("tamer", "inform", "inform_selected"):
         path = os.path.join(run_dir, f"{name}_actor.pt")
         if not os.path.isfile(path):
             continue
-        cmd = [
-            sys.executable,
-            os.path.join(REPO, "inform_sac_pusher.py"),
-            "--env-id",
-            env_id,
-            "--seed",
-            str(seed),
-            "--evaluate",
-            path,
-            "--random-starts",
-        ]
-        cmd += ["--eval-episodes", str(episodes), "--obstacle-episodes", "1"]
-        proc = subprocess.run(cmd, capture_output=True, text=True, check=True)
+        cmd = [sys.executable, "-m", "inform_utils.evaluate_pusher", path, "--env-id", env_id, "--seed", str(seed)]
+        cmd += ["--random-starts", "--eval-episodes", str(episodes), "--obstacle-episodes", "1"]
+        proc = subprocess.run(cmd, capture_output=True, text=True, check=True, env=child_env())
         metrics = json.loads(proc.stdout[proc.stdout.index("{") :])
         for key in ("return", "final_distance", "success_rate"):
             out[f"random_starts/{name}_{key}"] = metrics[f"eval/policy_{key}"]
@@ -191,8 +186,7 @@ def run_night(args: Args, day: str, variant: str, seed: int, extra: list[str]) -
     cmd += ["--sleep-seed", str(seed), *study.common, *extra, *study.variants[variant]]
     t0 = time.time()
     print(f"[study] {day_name} {variant} sleep seed {seed}: {' '.join(cmd[1:])}", flush=True)
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [REPO, os.environ.get("PYTHONPATH")]))}
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=child_env())
     line = next((x for x in proc.stdout.splitlines() if x.startswith("run directory:")), None)
     if proc.returncode != 0 or line is None:
         print(f"[study] failed ({proc.returncode}): {proc.stderr.strip()[-500:]}", flush=True)

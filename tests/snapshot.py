@@ -1,11 +1,11 @@
 """No number moves: tiny runs of every script and its main flag families, and every night of the sleep study, reduced
 to their numbers, so that a refactor can show it changed none of them, bit for bit.
 
-Each case is a command of one script (or of the sleep study's night runners) with a tiny budget. What a case yields
-is every number of its summary.json (times and speeds left out) and, per saved network file, the sorted digests of
-its tensors (independent of the tensors' names); or the JSON an --evaluate prints; or an oracle checkpoint's
-evaluation and tensors. tests/snapshot_values.json holds the values that the code of commit BASE gave on a machine
-whose CPU signature it records:
+Each case is a command of one script (or of the sleep study's night runners) with a tiny budget. What a case yields is
+every number of its summary.json (times and speeds left out) and, per saved network file, the sorted digests of its
+tensors (independent of the tensors' names); or the JSON an evaluation prints (--evaluate at BASE,
+inform_utils.evaluate_* now); or an oracle checkpoint's evaluation and tensors. tests/snapshot_values.json holds the
+values that the code of commit BASE gave on a machine whose CPU signature it records:
 
     python tests/snapshot.py --write --code-dir DIR     # DIR: a checkout of BASE (git archive BASE | tar -x -C DIR)
 
@@ -69,7 +69,7 @@ MAZE_VARIANTS = {
 def case(name, script, *flags, new=None, needs=None, python="main", stdin=None, output="run"):
     """A command; `new` is the command's form since the refactor when it differs (script and flags), `needs` a case
     whose run directory {day} (or file {file}) it uses, `output` what it yields: "run" (a run directory), "json"
-    (an --evaluate's stdout), or the name of a checkpoint file it writes."""
+    (an evaluation's stdout), or the name of a checkpoint file it writes."""
     old = [script, *flags]
     return {"name": name, "old": old, "new": new or old, "needs": needs, "python": python, "stdin": stdin,
             "output": output}  # fmt: skip
@@ -155,6 +155,18 @@ CASES = [
         "1",
         needs="pusher_day",
         output="json",
+        new=[
+            "-m",
+            "inform_utils.evaluate_pusher",
+            "{day}/inform_actor.pt",
+            "--seed",
+            "1",
+            "--random-starts",
+            "--eval-episodes",
+            "3",
+            "--obstacle-episodes",
+            "1",
+        ],
     ),  # fmt: skip
     case("pusher_v4_day", PUSHER, "--env-id", "Pusher-v4", *PUSHER_DAY, *PUSHER_NIGHT, python="v4"),
     case(
@@ -211,7 +223,15 @@ CASES = [
         )  # fmt: skip
         for variant, flags in MAZE_VARIANTS.items()
     ],
-    case("maze_evaluate", MAZE, "--evaluate", "{day}/inform_q.pt", needs="maze_day", output="json"),
+    case(
+        "maze_evaluate",
+        MAZE,
+        "--evaluate",
+        "{day}/inform_q.pt",
+        needs="maze_day",
+        output="json",
+        new=["-m", "inform_utils.evaluate_maze", "{day}/inform_q.pt"],
+    ),
     case("maze_learned_teacher", MAZE, "--oracle-path", "{file}", *MAZE_TINY, needs="oracle_train_maze_q_learning"),
     case(
         "toy_frozenlake",

@@ -38,8 +38,12 @@ TINY = [
 TINY_ORACLE = ["--train-oracle", "--oracle-total-timesteps", "5300"]  # SAC learns after 5,000 random steps
 
 
-def run(cwd, *flags, timeout=120):
-    return subprocess.run([sys.executable, SCRIPT, *flags], cwd=cwd, capture_output=True, text=True, timeout=timeout)
+def run(cwd, *flags, timeout=120, module=None):
+    """The script, or with `module` one of inform_utils/ (python -m inform_utils.MODULE), in the directory cwd."""
+    cmd, env = [sys.executable, SCRIPT], None
+    if module is not None:
+        cmd, env = [sys.executable, "-m", f"inform_utils.{module}"], {**os.environ, "PYTHONPATH": REPO}
+    return subprocess.run([*cmd, *flags], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -229,15 +233,18 @@ def test_smoke_oracle_path_and_determinism(tmp_path):
     _, first = check_run(tmp_path / "a", run(tmp_path / "a", *flags))
     assert first["oracle_path"] == SHIPPED
     (tmp_path / "b").mkdir()
-    _, second = check_run(tmp_path / "b", run(tmp_path / "b", *flags))
+    no_gpu_cuda = [] if torch.cuda.is_available() else ["--cuda"]  # without a GPU, --cuda stays on the CPU: no change
+    _, second = check_run(tmp_path / "b", run(tmp_path / "b", *flags, *no_gpu_cuda))
+    assert second["args"]["cuda"] == bool(no_gpu_cuda)
     for key, value in first.items():
         if key.startswith(("eval/", "feedback/", "losses/", "sleep/")):
             assert second[key] == value, key
-    # --evaluate re-runs the final evaluation of a saved policy: deterministic actions give the run's numbers
+    # inform_utils.evaluate_pusher re-runs the final evaluation of a saved policy: deterministic actions give the
+    # run's numbers
     (run_dir,) = glob.glob(str(tmp_path / "a" / "runs" / "*"))
     for policy in ("tamer", "inform"):
-        proc = run(tmp_path / "a", "--evaluate", f"{run_dir}/{policy}_actor.pt", "--eval-episodes", "2",
-                   "--obstacle-episodes", "3")  # fmt: skip
+        proc = run(tmp_path / "a", f"{run_dir}/{policy}_actor.pt", "--eval-episodes", "2", "--obstacle-episodes", "3",
+                   module="evaluate_pusher")  # fmt: skip
         assert proc.returncode == 0, proc.stderr
         metrics = json.loads(proc.stdout)
         assert metrics["eval/policy_return"] == first[f"eval/{policy}_return"]
@@ -293,14 +300,14 @@ def test_save_load_same_actions(tmp_path):
     torch.manual_seed(0)
     actor = isp.Actor(23, 7, 32, action_low=-2 * np.ones(7), action_high=2 * np.ones(7))
     isp.save_actor(str(tmp_path / "actor.pt"), actor, env_id="Pusher-v5")
-    loaded = isp.actor_from_checkpoint(isp.read_checkpoint(str(tmp_path / "actor.pt"), "--evaluate", "Pusher-v5"))
+    loaded = isp.actor_from_checkpoint(isp.read_checkpoint(str(tmp_path / "actor.pt"), "policy", "Pusher-v5"))
     obs = torch.randn(16, 23)
     a1, logp1, mean1 = actor.get_action(obs, torch.Generator().manual_seed(3))
     a2, logp2, mean2 = loaded.get_action(obs, torch.Generator().manual_seed(3))
     assert torch.equal(a1, a2) and torch.equal(logp1, logp2) and torch.equal(mean1, mean2)
     assert not (tmp_path / "actor.pt.tmp").exists()  # written atomically
     with pytest.raises(isp.InputError, match="trained on Pusher-v5, not Pusher-v4"):
-        isp.read_checkpoint(str(tmp_path / "actor.pt"), "--evaluate", "Pusher-v4")
+        isp.read_checkpoint(str(tmp_path / "actor.pt"), "policy", "Pusher-v4")
 
 
 @pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")

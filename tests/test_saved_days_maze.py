@@ -103,9 +103,12 @@ def test_day_pt_holds_the_day(saved_day):
 def test_sleep_from_gives_the_same_night(saved_day, tmp_path):
     run_dir, summary = saved_day
     assert summary["sleep_from"] is None
-    new_dir, new = sleep_on(run_dir, tmp_path, "--seed", "9")  # the day's seed replaces this one
+    # the day's seed replaces this one; --cuda on a machine without a GPU stays on the CPU and changes nothing
+    no_gpu_cuda = [] if torch.cuda.is_available() else ["--cuda"]
+    new_dir, new = sleep_on(run_dir, tmp_path, "--seed", "9", *no_gpu_cuda)
     assert os.path.basename(new_dir).startswith("KnoxStoneMaze-v0__inform_dqn_gridworld__3__")
     assert new["sleep_from"] == os.path.abspath(run_dir) and new["args"]["seed"] == 3
+    assert new["args"]["cuda"] == bool(no_gpu_cuda)
     assert new["status"] == "completed" and not os.path.exists(os.path.join(new_dir, "day.pt"))
     assert night(new) == night(summary)  # bit for bit, every key
     assert len(night(new)) >= 25 and "losses/iq_loss" in new and "feedback/positive" in new

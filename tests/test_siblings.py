@@ -17,7 +17,7 @@ SCRIPTS = ("inform_sac_pusher.py", "inform_dqn_gridworld.py")
 BEGIN, END = "# --- shared plumbing: the same in inform_dqn_gridworld.py ---", "# --- end of shared plumbing ---"
 # the same concept, the same flag (each script has more of its own)
 SHARED_FLAGS = (
-    "exp_name", "seed", "capture_video", "track", "env_id", "eval_episodes", "evaluate", "oracle_path",
+    "exp_name", "seed", "capture_video", "track", "env_id", "eval_episodes", "cuda", "oracle_path",
     "tamer_total_timesteps", "tamer_learning_starts", "tamer_batch_size", "tamer_h_lr", "feedback_alpha_start",
     "feedback_alpha_end", "teacher_noise", "teacher_sparsity", "teacher_delay", "credit_window", "feedback_budget",
     "budget_ends_forward_phase", "sleep_gradient_steps", "sleep_batch_size", "sleep_q_lr", "sleep_temperature",

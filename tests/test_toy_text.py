@@ -19,8 +19,12 @@ SCRIPT = os.path.join(REPO, "inform_dqn_gridworld.py")
 TINY = ["--seed", "1", "--tamer-total-timesteps", "3000", "--sleep-gradient-steps", "500", "--eval-episodes", "5"]
 
 
-def run(cwd, *flags, timeout=300):
-    return subprocess.run([sys.executable, SCRIPT, *flags], cwd=cwd, capture_output=True, text=True, timeout=timeout)
+def run(cwd, *flags, timeout=300, module=None):
+    """The script, or with `module` one of inform_utils/ (python -m inform_utils.MODULE), in the directory cwd."""
+    cmd, env = [sys.executable, SCRIPT], None
+    if module is not None:
+        cmd, env = [sys.executable, "-m", f"inform_utils.{module}"], {**os.environ, "PYTHONPATH": REPO}
+    return subprocess.run([*cmd, *flags], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
 
 
 def summaries(cwd) -> dict[str, dict]:
@@ -72,7 +76,7 @@ def test_the_goal_is_the_terminal_with_the_top_reward():
 
 def test_cliff_walking_end_to_end_from_its_env_id(tmp_path):
     """CliffWalking-v1 from --env-id alone: the teacher is its exact Q*, the day and the night run as on the maze, the
-    summary says what was skipped, and --evaluate reads the saved INFORM network back on the same task."""
+    summary says what was skipped, and inform_utils.evaluate_maze reads the saved INFORM network back on the task."""
     proc = run(tmp_path, "--env-id", "CliffWalking-v1", *TINY)
     assert proc.returncode == 0, proc.stderr[-2000:]
     ((run_dir, summary),) = summaries(tmp_path).items()
@@ -86,8 +90,8 @@ def test_cliff_walking_end_to_end_from_its_env_id(tmp_path):
     assert not any(k.startswith(("eval/wall/", "eval/start_set/", "eval/all_starts/")) for k in summary)
     assert os.path.isfile(os.path.join(run_dir, "inform_q.pt"))
     assert not os.path.exists(os.path.join(run_dir, "recovered_reward.pt"))  # the maze's table only
-    evaluated = run(tmp_path, "--env-id", "CliffWalking-v1", "--seed", "1", "--eval-episodes", "5",
-                    "--evaluate", os.path.join(run_dir, "inform_q.pt"))  # fmt: skip
+    evaluated = run(tmp_path, os.path.join(run_dir, "inform_q.pt"), "--env-id", "CliffWalking-v1", "--seed", "1",
+                    "--eval-episodes", "5", module="evaluate_maze")  # fmt: skip
     assert evaluated.returncode == 0, evaluated.stderr[-2000:]
     assert json.loads(evaluated.stdout)["eval/policy_episode_length"] == summary["eval/inform_episode_length"]
 
