@@ -103,6 +103,27 @@ def credit_weights(
     return weights
 
 
+def host_and_port(address: str) -> tuple[str, int]:
+    """--host as (host, port): HOST, HOST:PORT, [IPv6]:PORT or a bare IPv6 address; port 0 takes a free one."""
+    if address.startswith("["):
+        host, _, port = address[1:].partition("]")
+        port = port.removeprefix(":")
+    else:
+        host, port = address.split(":") if address.count(":") == 1 else (address, "")
+    if not host or not (port == "" or port.isdigit() and int(port) < 65536):
+        raise ValueError(f"--host must be HOST or HOST:PORT (a port below 65536), e.g. 0.0.0.0:8000; got {address!r}")
+    return host, int(port or 0)
+
+
+def check_address(host: str, port: int) -> None:
+    """The page's address is free and ours to take, said before the run starts (nothing is written)."""
+    try:
+        with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
+            s.bind((host, port))
+    except OSError as e:
+        raise ValueError(f"--host {host}:{port}: cannot listen there ({e.strerror or e}); pick another") from None
+
+
 def png_bytes(image: np.ndarray) -> bytes:
     """An RGB (H, W, 3), RGBA or grey (H, W) uint8 array as PNG, with zlib alone."""
     image = np.ascontiguousarray(image, dtype=np.uint8)
@@ -825,7 +846,8 @@ function setOffline(on) { if (offline !== on) { offline = on; render(); } }
 
 function describe(info) {
   const value = (v) => Array.isArray(v) ? v.map((x) => typeof x === "number" ? x.toFixed(2) : x).join(", ") : v;
-  return Object.entries(info || {}).map(([k, v]) => `${k}: ${value(v)}`).join(" · ");
+  const shown = Object.entries(info || {}).filter(([k]) => !k.startsWith("_"));  // "_" keys: for a script's eyes
+  return shown.map(([k, v]) => `${k}: ${value(v)}`).join(" · ");
 }
 
 function render() {

@@ -29,7 +29,6 @@ import math
 import os
 import random
 import signal
-import socket
 import sys
 import tempfile
 import time
@@ -1193,38 +1192,22 @@ def check_args(args: Args) -> None:
     if args.teacher == "browser" and not args.sleep_from:
         if importlib.util.find_spec("browser_teacher") is None:
             raise InputError("--teacher browser needs browser_teacher.py (the web page) beside this script")
-        check_address(*host_and_port(args.host))
+        import browser_teacher
+
+        try:  # the page's address is free and ours to take, said before the run starts (nothing is written)
+            browser_teacher.check_address(*browser_teacher.host_and_port(args.host))
+        except ValueError as e:
+            raise InputError(str(e)) from None
     if args.teacher == "human" and not args.sleep_from and (sys.stdin is None or sys.stdin.closed):
         raise InputError("--teacher human reads your answers from standard input, which is closed; "
                          "run it in a terminal, or pipe the answers in")  # fmt: skip
-
-
-def host_and_port(address: str) -> tuple[str, int]:
-    """--host as (host, port): HOST, HOST:PORT, [IPv6]:PORT or a bare IPv6 address; port 0 takes a free one."""
-    if address.startswith("["):
-        host, _, port = address[1:].partition("]")
-        port = port.removeprefix(":")
-    else:
-        host, port = address.split(":") if address.count(":") == 1 else (address, "")
-    if not host or not (port == "" or port.isdigit() and int(port) < 65536):
-        raise InputError(f"--host must be HOST or HOST:PORT (a port below 65536), e.g. 0.0.0.0:8000; got {address!r}")
-    return host, int(port or 0)
-
-
-def check_address(host: str, port: int) -> None:
-    """The page's address is free and ours to take, said before the run starts (nothing is written)."""
-    try:
-        with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
-            s.bind((host, port))
-    except OSError as e:
-        raise InputError(f"--host {host}:{port}: cannot listen there ({e.strerror or e}); pick another") from None
 
 
 def open_page(args: Args, run_dir: str):
     """--teacher browser: the web page the person teaches at (browser_teacher.py, imported only here)."""
     import browser_teacher
 
-    host, port = host_and_port(args.host)
+    host, port = browser_teacher.host_and_port(args.host)
     return browser_teacher.BrowserTeacher(run_dir, "maze", host, port, participant=args.participant)
 
 

@@ -8,13 +8,15 @@ the paper leaves open is in docs/protocol.md. Episodes start from the run's seed
 night, main; below main the evaluation protocol, then the plumbing. Other continuous-action tasks run from their id
 (`--env-id Reacher-v5`), judged by a final distance in `info` or by --success-return; the obstacle test is Pusher's.
 The sleep study's variants of the night are in inform_utils/sleep_variants_pusher.py, which imports this script;
-inform_utils/evaluate_pusher.py re-evaluates a saved policy.
+inform_utils/evaluate_pusher.py re-evaluates a saved policy; inform_utils/browser_pusher.py lets a person teach
+through a web page.
 
 Imported by inform_utils/, the only names other code may use (a test holds it to them): Args, main, cli, evaluate,
-check_args, Evaluator, obstacle_test, obstacle_skipped, read_checkpoint, actor_from_checkpoint, check_video,
-video_env, mujoco_major, InputError, Outcome, object_xy, In, QEnsemble, Actor, iq_loss, actor_loss, tamer_loss,
-update_actor, soft_update, soft_value, recover_reward, sleep_recipe, sleep_batch, check_finite, StopSignals, Progress,
-HIDDEN_SIZE, TAU, SLEEP_GAMMA, TAMER_POLICY_LR, SLEEP_EVAL_FREQUENCY, PERIODIC_EVAL_EPISODES, LOG_FREQUENCY.
+make_env, Teacher, oracle_q, oracle_feedback, linear_schedule, oracle_from_checkpoint, check_args, Evaluator,
+obstacle_test, obstacle_skipped, read_checkpoint, actor_from_checkpoint, check_video, video_env, mujoco_major,
+InputError, Outcome, object_xy, In, QEnsemble, Actor, iq_loss, actor_loss, tamer_loss, update_actor, soft_update,
+soft_value, recover_reward, sleep_recipe, sleep_batch, check_finite, StopSignals, Progress, HIDDEN_SIZE, TAU,
+SLEEP_GAMMA, TAMER_POLICY_LR, SLEEP_EVAL_FREQUENCY, PERIODIC_EVAL_EPISODES, LOG_FREQUENCY.
 
     python inform_sac_pusher.py --seed 1                            # Pusher-v5, the authors' budget
     python inform_sac_pusher.py --env-id Pusher-v4 --seed 1         # the paper's Pusher (needs mujoco==2.3.7)
@@ -370,7 +372,7 @@ class Teacher:
     def gone(self) -> bool:  # the budget is spent: no more feedback from now on
         return self.budget is not None and self.positives >= self.budget
 
-    def __call__(self, step: int, h_star: float) -> dict[int, float]:
+    def __call__(self, step: int, h_star: float, action=None) -> dict[int, float]:  # the action: for a person's eyes
         self.perfect_positives += int(h_star > 0)
         flip, click = self.rng.random(2)  # always two draws: the stream does not depend on the answers
         h = 1.0 - h_star if flip < self.noise else h_star
@@ -491,8 +493,9 @@ class ReplayBuffer:
 # ALGO LOGIC: the phases of Algorithm 1, then main
 
 
-def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer, evaluator, writer, device):
-    """The day: SAC-style TAMER (Eq. 1, gamma = 0) on the teacher's yes/no feedback (Eq. 4), all remembered."""
+def forward_phase(args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer, evaluator, writer, device, teacher=None):
+    """The day: SAC-style TAMER (Eq. 1, gamma = 0) on the teacher's yes/no feedback (Eq. 4), all remembered. The
+    teacher: the simulated person of the flags, or one with its interface (a person at a web page)."""
     obs_dim, act_dim, n = buffer.obs.shape[1], buffer.actions.shape[1], args.tamer_total_timesteps
     h_net = QEnsemble(obs_dim, act_dim, HIDDEN_SIZE, n=2).to(device)
     tamer_actor = Actor(obs_dim, act_dim, HIDDEN_SIZE, env.action_space.low, env.action_space.high).to(device)
@@ -500,8 +503,9 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer
     actor_optimizer = torch.optim.Adam(tamer_actor.parameters(), lr=TAMER_POLICY_LR, foreach=True)
     log_ent_coef = torch.zeros(1, device=device, requires_grad=True)  # the actor's entropy coefficient, autotuned
     ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.tamer_h_lr, foreach=True)
-    teacher = Teacher(args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window,
-                      args.feedback_budget, seed=args.seed + 7919)  # fmt: skip
+    if teacher is None:
+        teacher = Teacher(args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window,
+                          args.feedback_budget, seed=args.seed + 7919)  # fmt: skip
     outcome = Outcome.from_args(args)
     print(f"[tamer] {n} env steps, feedback alpha {args.feedback_alpha_start} -> {args.feedback_alpha_end}", flush=True)
     progress = Progress("tamer", n, warmup=args.tamer_learning_starts, evaluator=evaluator)
@@ -524,7 +528,7 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer
         with torch.no_grad():
             q_star_sa, q_star_best = oracle_q(oracle_actor, oracle_qf, obs_t, action_t)
         h_star = oracle_feedback(q_star_sa, q_star_best, feedback_alpha).item() if taught else 0.0
-        labels = teacher(step, h_star)  # {transition: h} that this step's arriving signal labels
+        labels = teacher(step, h_star, action_t)  # {transition: h} that this step's arriving signal labels
         buffer.feedback[list(labels)] = torch.tensor(list(labels.values()), device=device)
 
         next_obs, reward, terminated, truncated, info = env.step(action_t.cpu().numpy())
@@ -673,8 +677,9 @@ def check_finite(tags: dict, last: dict, what: str, when: str, flag: str) -> dic
     return {f"losses/{tag}": value for tag, value in zip(tags, values, strict=True)}
 
 
-def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals", day: dict | None = None, sleep=None) -> dict:
-    """oracle -> day (the forward phase) -> night (`sleep`, by default sleep_phase) -> Eq. 3 and the tests."""
+def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, sleep=None, make_teacher=None) -> dict:
+    """oracle -> day (the forward phase) -> night (`sleep`, by default sleep_phase) -> Eq. 3 and the tests.
+    `make_teacher(args, env, run_dir)`: the day's teacher in place of the simulated one (a person at a web page)."""
     recipe = sleep_recipe(args)  # the preset's values that ran go into the summary's args
     args = dataclasses.replace(args, **{k: v for k, v in recipe.items() if hasattr(args, k)})
     run_start, run_dir, writer, env, evaluator = time.time(), None, None, None, None
@@ -729,8 +734,9 @@ def main(args: Args, oracle_ckpt: dict | None, stop: "StopSignals", day: dict | 
         phase, t0 = "tamer", time.time() - evaluator.seconds  # the phase's clock stops during its evaluations
         buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, act_dim, device)
         if day is None:
+            teacher = make_teacher(args, env, run_dir) if make_teacher is not None else None
             h_net, tamer_actor, stats = forward_phase(args, env, oracle_actor, oracle_qf, buffer, evaluator, writer,
-                                                      device)  # fmt: skip
+                                                      device, teacher)  # fmt: skip
         else:  # --sleep-from: the saved day's memories and TAMER, and the random streams where the day left them
             h_net, tamer_actor, stats = restore_day(day, buffer, evaluator, device)
         summary["time/tamer_s"] = time.time() - evaluator.seconds - t0
@@ -1504,9 +1510,10 @@ def print_results(summary: dict, run_dir: str) -> None:
     say(f"{summary['status']} in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json")
 
 
-def cli(args: Args, sleep=None) -> int:
+def cli(args: Args, sleep=None, make_teacher=None) -> int:
     """The command line after tyro: a saved day, the checks, then the run; returns the exit code. The study
-    module (inform_utils/sleep_variants_pusher.py) runs it with its own Args and `sleep`."""
+    module (inform_utils/sleep_variants_pusher.py) runs it with its own Args and `sleep`, the web page
+    (inform_utils/browser_pusher.py) with its own Args and `make_teacher`."""
     day = None
     try:
         if args.sleep_from is not None:  # the day's flags replace this run's: its numbers are the day's
@@ -1522,7 +1529,7 @@ def cli(args: Args, sleep=None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
     stop = StopSignals()
-    summary = main(args, oracle_ckpt, stop, day, sleep)
+    summary = main(args, oracle_ckpt, stop, day, sleep, make_teacher)
     gc.freeze()  # the interpreter's last collections over torch's objects take seconds on a busy machine; skip them
     return stop.exit_code(summary["status"])
 

@@ -1,0 +1,203 @@
+"""A person teaches INFORM on the Pusher through a web page: inform_sac_pusher.py's run, with the person at the page
+(browser_teacher.py) in place of the simulated teacher. The page shows the arm, the object and the goal at `--pace` steps
+a second; the person answers Yes or No whenever the arm does well or badly (button, or keys y, n). An answer is about
+what the page showed 0.2-4 s before it (`--credit-delay`, Deep TAMER's window, which weighs each step by the chance
+that the delay fell while it was on the screen). A step's label is the credit-weighted mean of the answers about it
+(yes 1, no 0): Deep TAMER trains on each answer with its weight, and a squared loss on one label a step has the same
+minimum. Pusher's h is 0 or 1, so a step no answer is about keeps 0, as after a No. "End the day" (or closing the
+page, or `--tamer-total-timesteps` steps) starts the night; the page then shows TAMER's and INFORM's episodes from the
+run's start and the final numbers. Everything else is the core script's run: the same summary.json, the same flags (a
+person's day is shorter by default), --save-buffer for nights on the day.
+
+    python -m inform_utils.browser_pusher --participant P01            # prints the page's address
+    python -m inform_utils.browser_pusher --participant P01 --host 0.0.0.0:8000 --pace 5 --save-buffer
+
+Every answer is a line of runs/{run}/answers.jsonl (its time, step, action and the frame shown). The core script
+stays within its flag budget; this module holds the page's four flags (as inform_utils/sleep_variants_pusher.py
+holds the study's).
+"""
+
+import os
+import signal
+
+
+def stopped_while_starting(signum, frame):  # a stop before the run directory exists: one line, nothing to save
+    os.write(2, f"interrupted ({signal.Signals(signum).name}) while starting; no run was made\n".encode())
+    os._exit(128 + signum)
+
+
+if __name__ == "__main__":  # before the slow imports, so that no stop ends in a traceback
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        if signal.getsignal(sig) is not signal.SIG_IGN:
+            signal.signal(sig, stopped_while_starting)
+
+import importlib.util  # noqa: E402
+import json  # noqa: E402
+import sys  # noqa: E402
+from dataclasses import dataclass  # noqa: E402
+from typing import Annotated  # noqa: E402
+
+import gymnasium as gym  # noqa: E402
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+import tyro  # noqa: E402
+
+import inform_sac_pusher as isp  # noqa: E402
+
+# the page's camera: the arm, the object (white) and the goal (red) from above the table's corner (Pusher-v5; v4's
+# model takes no camera settings and shows its default view)
+PAGE_CAMERA = {"distance": 2.0, "elevation": -45.0, "azimuth": 135.0, "lookat": np.array([0.3, -0.3, -0.3]),
+               "trackbodyid": -1}  # fmt: skip
+FRAME_SIZE = 320  # pixels, square: the live view
+OUTCOME_SIZE = 240  # pixels: each of the two episodes side by side in the outcome's animation
+FRAMES_PER_SECOND = 5.0  # at most this many live frames a second reach the page ("a few")
+SIMULATED_ONLY = {"teacher_noise": 0.0, "teacher_sparsity": 1.0, "teacher_delay": 0, "credit_window": 1}
+
+
+@dataclass
+class Args(isp.Args):
+    participant: str | None = None
+    """the person's ID, written with each answer into runs/{run}/answers.jsonl"""
+    host: str = "127.0.0.1"
+    """where the page listens, HOST or HOST:PORT (0.0.0.0: other machines too; no port: any free one)"""
+    pace: Annotated[float, isp.In(0, 100, "(]")] = 10.0
+    """env steps a second: how fast the arm moves on the page (a Pusher episode is 100 steps)"""
+    credit_delay: tuple[float, float] = (0.2, 4.0)
+    """seconds: an answer is about what the page showed this long before it, uniformly (Deep TAMER's window)"""
+    # a person's day, shorter than the simulated teacher's: 6,000 steps are 10 minutes at 10 steps a second
+    tamer_total_timesteps: Annotated[int, isp.In(1)] = 6000
+    """environment steps of the day at most (the person may end it sooner)"""
+    tamer_learning_starts: Annotated[int, isp.In(1)] = 200
+    """random-action steps before H and the actor are trained"""
+    budget_ends_forward_phase: bool = True
+    """the day ends when the person ends it (or the budget of yes answers is spent)"""
+
+
+class PageTeacher:
+    """The person at the page, with the simulated Teacher's interface: called once a step with the oracle's perfect
+    answer h* (kept for the record only) and the action; shows the step and returns {step: label} of the answers
+    that arrived since. `gone`: the person ended the day, closed the page, or spent the budget."""
+
+    def __init__(self, args: Args, env, run_dir: str):
+        import browser_teacher
+
+        host, port = browser_teacher.host_and_port(args.host)
+        self.page = browser_teacher.BrowserTeacher(run_dir, "pusher", host, port, participant=args.participant,
+                                                   budget=args.feedback_budget, pace=args.pace,
+                                                   delay=args.credit_delay)  # fmt: skip
+        self.env, self.last_step, self.budget = env, args.tamer_total_timesteps - 1, args.feedback_budget
+        self.camera = camera_env(args.env_id, FRAME_SIZE)
+        self.camera.reset(seed=args.seed)
+        self.every = max(1, round(args.pace / FRAMES_PER_SECOND))  # steps between two live frames
+        self.frame = None
+        self.credited: dict[int, tuple[float, float]] = {}  # step: (sum of weight * answer, sum of weights)
+        self.positives = self.perfect_positives = 0
+
+    @property
+    def gone(self) -> bool:
+        spent = self.budget is not None and self.positives >= self.budget
+        return self.page.ended is not None or spent
+
+    def __call__(self, step: int, h_star: float, action=None) -> dict[int, float]:
+        self.perfect_positives += int(h_star > 0)
+        if step % self.every == 0 or self.frame is None:  # the camera's copy of the arm, where the day's arm is
+            data = self.env.unwrapped.data
+            self.camera.unwrapped.set_state(data.qpos.copy(), data.qvel.copy())
+            self.frame = self.camera.render()
+        obs = self.env.unwrapped._get_obs()
+        info = {"object to goal": f"{np.linalg.norm(obs[17:20] - obs[20:23]):.2f} m"}  # Pusher's observation
+        info.update(_obs=obs.tolist(), _action=None if action is None else action.tolist())  # for a script's eyes
+        self.page.show(step, self.frame, action=info["_action"], info=info)
+        answers, labels = [a for a in self.page.answers() if a.value is not None], {}
+        for answer in answers:  # each step on the screen in the answer's window: the weighted mean of its answers
+            for t, weight in self.page.credit(answer).items():
+                total, weights = self.credited.get(t, (0.0, 0.0))
+                self.credited[t] = (total + weight * answer.value, weights + weight)
+                labels[t] = self.credited[t][0] / self.credited[t][1]
+        self.positives += sum(a.value > 0 for a in answers)
+        if step == self.last_step:
+            self.page.end_day("the day's steps are done")
+        return {t: h for t, h in labels.items() if t <= step}
+
+
+def camera_env(env_id: str, size: int) -> gym.Env:
+    """The env, rendering from the page's camera: the day's state is copied in (set_state) to film it."""
+    camera = {"default_camera_config": PAGE_CAMERA} if env_id == "Pusher-v5" else {}
+    return gym.make(env_id, render_mode="rgb_array", width=size, height=size, **camera)
+
+
+def outcome(run_dir: str, args: Args, summary: dict) -> tuple[str, list]:
+    """The night's outcome for the page: the final numbers, and TAMER's and INFORM's deterministic episodes from the
+    run's start, side by side."""
+    if summary.get("status") != "completed":
+        return f"the run ended: {summary.get('status')} ({summary.get('error', '')})", []
+    yes, perfect, steps = (summary[f"feedback/{k}"] for k in ("positive", "perfect_positive", "steps"))
+    lines = [f"{yes} yes answers over the day's {steps} steps (the oracle, Eq. 4, would have said yes on {perfect})"]
+    lines.append("below, from the run's start: TAMER (left) and INFORM (right)")
+    for p in ("tamer", "inform"):
+        distance, success = summary[f"eval/{p}_final_distance"], summary[f"eval/{p}_success_rate"]
+        lines.append(f"{p.upper():>6}: object {distance:.3f} m from the goal at the end, success {success:.2f}")
+    films = []
+    for p in ("tamer", "inform"):
+        actor = isp.actor_from_checkpoint(torch.load(f"{run_dir}/{p}_actor.pt", weights_only=True))
+        env = gym.wrappers.RenderCollection(camera_env(args.env_id, OUTCOME_SIZE))
+        isp.evaluate(actor, env, 1, lambda ep: args.seed, True, torch.Generator(), isp.Outcome.from_args(args))
+        films.append(env.render()[::2])  # every second frame: 10 a second at 20 steps a second
+        env.close()
+    n = min(map(len, films))
+    return "\n".join(lines), [np.concatenate([films[0][i], films[1][i]], axis=1) for i in range(n)]
+
+
+def check_page_args(args: Args) -> None:
+    """What the core's check_args does not know: the page's flags, and the simulated teacher's that do not apply."""
+    if importlib.util.find_spec("browser_teacher") is None:
+        raise isp.InputError("the web page needs browser_teacher.py: run from the repository (python -m ...)")
+    import browser_teacher
+
+    low, high = args.credit_delay
+    if not 0 <= low < high:
+        raise isp.InputError(f"--credit-delay must be LOW HIGH seconds with 0 <= LOW < HIGH, got {low} {high}")
+    changed = [f"--{k.replace('_', '-')}" for k, v in SIMULATED_ONLY.items() if getattr(args, k) != v]
+    if changed:
+        raise isp.InputError(f"{', '.join(changed)}: the simulated teacher's; the page takes the person's answers as "
+                             "they are (--credit-delay sets their window)")  # fmt: skip
+    if not args.env_id.startswith("Pusher"):
+        raise isp.InputError(f"--env-id {args.env_id}: the page shows the Pusher only (Pusher-v5, Pusher-v4)")
+    if args.sleep_from is not None:
+        raise isp.InputError("--sleep-from: a night on a saved day needs no person; run inform_sac_pusher.py")
+    try:
+        browser_teacher.check_address(*browser_teacher.host_and_port(args.host))
+    except ValueError as e:
+        raise isp.InputError(str(e)) from None
+
+
+def main() -> int:
+    args = tyro.cli(Args)
+    try:
+        check_page_args(args)
+        isp.check_video(args.env_id)  # the page shows rendered frames: the same headless GL check
+    except isp.InputError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    teachers = []
+
+    def make_teacher(run_args, env, run_dir):
+        teachers.append((PageTeacher(run_args, env, run_dir), run_dir))
+        return teachers[-1][0]
+
+    code = isp.cli(args, make_teacher=make_teacher)
+    if teachers:  # the page shows what came of the night, then stops
+        teacher, run_dir = teachers[0]
+        try:
+            with open(f"{run_dir}/summary.json") as f:
+                text, frames = outcome(run_dir, args, json.load(f))
+            teacher.page.show_outcome(text, image=frames or None)
+        except (OSError, ValueError, KeyboardInterrupt) as e:  # no summary (a stop at once), or a second stop
+            teacher.page.show_outcome(f"the run ended without an outcome to show ({type(e).__name__})")
+        finally:
+            teacher.page.close()
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())
