@@ -1,13 +1,13 @@
 """A person teaches INFORM on the Pusher through a web page: inform_sac_pusher.py's run, with the person at the page
-(browser_teacher.py) in place of the simulated teacher. The page shows the arm, the object and the goal at `--pace` steps
-a second; the person answers Yes or No whenever the arm does well or badly (button, or keys y, n). An answer is about
-what the page showed 0.2-4 s before it (`--credit-delay`, Deep TAMER's window, which weighs each step by the chance
-that the delay fell while it was on the screen). A step's label is the credit-weighted mean of the answers about it
-(yes 1, no 0): Deep TAMER trains on each answer with its weight, and a squared loss on one label a step has the same
-minimum. Pusher's h is 0 or 1, so a step no answer is about keeps 0, as after a No. "End the day" (or closing the
-page, or `--tamer-total-timesteps` steps) starts the night; the page then shows TAMER's and INFORM's episodes from the
-run's start and the final numbers. Everything else is the core script's run: the same summary.json, the same flags (a
-person's day is shorter by default), --save-buffer for nights on the day.
+(browser_teacher.py) in place of the simulated teacher. The page shows the arm, the object and the goal at `--pace`
+steps a second; the person answers Yes or No whenever the arm does well or badly (button, or keys y, n). An answer is
+about what the page showed 0.2-4 s before it (`--credit-delay`, Deep TAMER's window, which weighs each step by the
+chance that the delay fell while it was on the screen). A step's label is the credit-weighted mean of the answers
+about it (yes 1, no 0): Deep TAMER trains on each answer with its weight, and a squared loss on one label a step has
+the same minimum. Pusher's h is 0 or 1, so a step no answer is about keeps 0, as after a No. "End the day" (or closing
+the page, or `--tamer-total-timesteps` steps) starts the night; the page then shows TAMER's and INFORM's episodes from
+the run's start and the final numbers. Everything else is the core script's run: the same summary.json, the same flags
+(a person's day is shorter by default), --save-buffer for nights on the day.
 
     python -m inform_utils.browser_pusher --participant P01            # prints the page's address
     python -m inform_utils.browser_pusher --participant P01 --host 0.0.0.0:8000 --pace 5 --save-buffer
