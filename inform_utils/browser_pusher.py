@@ -108,16 +108,24 @@ class PageTeacher:
         info = {"object to goal": f"{np.linalg.norm(obs[17:20] - obs[20:23]):.2f} m"}  # Pusher's observation
         info.update(_obs=obs.tolist(), _action=None if action is None else action.tolist())  # for a script's eyes
         self.page.show(step, self.frame, action=info["_action"], info=info)
-        answers, labels = [a for a in self.page.answers() if a.value is not None], {}
-        for answer in answers:  # each step on the screen in the answer's window: the weighted mean of its answers
-            for t, weight in self.page.credit(answer).items():
-                total, weights = self.credited.get(t, (0.0, 0.0))
-                self.credited[t] = (total + weight * answer.value, weights + weight)
-                labels[t] = self.credited[t][0] / self.credited[t][1]
-        self.positives += sum(a.value > 0 for a in answers)
-        if step == self.last_step:
+        if step == self.last_step:  # first: an answer the page took before the end is among those below
             self.page.end_day("the day's steps are done")
+        answers = [a for a in self.page.answers() if a.value is not None]
+        self.positives += sum(a.value > 0 for a in answers)
+        labels = weighted_labels(self.credited, [(a.value, self.page.credit(a)) for a in answers])
         return {t: h for t, h in labels.items() if t <= step}
+
+
+def weighted_labels(credited: dict, answers: list[tuple[float, dict]]) -> dict[int, float]:
+    """{step: label} of the steps that `answers` ((value, {step: credit weight}) each) are about: the weighted mean
+    of every answer about the step so far; `credited` keeps (sum of weight * value, sum of weights) per step."""
+    labels = {}
+    for value, weights in answers:
+        for t, weight in weights.items():
+            total, seen = credited.get(t, (0.0, 0.0))
+            credited[t] = (total + weight * value, seen + weight)
+            labels[t] = credited[t][0] / credited[t][1]
+    return labels
 
 
 def camera_env(env_id: str, size: int) -> gym.Env:

@@ -16,10 +16,13 @@ summary_{bc,sham,core}.json) and answers.jsonl under {out_dir}/seed{S}/; the run
 removed, or kept in --work-dir. Neither directory may exist: nothing is overwritten.
 """
 
+import contextlib
 import json
 import os
 import random
+import shlex
 import shutil
+import subprocess
 import sys
 import tempfile
 import time
@@ -49,8 +52,8 @@ class Args:
     """seconds between two looks at the screen (each gives one answer)"""
     reaction: tuple[float, float] = (0.3, 0.8)
     """seconds from a look to the key press, uniformly"""
-    flags: list[str] = field(default_factory=list)
-    """extra flags for the day's run and the nights (e.g. --flags=--obstacle-episodes=20)"""
+    flags: str = ""
+    """extra flags for the day's run and the nights, as one string (e.g. --flags "--obstacle-episodes 20")"""
     timeout: float = 3600.0
     """seconds a seed may take, day and nights"""
 
@@ -71,7 +74,12 @@ def judge(oracle, state: dict, alpha: tuple[float, float], steps: int) -> bool:
 def teach_day(page, oracle, seed: int, args: Args, say) -> dict:
     """Look and answer until the page says the day is over; the answers given."""
     rng, given = random.Random(seed), {"yes": 0, "no": 0}
-    page.wait_for_function("typeof state !== 'undefined' && state && state.mode === 'stream'", timeout=300_000)
+    state, deadline = None, time.monotonic() + 300
+    while state is None or state["mode"] not in ("stream", "ended", "outcome", "closed"):  # the day starts
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"the page did not start streaming within 300 s (its state: {state})")
+        time.sleep(0.2)
+        state = page.evaluate("typeof state === 'undefined' ? null : state")  # (the page's CSP forbids polling JS)
     while True:
         state = page.evaluate("state")
         if state["ended"] or state["mode"] != "stream":
@@ -89,6 +97,7 @@ def teach_day(page, oracle, seed: int, args: Args, say) -> dict:
 
 
 def load_oracle(run_flags: list[str]):
+    """The oracle the runs load (the shipped one of the --env-id in `run_flags`), to judge as it does."""
     import torch
 
     import inform_sac_pusher as isp
@@ -104,7 +113,7 @@ def run_seed(seed: int, args: Args, browser, oracle, work: str, out: str, say) -
     deadline, t0 = time.monotonic() + args.timeout, time.monotonic()
     cmd = [sys.executable, "-m", "inform_utils.browser_pusher", "--participant", "scripted", "--seed", str(seed),
            "--tamer-total-timesteps", str(args.steps), "--pace", str(args.pace), "--save-buffer",
-           "--exp-name", "browser_scripted", *args.flags]  # fmt: skip
+           "--exp-name", "browser_scripted", *shlex.split(args.flags)]  # fmt: skip
     child, context = Child(cmd, cwd, os.path.join(cwd, "day.log")), None
     try:
         url = child.wait_for_line("[teacher] open the teaching page", timeout=300).split(": ", 1)[1].strip()
@@ -115,7 +124,8 @@ def run_seed(seed: int, args: Args, browser, oracle, work: str, out: str, say) -
         page.wait_for_selector("#outcome:visible", timeout=max(deadline - time.monotonic(), 1) * 1000)
         code = child.finish(deadline - time.monotonic())
     except BaseException:
-        child.finish(0)
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            child.finish(0)  # kills it
         say("".join(child.tail[-20:]))
         raise
     finally:
@@ -133,7 +143,7 @@ def run_seed(seed: int, args: Args, browser, oracle, work: str, out: str, say) -
         before = runs_in(cwd)
         control = "none" if name == "core" else name
         cmd = [sys.executable, "-m", "inform_utils.sleep_variants_pusher", "--sleep-from", run, "--sleep-control",
-               control, "--exp-name", f"browser_scripted_{name}", *args.flags]  # fmt: skip
+               control, "--exp-name", f"browser_scripted_{name}", *shlex.split(args.flags)]  # fmt: skip
         night = Child(cmd, cwd, os.path.join(cwd, f"night_{name}.log"))
         if night.finish(deadline - time.monotonic()) != 0:
             raise RuntimeError(f"seed {seed}: the {name} night failed; {cwd}/night_{name}.log\n{''.join(night.tail)}")
@@ -183,7 +193,7 @@ def main(args: Args) -> list[dict]:
         sys.path.insert(0, REPO)
     from playwright.sync_api import sync_playwright
 
-    oracle = load_oracle(args.flags)
+    oracle = load_oracle(shlex.split(args.flags))
     os.makedirs(args.out_dir)
     work = args.work_dir or tempfile.mkdtemp(prefix="scripted_person_pusher_")
     os.makedirs(work, exist_ok=args.work_dir is None)
