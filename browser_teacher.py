@@ -305,6 +305,12 @@ class BrowserTeacher:
             self._mode = "stream"
             self._changed()
 
+    def person_here(self, timeout: float) -> bool:
+        """Whether the person's page has opened (or the day ended), waiting at most `timeout` s for it: a stream
+        starts when someone watches. Short waits in a loop let the caller's signal handling run between them."""
+        with self._cond:
+            return self._cond.wait_for(lambda: self._owner is not None or self.ended is not None, timeout)
+
     def answers(self) -> list[Answer]:
         """The streamed answers that came since the last call, oldest first."""
         with self._cond:

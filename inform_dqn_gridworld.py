@@ -10,7 +10,7 @@ ends on the task's goal (the terminal that earns its top reward); the maze's own
 
 Imported by inform_utils/, the only names other code may use (a test holds it to them): Args, Sleep, cli, main,
 check_args, Evaluator, StopSignals, Teacher, ReplayBuffer, tamer_loss, iq_loss, greedy_actions, load_q_network,
-InputError. inform_utils/evaluate_maze.py re-evaluates a saved network.
+InputError. inform_utils/evaluate_policy.py re-evaluates a saved network.
 
     python inform_dqn_gridworld.py --seed 1
     python inform_dqn_gridworld.py --teacher-noise 0.2 --teacher-delay 1 --credit-window 2   # a human-like teacher

@@ -8,7 +8,7 @@ the paper leaves open is in docs/protocol.md. Episodes start from the run's seed
 night, main; below main the evaluation protocol, then the plumbing. Other continuous-action tasks run from their id
 (`--env-id Reacher-v5`), judged by a final distance in `info` or by --success-return; the obstacle test is Pusher's.
 The sleep study's variants of the night are in inform_utils/sleep_variants_pusher.py, which imports this script;
-inform_utils/evaluate_pusher.py re-evaluates a saved policy; inform_utils/browser_pusher.py lets a person teach
+inform_utils/evaluate_policy.py re-evaluates a saved policy; inform_utils/browser_pusher.py lets a person teach
 through a web page.
 
 Imported by inform_utils/, the only names other code may use (a test holds it to them): Args, main, cli, evaluate,
@@ -1232,9 +1232,9 @@ def env_shapes(env_id: str) -> tuple[int, int]:
 
 
 def read_checkpoint(path: str, flag: str, env_id: str) -> dict:
-    """An oracle (--oracle-path) or a saved actor (tamer_actor.pt, inform_actor.pt or an oracle: inform_utils/
-    evaluate_pusher.py) that fits
-    env_id, read with torch.load(weights_only=True): tensors and plain values only, never code. InputError otherwise."""
+    """An oracle (--oracle-path) or a saved actor (tamer_actor.pt, inform_actor.pt or an oracle, for
+    inform_utils/evaluate_policy.py) that fits env_id, read with torch.load(weights_only=True): tensors and plain
+    values only, never code. InputError otherwise."""
     oracle, where = flag == "--oracle-path", f"{flag} {path}"
     if not os.path.isfile(path):
         raise InputError(f"{where}: no such file" + (" (train one with oracle_train.py)" if oracle else ""))

@@ -5,9 +5,10 @@ about what the page showed 0.2-4 s before it (`--credit-delay`, Deep TAMER's win
 chance that the delay fell while it was on the screen). A step's label is the credit-weighted mean of the answers
 about it (yes 1, no 0): Deep TAMER trains on each answer with its weight, and a squared loss on one label a step has
 the same minimum. Pusher's h is 0 or 1, so a step no answer is about keeps 0, as after a No. "End the day" (or closing
-the page, or `--tamer-total-timesteps` steps) starts the night; the page then shows TAMER's and INFORM's episodes from
-the run's start and the final numbers. Everything else is the core script's run: the same summary.json, the same flags
-(a person's day is shorter by default), --save-buffer for nights on the day.
+the page, or `--tamer-total-timesteps` steps) starts the night (the day starts when the page is opened); the page then
+shows TAMER's and INFORM's episodes from the run's start and the final numbers. Everything else is the core script's
+run: the same summary.json, the same flags (a person's day is shorter by default), --save-buffer for nights on the
+day.
 
     python -m inform_utils.browser_pusher --participant P01            # prints the page's address
     python -m inform_utils.browser_pusher --participant P01 --host 0.0.0.0:8000 --pace 5 --save-buffer
@@ -92,6 +93,8 @@ class PageTeacher:
         self.frame = None
         self.credited: dict[int, tuple[float, float]] = {}  # step: (sum of weight * answer, sum of weights)
         self.positives = self.perfect_positives = 0
+        while not self.page.person_here(0.2):  # the day starts when the person opens the page
+            isp.StopSignals.check()
 
     @property
     def gone(self) -> bool:

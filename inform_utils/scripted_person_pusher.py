@@ -1,13 +1,12 @@
 """The web page's reference numbers on the Pusher: a scripted person teaches `python -m inform_utils.browser_pusher`
-through the page in Debian's Chromium (headless, driven by Playwright). It answers at a person's rate: every
-`--period` seconds it looks at the step on the screen, judges it as the run's oracle would (Eq. 4 on the state and
+through the page in Debian's Chromium (headless, driven by Playwright). It answers at a person's rate: it looks at the
+step on the screen (at most `--period` seconds apart), judges it as the run's oracle would (Eq. 4 on the state and
 action the page was sent, at the day's alpha), and presses y or n after a reaction time drawn uniformly from
 `--reaction`. The page credits each answer to what it showed 0.2-4 s before (Deep TAMER's window). The day is the
 runner's: `--tamer-total-timesteps` steps at `--pace` steps a second (the defaults: 3,000 steps at 10 a second, five
 minutes), then the night. Then, per seed, three more nights on the saved day (inform_utils/sleep_variants_pusher.py
 --sleep-from): behaviour cloning (bc), the sham (TAMER's own update) and the core night again. Per seed and their
-mean: the answers (yes, no), and TAMER, INFORM and both controls: the final distance and success from the run's
-start.
+mean: the answers (yes, no), and TAMER, INFORM and both controls: the final distance and success from the run's start.
 
     python -m inform_utils.scripted_person_pusher --seeds 1 2 3 4 5 --out-dir results/browser_pusher
 
@@ -49,7 +48,8 @@ class Args:
     pace: float = 10.0
     """steps a second on the page (the runner's --pace)"""
     period: float = 1.0
-    """seconds between two looks at the screen (each gives one answer)"""
+    """the longest time from one look at the screen to the next (each look gives one answer): after its key press
+    the person waits period minus the longest reaction, so at the defaults it looks every 0.5-1.0 s"""
     reaction: tuple[float, float] = (0.3, 0.8)
     """seconds from a look to the key press, uniformly"""
     flags: str = ""

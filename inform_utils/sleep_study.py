@@ -3,12 +3,12 @@ inform_dqn_gridworld.py --save-buffer, then --sleep-from), each variant of the s
 table.
 
 Each night runs `python -m inform_utils.sleep_variants_pusher --sleep-from DAY` (the core script's night plus the
-study's switches) with the variant's flags, a 15% hold-out (so every night
-logs the offline criterion on the same held-out episodes), any flags given after `--`, and a sleep seed; then its
-INFORM actor (and the one the offline criterion picked) is tested on 50 random starts by `inform_utils.evaluate_pusher`.
-What a night leaves is copied to {results_dir}/{campaign}/{day}/{variant}__sleep{seed}/ (summary.json,
-obstacle_distances.npz, random_starts.json), and a night already there is not run again: the study resumes.
---table prints the table from the results alone.
+study's switches) with the variant's flags, a 15% hold-out (so every night logs the offline criterion on the same
+held-out episodes), any flags given after `--`, and a sleep seed; then its INFORM actor (and the one the offline
+criterion picked) is tested on 50 random starts by `inform_utils.evaluate_policy pusher`. What a night leaves is
+copied to {results_dir}/{campaign}/{day}/{variant}__sleep{seed}/ (summary.json, obstacle_distances.npz,
+random_starts.json), and a night already there is not run again: the study resumes. --table prints the table from the
+results alone.
 
     python inform_sac_pusher.py --env-id Pusher-v4 --seed 1 --save-buffer          # a day: runs/<day>/day.pt
     python -m inform_utils.sleep_study --days runs/<day> --campaign sleep_study    # the nights on it
@@ -160,15 +160,15 @@ def child_env() -> dict:  # a child finds the repository's modules from any work
 
 
 def random_starts(run_dir: str, seed: int, env_id: str, episodes: int) -> dict:
-    """inform_utils.evaluate_pusher of each saved policy on random starts (deterministic actions; a short obstacle
+    """inform_utils.evaluate_policy of each saved policy on random starts (deterministic actions; a short obstacle
     part)."""
     out = {}
     for name in ("tamer", "inform", "inform_selected"):
         path = os.path.join(run_dir, f"{name}_actor.pt")
         if not os.path.isfile(path):
             continue
-        cmd = [sys.executable, "-m", "inform_utils.evaluate_pusher", path, "--env-id", env_id, "--seed", str(seed)]
-        cmd += ["--random-starts", "--eval-episodes", str(episodes), "--obstacle-episodes", "1"]
+        cmd = [sys.executable, "-m", "inform_utils.evaluate_policy", "pusher", path, "--env-id", env_id]
+        cmd += ["--seed", str(seed), "--random-starts", "--eval-episodes", str(episodes), "--obstacle-episodes", "1"]
         proc = subprocess.run(cmd, capture_output=True, text=True, check=True, env=child_env())
         metrics = json.loads(proc.stdout[proc.stdout.index("{") :])
         for key in ("return", "final_distance", "success_rate"):

@@ -4,8 +4,8 @@ to their numbers, so that a refactor can show it changed none of them, bit for b
 Each case is a command of one script (or of the sleep study's night runners) with a tiny budget. What a case yields is
 every number of its summary.json (times and speeds left out) and, per saved network file, the sorted digests of its
 tensors (independent of the tensors' names); or the JSON an evaluation prints (--evaluate at BASE,
-inform_utils.evaluate_* now); or an oracle checkpoint's evaluation and tensors. tests/snapshot_values.json holds the
-values that the code of commit BASE gave on a machine whose CPU signature it records:
+inform_utils.evaluate_policy now); or an oracle checkpoint's evaluation and tensors. tests/snapshot_values.json holds
+the values that the code of commit BASE gave on a machine whose CPU signature it records:
 
     python tests/snapshot.py --write --code-dir DIR     # DIR: a checkout of BASE (git archive BASE | tar -x -C DIR)
 
@@ -157,7 +157,8 @@ CASES = [
         output="json",
         new=[
             "-m",
-            "inform_utils.evaluate_pusher",
+            "inform_utils.evaluate_policy",
+            "pusher",
             "{day}/inform_actor.pt",
             "--seed",
             "1",
@@ -230,7 +231,7 @@ CASES = [
         "{day}/inform_q.pt",
         needs="maze_day",
         output="json",
-        new=["-m", "inform_utils.evaluate_maze", "{day}/inform_q.pt"],
+        new=["-m", "inform_utils.evaluate_policy", "maze", "{day}/inform_q.pt"],
     ),
     case("maze_learned_teacher", MAZE, "--oracle-path", "{file}", *MAZE_TINY, needs="oracle_train_maze_q_learning"),
     case(

@@ -22,6 +22,7 @@ import oracle_train as ot
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PUSHER_ORACLE = os.path.join(REPO, "oracles", "Pusher-v5__sac_oracle.pt")
+EVALUATE = "inform_utils/evaluate_policy.py"  # python -m inform_utils.evaluate_policy
 PWNED = "PWNED"  # the file the pickle payload would create if it were ever unpickled
 
 
@@ -78,10 +79,10 @@ CASES = [
     case("gridworld-zero-budget", "inform_dqn_gridworld.py", "--feedback-budget 0", "--feedback-budget must be >= 1"),
     case("pusher-zero-budget", "inform_sac_pusher.py", "--feedback-budget 0", "--feedback-budget must be >= 1"),
     case("pusher-negative-seed", "inform_sac_pusher.py", "--seed -2", "--seed must be >= 0"),
-    case("pusher-evaluate-missing-file", "inform_utils/evaluate_pusher.py", "nope.pt", "policy nope.pt: no such file"),
-    case("pusher-evaluate-bad-seed", "inform_utils/evaluate_pusher.py", "nope.pt --seed -1", "--seed must be >= 0"),
-    case("maze-evaluate-missing-file", "inform_utils/evaluate_maze.py", "nope.pt", "the network nope.pt: no such file"),
-    case("maze-evaluate-code", "inform_utils/evaluate_maze.py", "evil.pt", "refused, it holds more than tensors"),
+    case("pusher-evaluate-missing-file", EVALUATE, "pusher nope.pt", "policy nope.pt: no such file"),
+    case("pusher-evaluate-bad-seed", EVALUATE, "pusher nope.pt --seed -1", "--seed must be >= 0"),
+    case("maze-evaluate-missing-file", EVALUATE, "maze nope.pt", "the network nope.pt: no such file"),
+    case("maze-evaluate-code", EVALUATE, "maze evil.pt", "refused, it holds more than tensors"),
     case("pusher-unknown-env-id", "inform_sac_pusher.py", "--env-id Pusher-v9",
          "--env-id Pusher-v9: Gymnasium cannot make it"),
     case("pusher-oracle-pickle-with-code", "inform_sac_pusher.py", "--oracle-path evil.pt",

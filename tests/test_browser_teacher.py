@@ -646,3 +646,81 @@ def test_the_maze_scripts_page_flags_are_refused_in_one_line_before_any_file(tmp
     assert proc.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: "), proc.stderr[-2000:]
     assert phrase in lines[0], lines[0]
     assert not os.listdir(tmp_path), os.listdir(tmp_path)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# the Pusher at the page: python -m inform_utils.browser_pusher
+
+PUSHER_TINY = ["--tamer-total-timesteps", "3000", "--tamer-learning-starts", "50", "--tamer-batch-size", "32",
+               "--sleep-batch-size", "32", "--sleep-gradient-steps", "100", "--eval-episodes", "1",
+               "--obstacle-episodes", "1", "--authors-test-episodes", "1"]  # fmt: skip
+
+
+def test_each_step_is_labelled_by_the_weighted_mean_of_the_answers_about_it():
+    from inform_utils.browser_pusher import weighted_labels
+
+    credited = {}
+    assert weighted_labels(credited, [(1.0, {4: 0.25, 5: 0.5})]) == {4: 1.0, 5: 1.0}
+    # a No about steps 5 and 6: step 5 is (0.5 * 1 + 0.25 * 0) / 0.75; step 4 is not touched again
+    labels = weighted_labels(credited, [(0.0, {5: 0.25, 6: 0.75})])
+    assert labels == {5: pytest.approx(2 / 3), 6: 0.0}
+    assert credited == {4: (0.25, 0.25), 5: (0.5, 0.75), 6: (0.0, 0.75)}
+
+
+def test_a_person_teaches_the_pusher_through_the_page_and_sees_the_night(new_page, tmp_path, monkeypatch):
+    """The Pusher's page: the day waits for the page, the arm streams, three Yes and one No by key, then "End the
+    day"; the night runs, the page shows its outcome (numbers and TAMER's and INFORM's episodes), and the run
+    completes: every answer in answers.jsonl, the yes answers counted, their credit window labelling the saved day."""
+    monkeypatch.setenv("PYTHONPATH", REPO)
+    monkeypatch.setenv("MUJOCO_GL", os.environ.get("MUJOCO_GL", "egl"))
+    flags = ["--participant", "T1", "--pace", "40", "--save-buffer", *PUSHER_TINY]
+    child = Child([sys.executable, "-m", "inform_utils.browser_pusher", *flags], cwd=tmp_path)
+    url = child.wait_for_line("[teacher] open the teaching page", timeout=180).split(": ", 1)[1].strip()
+    time.sleep(1.0)
+    (run_dir,) = (tmp_path / "runs").iterdir()
+    assert not any(line.startswith("[tamer]") for line in child.out), "the day began before the page was opened"
+    page = new_page(url)
+    wait_until(lambda: page.evaluate("typeof state !== 'undefined' && state && state.mode") == "stream", "streaming")
+    wait_until(lambda: page.evaluate("document.getElementById('frame').naturalWidth") == 320, "the arm's frame")
+    for key in ("y", "y", "y", "n"):
+        page.keyboard.press(key)
+        time.sleep(0.3)
+    wait_until(lambda: page.evaluate("state.answers") == 4, "four answers taken")
+    page.click("#end")
+    page.click("#end")
+    page.wait_for_selector("#outcome:visible", timeout=180_000)
+    text = page.text_content("#outcome-text")
+    assert "TAMER (left) and INFORM (right)" in text and "3 yes answers" in text, text
+    code, out, err = child.finish(timeout=180)
+    assert code == 0, err[-2000:]
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["status"] == "completed" and summary["args"]["participant"] == "T1"
+    assert summary["feedback/positive"] == 3 and 0 < summary["feedback/steps"] < 3000  # the person ended the day
+    with open(run_dir / "answers.jsonl") as f:
+        rows = [row for row in map(json.loads, f) if row["event"] == "answer"]
+    assert [row["answer"] for row in rows] == ["yes", "yes", "yes", "no"]
+    assert all(row["mode"] == "stream" and len(row["action"]) == 7 and row["frame"]["sha256"] for row in rows)
+    import torch
+
+    feedback = torch.load(run_dir / "day.pt", weights_only=True)["feedback"]
+    labelled = feedback.nonzero().squeeze(-1)
+    assert labelled.numel() > 0 and float(feedback.max()) <= 1.0  # the yes answers' windows, at most 1
+    assert int(labelled.max()) <= max(row["step_at_arrival"] for row in rows)  # an answer is about what came before
+
+
+@pytest.mark.parametrize(
+    ("flags", "phrase"),
+    [
+        (["--credit-delay", "4", "0.2"], "--credit-delay must be LOW HIGH seconds"),
+        (["--teacher-noise", "0.1"], "--teacher-noise: the simulated teacher's"),
+        (["--env-id", "Reacher-v5"], "the page shows the Pusher only"),
+        (["--host", "127.0.0.1:99999"], "--host must be HOST or HOST:PORT"),
+        (["--pace", "0"], "--pace must be in (0, 100]"),
+    ],
+)
+def test_the_pusher_pages_flags_are_refused_in_one_line_before_any_file(run_script, flags, phrase):
+    proc = run_script("inform_utils/browser_pusher.py", *flags, timeout=120)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: "), proc.stderr[-2000:]
+    assert phrase in lines[0], lines[0]
+    assert not os.listdir(run_script.cwd), os.listdir(run_script.cwd)

@@ -69,7 +69,10 @@ def program_flags(program: str) -> set[str] | None:
     if program in MODULES:
         if REPO not in sys.path:
             sys.path.insert(0, REPO)
-        return flags_of(importlib.import_module(MODULES[program]).Args)
+        module = importlib.import_module(MODULES[program])
+        if hasattr(module, "SUBCOMMANDS"):  # python -m inform_utils.evaluate_policy pusher|maze ...: any one's flags
+            return set().union(*map(flags_of, module.SUBCOMMANDS.values()))
+        return flags_of(module.Args)
     return None
 
 

@@ -288,7 +288,7 @@ class CodeCarrier:
 
 
 def bad_checkpoints(tmp):
-    """Files an --oracle-path or inform_utils.evaluate_maze may be given, each wrong in its own way."""
+    """Files an --oracle-path or inform_utils.evaluate_policy may be given, each wrong in its own way."""
     paths = {}
     good = tmp / "good.pt"
     torch.save({"q_table": torch.zeros(30, 4), "env_id": "KnoxStoneMaze-v0"}, good)
@@ -372,7 +372,7 @@ def test_evaluate_mode_reproduces_the_run(run_script):
     run_dir = only_run_dir(run_script.cwd)
     summary = json.load(open(os.path.join(run_dir, "summary.json")))
     for name, policy in (("tamer_h.pt", "tamer"), ("inform_q.pt", "inform")):
-        result = run_script("inform_utils/evaluate_maze.py", os.path.join(run_dir, name))
+        result = run_script("inform_utils/evaluate_policy.py", "maze", os.path.join(run_dir, name))
         assert result.returncode == 0, result.stderr
         metrics = json.loads(result.stdout)
         for key in ("episode_length", "wall/{}_episode_length", "start_set/{}_success_rate"):

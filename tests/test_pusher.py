@@ -239,12 +239,12 @@ def test_smoke_oracle_path_and_determinism(tmp_path):
     for key, value in first.items():
         if key.startswith(("eval/", "feedback/", "losses/", "sleep/")):
             assert second[key] == value, key
-    # inform_utils.evaluate_pusher re-runs the final evaluation of a saved policy: deterministic actions give the
+    # inform_utils.evaluate_policy re-runs the final evaluation of a saved policy: deterministic actions give the
     # run's numbers
     (run_dir,) = glob.glob(str(tmp_path / "a" / "runs" / "*"))
     for policy in ("tamer", "inform"):
-        proc = run(tmp_path / "a", f"{run_dir}/{policy}_actor.pt", "--eval-episodes", "2", "--obstacle-episodes", "3",
-                   module="evaluate_pusher")  # fmt: skip
+        proc = run(tmp_path / "a", "pusher", f"{run_dir}/{policy}_actor.pt", "--eval-episodes", "2",
+                   "--obstacle-episodes", "3", module="evaluate_policy")  # fmt: skip
         assert proc.returncode == 0, proc.stderr
         metrics = json.loads(proc.stdout)
         assert metrics["eval/policy_return"] == first[f"eval/{policy}_return"]

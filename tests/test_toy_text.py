@@ -76,7 +76,7 @@ def test_the_goal_is_the_terminal_with_the_top_reward():
 
 def test_cliff_walking_end_to_end_from_its_env_id(tmp_path):
     """CliffWalking-v1 from --env-id alone: the teacher is its exact Q*, the day and the night run as on the maze, the
-    summary says what was skipped, and inform_utils.evaluate_maze reads the saved INFORM network back on the task."""
+    summary says what was skipped, and inform_utils.evaluate_policy reads the saved INFORM network back on the task."""
     proc = run(tmp_path, "--env-id", "CliffWalking-v1", *TINY)
     assert proc.returncode == 0, proc.stderr[-2000:]
     ((run_dir, summary),) = summaries(tmp_path).items()
@@ -90,8 +90,8 @@ def test_cliff_walking_end_to_end_from_its_env_id(tmp_path):
     assert not any(k.startswith(("eval/wall/", "eval/start_set/", "eval/all_starts/")) for k in summary)
     assert os.path.isfile(os.path.join(run_dir, "inform_q.pt"))
     assert not os.path.exists(os.path.join(run_dir, "recovered_reward.pt"))  # the maze's table only
-    evaluated = run(tmp_path, os.path.join(run_dir, "inform_q.pt"), "--env-id", "CliffWalking-v1", "--seed", "1",
-                    "--eval-episodes", "5", module="evaluate_maze")  # fmt: skip
+    evaluated = run(tmp_path, "maze", os.path.join(run_dir, "inform_q.pt"), "--env-id", "CliffWalking-v1", "--seed",
+                    "1", "--eval-episodes", "5", module="evaluate_policy")  # fmt: skip
     assert evaluated.returncode == 0, evaluated.stderr[-2000:]
     assert json.loads(evaluated.stdout)["eval/policy_episode_length"] == summary["eval/inform_episode_length"]
 
