@@ -709,18 +709,28 @@ def test_a_person_teaches_the_pusher_through_the_page_and_sees_the_night(new_pag
 
 
 @pytest.mark.parametrize(
-    ("flags", "phrase"),
+    ("values", "phrase"),
     [
-        (["--credit-delay", "4", "0.2"], "--credit-delay must be LOW HIGH seconds"),
-        (["--teacher-noise", "0.1"], "--teacher-noise: the simulated teacher's"),
-        (["--env-id", "Reacher-v5"], "the page shows the Pusher only"),
-        (["--host", "127.0.0.1:99999"], "--host must be HOST or HOST:PORT"),
-        (["--pace", "0"], "--pace must be in (0, 100]"),
+        ({"credit_delay": (4.0, 0.2)}, "--credit-delay must be LOW HIGH seconds"),
+        ({"teacher_noise": 0.1}, "--teacher-noise: the simulated teacher's"),
+        ({"env_id": "Reacher-v5"}, "the page shows the Pusher only"),
+        ({"host": "127.0.0.1:99999"}, "--host must be HOST or HOST:PORT"),
+        ({"pace": 0.0}, r"--pace must be in \(0, 100\]"),
     ],
 )
-def test_the_pusher_pages_flags_are_refused_in_one_line_before_any_file(run_script, flags, phrase):
-    proc = run_script("inform_utils/browser_pusher.py", *flags, timeout=120)
+def test_the_pusher_pages_flags_are_checked(values, phrase):
+    import inform_sac_pusher as isp
+    from inform_utils.browser_pusher import Args, check_page_args
+
+    args = Args(**values)
+    with pytest.raises(isp.InputError, match=phrase):
+        check_page_args(args)
+        isp.check_args(args)
+
+
+def test_a_bad_flag_of_the_pusher_page_is_one_line_before_any_file(run_script):
+    proc = run_script("inform_utils/browser_pusher.py", "--credit-delay", "4", "0.2", timeout=120)
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: "), proc.stderr[-2000:]
-    assert phrase in lines[0], lines[0]
+    assert "--credit-delay must be LOW HIGH seconds" in lines[0], lines[0]
     assert not os.listdir(run_script.cwd), os.listdir(run_script.cwd)
