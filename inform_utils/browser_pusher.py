@@ -93,7 +93,9 @@ class PageTeacher:
         self.frame = None
         self.credited: dict[int, tuple[float, float]] = {}  # step: (sum of weight * answer, sum of weights)
         self.positives = self.perfect_positives = 0
-        while not self.page.person_here(0.2):  # the day starts when the person opens the page
+
+    def wait_for_person(self) -> None:  # the day starts when the person opens the page (a stop ends the wait)
+        while not self.page.person_here(0.2):
             isp.StopSignals.check()
 
     @property
@@ -193,7 +195,8 @@ def main() -> int:
     teachers = []
 
     def make_teacher(run_args, env, run_dir):
-        teachers.append((PageTeacher(run_args, env, run_dir), run_dir))
+        teachers.append((PageTeacher(run_args, env, run_dir), run_dir))  # first: the page is closed at the end
+        teachers[-1][0].wait_for_person()
         return teachers[-1][0]
 
     code = isp.cli(args, make_teacher=make_teacher)

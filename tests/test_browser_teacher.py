@@ -35,6 +35,7 @@ from browser_teacher import BrowserTeacher, credit_weights, png_bytes
 from inform_utils.scripted_person_browser import CHROMIUM, CHROMIUM_ARGS, browser_missing, on_the_page
 
 SCREENSHOT = os.path.join(REPO, "docs", "figures", "browser_teacher.png")
+PUSHER_SCREENSHOT = os.path.join(REPO, "docs", "figures", "browser_pusher.png")
 MAZE_SCRIPT = os.path.join(REPO, "inform_dqn_gridworld.py")
 WAIT_S = 20.0  # the bound on every wait for a condition (a loaded machine; a pass takes far less)
 
@@ -686,6 +687,8 @@ def test_a_person_teaches_the_pusher_through_the_page_and_sees_the_night(new_pag
         page.keyboard.press(key)
         time.sleep(0.3)
     wait_until(lambda: page.evaluate("state.answers") == 4, "four answers taken")
+    if os.environ.get("INFORM_WRITE_SCREENSHOT") == "1":  # docs/teachers.md's: the Pusher's day at the page
+        page.screenshot(path=PUSHER_SCREENSHOT, full_page=True)
     page.click("#end")
     page.click("#end")
     page.wait_for_selector("#outcome:visible", timeout=180_000)
@@ -734,3 +737,26 @@ def test_a_bad_flag_of_the_pusher_page_is_one_line_before_any_file(run_script):
     assert proc.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: "), proc.stderr[-2000:]
     assert "--credit-delay must be LOW HIGH seconds" in lines[0], lines[0]
     assert not os.listdir(run_script.cwd), os.listdir(run_script.cwd)
+
+
+@pytest.mark.parametrize("when", ["teaching", "before the page opens"])
+def test_ctrl_c_ends_the_pushers_day_with_a_summary(tmp_path, monkeypatch, when):
+    """Ctrl-C in the terminal while the person teaches, or while the run waits for the page: the run stops as every
+    run does (summary.json, status interrupted, exit 130), and the page's record ends."""
+    monkeypatch.setenv("PYTHONPATH", REPO)
+    monkeypatch.setenv("MUJOCO_GL", os.environ.get("MUJOCO_GL", "egl"))
+    child = Child([sys.executable, "-m", "inform_utils.browser_pusher", "--pace", "20", *PUSHER_TINY], cwd=tmp_path)
+    url = child.wait_for_line("[teacher] open the teaching page", timeout=180).split(": ", 1)[1].strip()
+    if when == "teaching":
+        with urllib.request.urlopen(url, timeout=WAIT_S) as reply:  # the person's page opens: the day starts
+            assert reply.status == 200
+        child.wait_for_line("[tamer] 3000 env steps", timeout=60)
+    child.proc.send_signal(signal.SIGINT)
+    code, out, err = child.finish(timeout=120)
+    assert code == 130 and "Traceback" not in err, err[-2000:]
+    (run_dir,) = (tmp_path / "runs").iterdir()
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["status"] == "interrupted" and summary["phase"] == "tamer"
+    with open(run_dir / "answers.jsonl") as f:
+        ends = [row for row in map(json.loads, f) if row["event"] == "end"]
+    assert len(ends) == 1, ends
