@@ -246,3 +246,9 @@ def test_the_check_sees_a_wrong_flag():
     assert check_command("inform_utils.sleep_variant_maze", []) == [
         "inform_utils.sleep_variant_maze is not in the repository"
     ]
+
+
+def test_the_front_page_stays_short():
+    """The README a newcomer reads in five minutes: at most 130 lines; the rest lives in docs/."""
+    with open(os.path.join(REPO, "README.md")) as f:
+        assert len(f.read().splitlines()) <= 130
