@@ -320,7 +320,8 @@ class Actor(nn.Module):
 
 def on_cpu(net: nn.Module) -> nn.Module:
     """The network, or a CPU copy of one on the GPU (evaluation runs on the CPU, as the env does)."""
-    return net if next(net.parameters()).device.type == "cpu" else copy.deepcopy(net).cpu()
+    on_gpu = any(p.device.type != "cpu" for p in net.parameters())
+    return copy.deepcopy(net).cpu() if on_gpu else net
 
 
 def soft_update(target: nn.Module, source: nn.Module, tau: float) -> None:
