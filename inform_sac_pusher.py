@@ -318,10 +318,10 @@ class Actor(nn.Module):
         return (log_prob - torch.log(self.action_scale * (1 - y.pow(2)) + 1e-6)).sum(-1)
 
 
-def on_cpu(net: nn.Module) -> nn.Module:
+def on_cpu(net):
     """The network, or a CPU copy of one on the GPU (evaluation runs on the CPU, as the env does)."""
-    on_gpu = any(p.device.type != "cpu" for p in net.parameters())
-    return copy.deepcopy(net).cpu() if on_gpu else net
+    params = net.parameters() if isinstance(net, nn.Module) else ()  # anything else: as it is
+    return copy.deepcopy(net).cpu() if any(p.device.type != "cpu" for p in params) else net
 
 
 def soft_update(target: nn.Module, source: nn.Module, tau: float) -> None:
