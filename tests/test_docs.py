@@ -99,6 +99,8 @@ def program_name(token: str, after_m: bool) -> str | None:
 def find_command(segment: str) -> tuple[str, list[str]] | None:
     """(program, its arguments) of one shell command, or None: `python [-m] PROGRAM ...` anywhere in it (as inside
     sbatch --wrap "..."), or a command that starts with a script of the repository (env assignments before it)."""
+    # a quoted --flag=value with spaces in it ("--flags=--a 1 --b 2") is one token: a value, not flags
+    segment = re.sub(r"[\"'](--[\w-]+=[^\"']*)[\"']", lambda m: m.group(1).replace(" ", "\x00"), segment)
     tokens = [t.strip("\"'") for t in segment.split()]
     tokens = [t for t in tokens if t]
     for i, token in enumerate(tokens):
