@@ -34,6 +34,7 @@ if __name__ == "__main__":  # before the slow imports, so that no stop ends in a
 
 import importlib.util  # noqa: E402
 import json  # noqa: E402
+import math  # noqa: E402
 import sys  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
 from typing import Annotated  # noqa: E402
@@ -168,7 +169,7 @@ def check_page_args(args: Args) -> None:
     import browser_teacher
 
     low, high = args.credit_delay
-    if not 0 <= low < high:
+    if not (0 <= low < high and math.isfinite(high)):
         raise isp.InputError(f"--credit-delay must be LOW HIGH seconds with 0 <= LOW < HIGH, got {low} {high}")
     changed = [f"--{k.replace('_', '-')}" for k, v in SIMULATED_ONLY.items() if getattr(args, k) != v]
     if changed:

@@ -715,6 +715,7 @@ def test_a_person_teaches_the_pusher_through_the_page_and_sees_the_night(new_pag
     ("values", "phrase"),
     [
         ({"credit_delay": (4.0, 0.2)}, "--credit-delay must be LOW HIGH seconds"),
+        ({"credit_delay": (0.2, float("inf"))}, "--credit-delay must be LOW HIGH seconds"),
         ({"teacher_noise": 0.1}, "--teacher-noise: the simulated teacher's"),
         ({"env_id": "Reacher-v5"}, "the page shows the Pusher only"),
         ({"host": "127.0.0.1:99999"}, "--host must be HOST or HOST:PORT"),
