@@ -494,7 +494,7 @@ class ReplayBuffer:
 # ALGO LOGIC: the phases of Algorithm 1, then main
 
 
-def forward_phase(args, env, oracle_actor, oracle_qf, buffer: ReplayBuffer, evaluator, writer, device, teacher=None):
+def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer, evaluator, writer, device, teacher=None):
     """The day: SAC-style TAMER (Eq. 1, gamma = 0) on the teacher's yes/no feedback (Eq. 4), all remembered. The
     teacher: the simulated person of the flags, or one with its interface (a person at a web page)."""
     obs_dim, act_dim, n = buffer.obs.shape[1], buffer.actions.shape[1], args.tamer_total_timesteps
