@@ -123,7 +123,7 @@ def evaluate_maze(args: Maze) -> dict:
 
 
 def main() -> int:
-    args = tyro.extras.subcommand_cli_from_dict(SUBCOMMANDS)
+    args = tyro.extras.subcommand_cli_from_dict(SUBCOMMANDS, description=__doc__.split("\n\n")[0])
     script = importlib.import_module("inform_sac_pusher" if isinstance(args, Pusher) else "inform_dqn_gridworld")
     try:
         print(json.dumps(evaluate_pusher(args) if isinstance(args, Pusher) else evaluate_maze(args), indent=2))
