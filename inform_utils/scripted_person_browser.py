@@ -331,7 +331,9 @@ def say(text: str, err: bool = False) -> None:
     print(text, file=sys.stderr if err else sys.stdout, flush=True)
 
 
-def main(args: Args) -> dict:
+def check_before_writing(args) -> None:
+    """What a scripted person's run needs before it writes anything: a browser, a new --out-dir and --work-dir (else
+    one error line), and the repository's modules importable."""
     why = browser_missing()
     if why:
         sys.exit(f"error: the scripted person needs a browser: {why}")
@@ -340,27 +342,43 @@ def main(args: Args) -> dict:
             sys.exit(f"error: {flag} {path} exists; give a new directory (nothing is overwritten)")
     if REPO not in sys.path:
         sys.path.insert(0, REPO)
+
+
+def each_seed(args, prefix: str, what: str, run_one) -> list:
+    """run_one(seed, browser, work) for each of args.seeds in one headless Chromium, the runs in --work-dir (or a
+    temporary directory named `prefix`..., removed at the end); --out-dir is made first."""
     from playwright.sync_api import sync_playwright
 
-    import gridworld_env
-
-    q = gridworld_env.optimal_q()
     os.makedirs(args.out_dir)
-    work = args.work_dir or tempfile.mkdtemp(prefix="scripted_person_browser_")
+    work = args.work_dir or tempfile.mkdtemp(prefix=prefix)
     os.makedirs(work, exist_ok=args.work_dir is None)
-    say(f"the scripted person teaches seeds {args.seeds} at the page (until {args.until}); runs in {work}")
-    t0, rows = time.monotonic(), []
+    say(f"{what}; runs in {work}")
+    rows = []
     try:
         with sync_playwright() as playwright:
             browser = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
             try:
                 for seed in args.seeds:
-                    rows.append(run_seed(seed, args, browser, q, work, args.out_dir, say))
+                    rows.append(run_one(seed, browser, work))
             finally:
                 browser.close()
     finally:
         if args.work_dir is None:
             shutil.rmtree(work, ignore_errors=True)
+    return rows
+
+
+def main(args: Args) -> dict:
+    check_before_writing(args)
+    import gridworld_env
+
+    q, t0 = gridworld_env.optimal_q(), time.monotonic()
+    what = f"the scripted person teaches seeds {args.seeds} at the page (until {args.until})"
+
+    def run_one(seed, browser, work):
+        return run_seed(seed, args, browser, q, work, args.out_dir, say)
+
+    rows = each_seed(args, "scripted_person_browser_", what, run_one)
     table = build_table(rows)
     table["command"] = "python -m inform_utils.scripted_person_browser " + " ".join(sys.argv[1:])
     table["seconds"] = round(time.monotonic() - t0, 1)

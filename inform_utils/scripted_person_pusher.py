@@ -23,13 +23,12 @@ import shlex
 import shutil
 import subprocess
 import sys
-import tempfile
 import time
 from dataclasses import dataclass, field
 
 import tyro
 
-from inform_utils.scripted_person_browser import CHROMIUM, CHROMIUM_ARGS, REPO, Child, browser_missing, new_run, runs_in
+from inform_utils.scripted_person_browser import REPO, Child, check_before_writing, each_seed, new_run, runs_in
 
 POLICIES = ("tamer", "inform", "bc", "sham", "core")  # the day's two, then the nights on the saved day
 CONTROLS = ("bc", "sham", "core")  # --sleep-control bc, sham, none
@@ -183,33 +182,14 @@ def say(text: str) -> None:
 
 
 def main(args: Args) -> list[dict]:
-    why = browser_missing()
-    if why:
-        sys.exit(f"error: the scripted person needs a browser: {why}")
-    for flag, path in (("--out-dir", args.out_dir), ("--work-dir", args.work_dir)):
-        if path is not None and os.path.exists(path):
-            sys.exit(f"error: {flag} {path} exists; give a new directory (nothing is overwritten)")
-    if REPO not in sys.path:
-        sys.path.insert(0, REPO)
-    from playwright.sync_api import sync_playwright
-
+    check_before_writing(args)
     oracle = load_oracle(shlex.split(args.flags))
-    os.makedirs(args.out_dir)
-    work = args.work_dir or tempfile.mkdtemp(prefix="scripted_person_pusher_")
-    os.makedirs(work, exist_ok=args.work_dir is None)
-    say(f"the scripted person teaches the Pusher, seeds {args.seeds}, at the page; runs in {work}")
-    rows = []
-    try:
-        with sync_playwright() as playwright:
-            browser = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-            try:
-                for seed in args.seeds:
-                    rows.append(run_seed(seed, args, browser, oracle, work, args.out_dir, say))
-            finally:
-                browser.close()
-    finally:
-        if args.work_dir is None:
-            shutil.rmtree(work, ignore_errors=True)
+    what = f"the scripted person teaches the Pusher, seeds {args.seeds}, at the page"
+
+    def run_one(seed, browser, work):
+        return run_seed(seed, args, browser, oracle, work, args.out_dir, say)
+
+    rows = each_seed(args, "scripted_person_pusher_", what, run_one)
     text = markdown(rows, "python -m inform_utils.scripted_person_pusher " + " ".join(sys.argv[1:]))
     with open(os.path.join(args.out_dir, "table.md"), "w") as f:
         f.write(text)
