@@ -24,7 +24,7 @@ import signal
 import sys
 import time
 import warnings
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields, replace
 from typing import Annotated, get_type_hints
 
 import gymnasium as gym
@@ -118,7 +118,7 @@ class Args:
     batch_size: Annotated[int, POSITIVE_INT] = 256
     """the batch size of sample from the replay memory"""
     learning_starts: Annotated[int, POSITIVE_INT] = 5000
-    """timestep to start learning (random actions before)"""
+    """timestep to start learning (random actions before, or the --init-from actor's)"""
     policy_lr: Annotated[float, POSITIVE] = 3e-4
     """the learning rate of the policy network optimizer"""
     q_lr: Annotated[float, POSITIVE] = 1e-3
@@ -148,9 +148,16 @@ class Args:
     snapshot_frequency: Annotated[int, POSITIVE_INT] = 50000
     """keep a copy of the oracle checkpoint (oracle_step{N}.pt in the run dir) every this many steps"""
     resume: str | None = None
-    """path of a training_state.pt to continue from (same run directory)"""
+    """path of a training_state.pt to continue from (same run directory, the run's own flags; --total-timesteps and
+    the logging flags may change)"""
+    init_from: str | None = None
+    """warm start: the actor and twin critics of this SAC teacher (oracle_train.py's checkpoint, same observation and
+    action sizes), acting from the first step; the entropy coefficient starts at --ent-coef"""
     output_path: str | None = None
-    """where the final oracle checkpoint is written (default: oracles/{env_id}__{method}_oracle.pt)"""
+    """where the final oracle checkpoint is written (default: the run directory's oracle.pt for SAC,
+    oracles/{env_id}__{method}_oracle.pt for the maze); an existing file is replaced only with --overwrite"""
+    overwrite: bool = False
+    """allow --output-path to replace an existing checkpoint (a shipped teacher under oracles/, say)"""
 
     # Maze oracles
     method: str | None = None
@@ -298,7 +305,7 @@ class SAC:
 
     MODULES = ("actor", "qf", "qf_target", "q_optimizer", "actor_optimizer", "ent_coef_optimizer")
 
-    def __init__(self, obs_dim, act_dim, low, high, hidden, policy_lr, q_lr, ent_coef, autotune, device):
+    def __init__(self, obs_dim, act_dim, low, high, hidden, policy_lr, q_lr, ent_coef, autotune, device, warm=False):
         self.obs_dim, self.act_dim, self.low, self.high, self.hidden = obs_dim, act_dim, low, high, hidden
         self.actor = Actor(obs_dim, act_dim, hidden, low, high).to(device)
         self.qf = QEnsemble(obs_dim, act_dim, hidden, n=2).to(device)
@@ -309,7 +316,7 @@ class SAC:
         self.log_ent_coef = torch.zeros(1, device=device, requires_grad=True)
         self.ent_coef_optimizer = torch.optim.Adam([self.log_ent_coef], lr=q_lr)
         self.target_entropy, self.autotune = -float(act_dim), autotune
-        if not autotune:
+        if not autotune or warm:  # autotuned from scratch, it starts at 1; a warm start's at ent_coef
             self.log_ent_coef.data.fill_(math.log(ent_coef))
         self.losses = dict.fromkeys(("qf_loss", "actor_loss", "ent_coef_loss"), torch.zeros((), device=device))
 
@@ -343,6 +350,12 @@ class SAC:
                 self.ent_coef_optimizer.step()
                 self.losses["ent_coef_loss"] = ent_coef_loss
         soft_update(self.qf_target, self.qf, tau)
+
+    def warm_start(self, teacher: dict) -> None:
+        """--init-from: the actor and the twin critics (their target too) of a teacher's checkpoint."""
+        self.actor.load_state_dict(teacher["actor_state_dict"])
+        self.qf.load_state_dict(teacher["qf_state_dict"])
+        self.qf_target.load_state_dict(teacher["qf_state_dict"])
 
 
 # ALGO LOGIC: the evaluation that chooses the oracle. Outcome is copied verbatim from inform_sac_pusher.py
@@ -441,7 +454,9 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     env = make_env(args.env_id, args.seed)
     obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
     sac = SAC(obs_dim, act_dim, env.action_space.low, env.action_space.high, args.hidden_size, args.policy_lr,
-              args.q_lr, args.ent_coef, args.autotune, device)  # fmt: skip
+              args.q_lr, args.ent_coef, args.autotune, device, warm=args.init_from is not None)  # fmt: skip
+    if args.init_from is not None and args.resume is None:
+        sac.warm_start(read_teacher(args.init_from, obs_dim, act_dim, args.hidden_size))
     amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
     rb = ReplayBuffer(min(args.buffer_size, args.total_timesteps), obs_dim, act_dim, device)
     start_step = 0
@@ -453,6 +468,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
         print(f"resumed from {args.resume} at step {start_step}", flush=True)
     else:
         run_dir = new_run_dir(args)
+    output_path = args.output_path or os.path.join(run_dir, "oracle.pt")
     writer = open_writer(args, run_dir)
     print(f"run directory: {run_dir}", flush=True)
     state_path = os.path.join(run_dir, "training_state.pt")
@@ -470,7 +486,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     report_every = max(1, (args.total_timesteps - start_step) // 20)
     for global_step in range(start_step, args.total_timesteps):
         Stop.check()
-        if global_step < args.learning_starts:
+        if global_step < args.learning_starts and args.init_from is None:
             action = env.action_space.sample()
         else:
             with torch.no_grad():
@@ -506,7 +522,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
         if step % report_every == 0 or evaluated:
             print_progress(step, start_step, args.total_timesteps, t0, last_eval, selection)
         if step % args.checkpoint_frequency == 0 or step == args.total_timesteps:
-            save_training_state(state_path, sac, rb, step)
+            save_training_state(state_path, sac, rb, step, args)
             save_oracle(step, last_eval, os.path.join(run_dir, "oracle_latest.pt"))
             if step % args.snapshot_frequency == 0:  # kept, so the teacher can be chosen by a longer evaluation later
                 save_oracle(step, last_eval, os.path.join(run_dir, f"oracle_step{step:07d}.pt"))
@@ -514,14 +530,16 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
         if args.stop_at_expert and evaluated and last_eval["success_rate"] >= EXPERT_SUCCESS_RATE and (
             args.env_id not in PUSHER_IDS or last_eval["final_distance"] <= EXPERT_FINAL_DISTANCE):  # fmt: skip
             print(f"[oracle] step {step}: the evaluation meets the expert bar (--stop-at-expert), training ends")
-            save_training_state(state_path, sac, rb, step)
+            save_training_state(state_path, sac, rb, step, args)
             break
     env.close()
-    write_oracle(args, sac, selection, run_dir, device, trained, time.time() - t0)
+    write_oracle(args, sac, selection, run_dir, output_path, device, trained, time.time() - t0)
     writer.close()
 
 
-def write_oracle(args: Args, sac: SAC, selection: Selection, run_dir: str, device, trained: int, train_time: float):
+def write_oracle(
+    args: Args, sac: SAC, selection: Selection, run_dir: str, output_path: str, device, trained: int, train_time: float
+) -> None:
     """The best evaluation's networks (the last ones stay in oracle_latest.pt), judged again on held-out starts."""
     best = torch.load(selection.path, weights_only=True, map_location="cpu")
     sac.actor.load_state_dict(best["actor_state_dict"])
@@ -537,11 +555,11 @@ def write_oracle(args: Args, sac: SAC, selection: Selection, run_dir: str, devic
     if args.save_model:
         ckpt = oracle_checkpoint(sac, args, best["training_steps"], final)
         ckpt.update(train_time_s_this_session=float(train_time), selection_evaluation=chosen, total_timesteps=trained)
-        os.makedirs(os.path.dirname(os.path.abspath(args.output_path)), exist_ok=True)
-        atomic_save(ckpt, args.output_path)
+        os.makedirs(os.path.dirname(os.path.abspath(output_path)), exist_ok=True)
+        atomic_save(ckpt, output_path)
         report = {"eval": final, "selection_eval": chosen, "steps": best["training_steps"], "train_time_s": train_time}
         atomic_write(os.path.join(run_dir, "oracle_eval.json"), json.dumps({**report, "args": asdict(args)}, indent=1))
-        print(f"oracle written to {args.output_path}", flush=True)
+        print(f"oracle written to {output_path}", flush=True)
     if args.capture_video:
         record_teacher(args, sac.actor, run_dir, device)
 
@@ -661,13 +679,17 @@ def main() -> None:
     is_sac = args.env_id not in MAZE_IDS
     try:
         check_args(args)
+        state = read_training_state(args.resume) if args.resume is not None else None
+        if state is not None and "args" in state:  # the run goes on with its own flags
+            args = resumed_args(args.resume, state["args"])
+            check_args(args)
         if args.capture_video:
             check_video(args.env_id)
         args.method = args.method or ("sac" if is_sac else "value-iteration")
-        args.output_path = args.output_path or os.path.join("oracles", f"{args.env_id}__{args.method}_oracle.pt")
         if is_sac:
-            train_sac(args, read_training_state(args.resume) if args.resume is not None else None)
+            train_sac(args, state)
         else:
+            args.output_path = args.output_path or maze_output_path(args)
             train_maze(args)
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
@@ -708,6 +730,15 @@ def check_args(args: Args) -> None:
         raise InputError(f"--method {args.method} does not apply to {args.env_id}; choose one of {', '.join(methods)}")
     if args.output_path is not None and (not args.output_path or os.path.isdir(args.output_path)):
         raise InputError(f"--output-path {args.output_path!r} must name a file (it is empty or a directory)")
+    output_path = args.output_path or (maze_output_path(args) if maze else None)
+    if output_path is not None and os.path.lexists(output_path):
+        if not os.path.isfile(output_path) or os.path.islink(output_path):
+            raise InputError(f"--output-path {output_path} exists and is not a regular file; name another path")
+        if not args.overwrite:
+            raise InputError(f"--output-path {output_path} exists; name another path, or pass --overwrite to replace "
+                             "it (a shipped teacher is replaced only on purpose)")  # fmt: skip
+    if args.init_from is not None and (maze or not os.path.isfile(args.init_from)):
+        raise InputError(f"--init-from {args.init_from}: " + ("the maze has no warm start" if maze else "no such file"))
     if args.resume is not None and (maze or not os.path.isfile(args.resume)):
         raise InputError(f"--resume {args.resume}: " + ("the maze has no training state" if maze else "no such file"))
     if args.batch_size > args.total_timesteps:
@@ -797,11 +828,38 @@ def oracle_checkpoint(sac: SAC, args: Args, step: int, evaluation: dict) -> dict
             "evaluation": {k: float(v) for k, v in evaluation.items()}}  # fmt: skip
 
 
-def save_training_state(path: str, sac: SAC, rb: ReplayBuffer, step: int) -> None:
+def maze_output_path(args: Args) -> str:
+    return os.path.join("oracles", f"{args.env_id}__{args.method or 'value-iteration'}_oracle.pt")
+
+
+# what --resume lets change; every other flag is the run's own (a different value is refused)
+RESUME_MAY_CHANGE = ("resume", "total_timesteps", "num_threads", "cuda", "output_path", "overwrite", "stop_at_expert",
+                     "log_frequency", "checkpoint_frequency", "snapshot_frequency", "final_eval_episodes",
+                     "capture_video", "track", "wandb_project_name", "wandb_entity")  # fmt: skip
+
+
+def resumed_args(path: str, saved: dict) -> Args:
+    """The flags of the run being resumed, with what this command line sets of RESUME_MAY_CHANGE; InputError for a
+    flag that would change the run (a learning rate, the seed, the env)."""
+    names = [f.name for f in fields(Args)]
+    original = Args(**{k: v for k, v in saved.items() if k in names})
+    args = tyro.cli(Args, default=replace(original, resume=path))
+    changed = [n for n in names if n not in RESUME_MAY_CHANGE and getattr(args, n) != getattr(original, n)]
+    if changed:
+        flag = changed[0]
+        raise InputError(
+            f"--resume {path}: --{flag.replace('_', '-')} {getattr(args, flag)} differs from the run's "
+            f"{getattr(original, flag)}; a resumed run keeps its flags (drop it, or start a new run)"
+        )
+    return args
+
+
+def save_training_state(path: str, sac: SAC, rb: ReplayBuffer, step: int, args: Args) -> None:
+    """Everything --resume needs: networks, optimizers, the replay buffer, the RNG, and the run's flags."""
     state = {key: getattr(sac, key).state_dict() for key in SAC.MODULES}
     state.update({f"buf_{name}": buf[: min(rb.n, rb.size)].clone() for name, buf in rb.data.items()})
     state.update(log_ent_coef=sac.log_ent_coef.detach().clone(), buf_n=rb.n, global_step=step,
-                 torch_rng=torch.get_rng_state())  # fmt: skip
+                 torch_rng=torch.get_rng_state(), args=asdict(args))  # fmt: skip
     atomic_save(state, path)
 
 
@@ -816,6 +874,22 @@ def read_training_state(path: str) -> dict:
     if not isinstance(state, dict) or any(key not in state for key in (*keys, "torch_rng")):
         raise InputError(f"--resume {path}: not a training_state.pt of oracle_train.py")
     return state
+
+
+def read_teacher(path: str, obs_dim: int, act_dim: int, hidden: int) -> dict:
+    """--init-from: a SAC teacher's checkpoint (torch.load(weights_only=True)) that fits this env and --hidden-size."""
+    try:
+        teacher = torch.load(path, weights_only=True, map_location="cpu")
+    except Exception as e:
+        raise InputError(f"--init-from {path}: not a torch checkpoint of tensors and plain values, refused "
+                         f"({type(e).__name__})") from None  # fmt: skip
+    if not isinstance(teacher, dict) or teacher.get("algorithm") != "sac" or "actor_state_dict" not in teacher:
+        raise InputError(f"--init-from {path}: not a SAC teacher of oracle_train.py")
+    kwargs = teacher.get("kwargs", {})
+    if (kwargs.get("obs_dim"), kwargs.get("act_dim")) != (obs_dim, act_dim) or kwargs.get("hidden") != hidden:
+        raise InputError(f"--init-from {path}: its networks are {kwargs} (from {teacher.get('env_id')}); this run's "
+                         f"are obs_dim {obs_dim}, act_dim {act_dim}, hidden {hidden} (--hidden-size)")  # fmt: skip
+    return teacher
 
 
 def load_training_state(state: dict, sac: SAC, rb: ReplayBuffer, args: Args) -> int:

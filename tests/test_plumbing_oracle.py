@@ -4,6 +4,7 @@ success return that is not a number is refused. Bad input: one `error:` line, ex
 
 import dataclasses
 import errno
+import glob
 import math
 import os
 import shutil
@@ -91,7 +92,7 @@ def test_a_resume_whose_seed_plus_step_numpy_refuses_is_refused(tmp_path):
     """A resumed run seeds numpy with --seed + the saved step: past 2**32 it is refused before anything is written."""
     sac = ot.SAC(3, 2, -torch.ones(2).numpy(), torch.ones(2).numpy(), 8, 1e-3, 1e-3, 0.2, True, torch.device("cpu"))
     rb = ot.ReplayBuffer(10, 3, 2, torch.device("cpu"))
-    ot.save_training_state(str(tmp_path / "state.pt"), sac, rb, step=10)
+    ot.save_training_state(str(tmp_path / "state.pt"), sac, rb, step=10, args=ot.Args())
     state = ot.read_training_state(str(tmp_path / "state.pt"))
     for seed, fits in ((2**32 - 11, True), (2**32 - 10, False)):
         args = ot.Args(seed=seed, resume=str(tmp_path / "state.pt"))
@@ -206,3 +207,82 @@ def test_a_real_disk_that_fills_during_training_ends_in_one_line(small_disk):
     assert "No space left on device" in lines[0] and "--resume" in lines[0]
     left = [os.path.join(d, f) for d, _, files in os.walk(small_disk) for f in files]
     assert not [f for f in left if ".tmp" in f], left  # no partial file takes the space
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# nothing overwritten that the user did not name; a resumed run keeps its flags; a warm start loads its teacher
+
+
+def test_the_default_output_is_the_run_directory_and_an_existing_file_needs_overwrite(oracle):
+    flags = [f for f in PUSHER_TINY if f not in ("--output-path", "oracle.pt")]
+    result = oracle(*flags)
+    assert result.returncode == 0, result.stderr[-2000:]
+    (written,) = (result.cwd / "runs").glob("*/oracle.pt")  # the run's own, not oracles/
+    assert not (result.cwd / "oracles").exists()
+    shipped = result.cwd / "oracles" / "Pusher-v5__sac_oracle.pt"
+    shipped.parent.mkdir()
+    shipped.write_bytes(written.read_bytes())
+    before = shipped.read_bytes()
+    result = oracle(*flags, "--output-path", "oracles/Pusher-v5__sac_oracle.pt")
+    assert result.returncode == 2 and "--overwrite" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+    assert shipped.read_bytes() == before and len(list((result.cwd / "runs").iterdir())) == 1  # no new run either
+    result = oracle(*flags, "--output-path", "oracles/Pusher-v5__sac_oracle.pt", "--overwrite", "--seed", "2")
+    assert result.returncode == 0 and shipped.read_bytes() != before  # named, and said so
+
+
+@pytest.mark.parametrize("kind", ["fifo", "symlink"])
+def test_an_output_path_that_is_not_a_regular_file_is_refused(oracle, tmp_path, kind):
+    cwd = tmp_path  # the oracle fixture's working directory
+    path = cwd / "out.pt"
+    os.mkfifo(path) if kind == "fifo" else path.symlink_to("/dev/null")
+    result = oracle("--env-id", "KnoxStoneMaze-v0", "--output-path", "out.pt", "--overwrite")
+    assert result.returncode == 2 and "not a regular file" in result.stderr, result.stderr
+    assert sorted(p.name for p in cwd.iterdir()) == ["out.pt"]
+
+
+def test_a_resumed_run_keeps_its_flags_and_refuses_a_changed_one(oracle, tmp_path):
+    flags = [f for f in PUSHER_TINY if f not in ("--output-path", "oracle.pt")]
+    assert oracle(*flags, "--policy-lr", "1e-4").returncode == 0
+    (state,) = (tmp_path / "runs").glob("*/training_state.pt")
+    result = oracle("--resume", str(state), "--total-timesteps", "600")  # nothing else: the run's own flags
+    assert result.returncode == 0, result.stderr[-2000:]
+    ckpt = torch.load(state.parent / "oracle.pt", weights_only=True)
+    assert ckpt["total_timesteps"] == 600 and ckpt["kwargs"]["hidden"] == 32  # --hidden-size 32 came back
+    resumed = torch.load(state, weights_only=True)["args"]
+    assert resumed["policy_lr"] == 1e-4 and resumed["total_timesteps"] == 600 and resumed["resume"] == str(state)
+    result = oracle("--resume", str(state), "--total-timesteps", "800", "--policy-lr", "3e-4")
+    assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert "--policy-lr 0.0003 differs from the run's 0.0001" in result.stderr
+    assert torch.load(state, weights_only=True)["global_step"] == 600  # not touched
+
+
+def test_a_warm_start_takes_the_teachers_networks(tmp_path, monkeypatch):
+    """--init-from: with no update (learning starts at the last step), the run's networks are the teacher's, and its
+    actor acts from the first step (the buffer holds its actions, not uniform ones)."""
+    monkeypatch.chdir(tmp_path)
+    tiny = dict(env_id="Pusher-v5", learning_starts=200, batch_size=64, hidden_size=32, eval_frequency=200,
+                eval_episodes=1, final_eval_episodes=1, checkpoint_frequency=200, log_frequency=100)  # fmt: skip
+    ot.train_sac(ot.Args(**tiny, total_timesteps=400, output_path="teacher.pt", seed=3))
+    teacher = torch.load("teacher.pt", weights_only=True)
+    ot.train_sac(ot.Args(**tiny, total_timesteps=200, output_path="warm.pt", init_from="teacher.pt", ent_coef=0.05))
+    warm = torch.load("warm.pt", weights_only=True)
+    for key in ("actor_state_dict", "qf_state_dict"):
+        for name, value in teacher[key].items():
+            assert torch.equal(warm[key][name], value), (key, name)
+    state = [s for s in glob.glob("runs/*/training_state.pt") if torch.load(s, weights_only=True)["args"]["init_from"]]
+    saved = torch.load(state[0], weights_only=True)
+    assert saved["log_ent_coef"].exp().item() == pytest.approx(0.05)
+    actor = ot.Actor(**teacher["kwargs"], action_low=teacher["action_low"], action_high=teacher["action_high"])
+    actor.load_state_dict(teacher["actor_state_dict"])
+    with torch.no_grad():
+        mean = actor.get_action(saved["buf_obs"])[2]
+    # the sampled actions are the teacher's mean plus its noise: far closer to it than uniform actions would be
+    assert (saved["buf_act"] - mean).abs().mean() < 0.5 * (torch.rand_like(mean) * 4 - 2 - mean).abs().mean()
+
+
+def test_a_warm_start_that_does_not_fit_is_refused_in_one_line(oracle, tmp_path):
+    refused_in_one_line(oracle("--init-from", "nothing.pt"), "--init-from nothing.pt: no such file")
+    reacher = os.path.join(os.path.dirname(ot.__file__), "oracles", "Reacher-v5__sac_oracle.pt")
+    result = oracle("--env-id", "Pusher-v5", "--init-from", reacher)
+    assert result.returncode == 2 and "its networks are" in result.stderr and "Traceback" not in result.stderr
+    assert not list(tmp_path.iterdir())

@@ -641,7 +641,7 @@ def test_oracle_train_pusher_smoke_and_resume(tmp_path):
     assert best["evaluation"]["reset_seed"] == 1_000_000
     (state,) = glob.glob(str(tmp_path / "runs" / "*" / "training_state.pt"))
     proc = subprocess.run(
-        [sys.executable, script, *flags, "--total-timesteps", "600", "--resume", state],
+        [sys.executable, script, *flags, "--total-timesteps", "600", "--resume", state, "--overwrite"],
         cwd=tmp_path,
         capture_output=True,
         text=True,
