@@ -1377,8 +1377,9 @@ def end_run(args, summary, status, phase, run_dir, run_start, evaluator, closing
         summary.update({"signal": stop.reason()} if status == "interrupted" else {})
         try:
             write_json_atomic(f"{run_dir}/summary.json", summary)
-        except OSError as e:
-            say(f"error: {run_dir}/summary.json not written: {e}", sys.stderr)
+        except OSError as e:  # a run without its record must not look completed to a caller: exit 1
+            say(f"error: {run_dir}/summary.json not written ({e.strerror or e}); this run has no record", sys.stderr)
+            status = summary["status"] = "unrecorded"
     for thing in (thing for thing in (*closing, evaluator) if thing is not None):
         thing.close()
     if status == "interrupted":
@@ -1386,7 +1387,7 @@ def end_run(args, summary, status, phase, run_dir, run_start, evaluator, closing
         say(f"interrupted ({stop.reason()}) during the {phase} phase; {saved}", sys.stderr)
     elif status in ("diverged", "failed"):
         say(f"error: {summary.get('error')}", sys.stderr)
-    if run_dir is not None:
+    if run_dir is not None and status != "unrecorded":
         print_results(summary, run_dir)
     summary.setdefault("status", status)
     if status == "interrupted" and getattr(sys.modules.get("wandb"), "run", None) is not None:

@@ -413,6 +413,12 @@ def main(args: Args, sources: list[dict], stop: "StopSignals | None" = None) -> 
         )
         stop.restore()
         return summary
+    except OSError as e:  # a read-only or full disk: one line, exit 1
+        if writer is not None:
+            writer.close()
+        say(f"error: cannot write {e.filename or 'runs/'}: {e.strerror or e}; this run has no record", sys.stderr)
+        stop.restore()
+        return {"status": "failed", "error": f"{type(e).__name__}: {e}"}
     stop.finished = True  # from here on a signal is only noted: the results below take seconds, then the exit says it
 
     summary = {
@@ -456,17 +462,11 @@ def main(args: Args, sources: list[dict], stop: "StopSignals | None" = None) -> 
         curves[arm] = (grid, interpolate_curves(runs[arm], grid))
         for step, mean in zip(grid, curves[arm][1].mean(0), strict=True):
             writer.add_scalar(f"{arm}/episode_length", mean, int(step))
-    np.savez(
-        f"{run_dir}/agents.npz",
-        **{
-            f"{arm}/{k}": np.stack([run[k] for run in runs[arm]])
-            for arm in arms
-            for k in ("lengths", "steps", "greedy")
-        },
-    )
+    fields = ("lengths", "steps", "greedy")
+    agents = {f"{arm}/{k}": np.stack([run[k] for run in runs[arm]]) for arm in arms for k in fields}
     tamer_label = "TAMER's greedy policy, untrained on the wall" if variant == "wall" else "TAMER's greedy policy"
     title = f"{args.env_id}: {len(seeds)} agents per arm, {args.num_episodes} episodes each"
-    fig6(curves, optimum, summary[tamer_key], title, tamer_label).savefig(f"{run_dir}/fig6.png", dpi=120)
+    figure = fig6(curves, optimum, summary[tamer_key], title, tamer_label)
 
     summary.update(
         {
@@ -484,7 +484,22 @@ def main(args: Args, sources: list[dict], stop: "StopSignals | None" = None) -> 
             "args": asdict(args),
         }
     )
-    write_json_atomic(f"{run_dir}/summary.json", summary)
+    try:  # the results, then the summary that says they are complete; a full disk leaves none of them
+        with open(f"{run_dir}/agents.npz.tmp", "wb") as f:
+            np.savez(f, **agents)
+        os.replace(f"{run_dir}/agents.npz.tmp", f"{run_dir}/agents.npz")
+        figure.savefig(f"{run_dir}/fig6.tmp.png", dpi=120)
+        os.replace(f"{run_dir}/fig6.tmp.png", f"{run_dir}/fig6.png")
+        write_json_atomic(f"{run_dir}/summary.json", summary)
+    except OSError as e:
+        for name in ("agents.npz", "agents.npz.tmp", "fig6.png", "fig6.tmp.png", "summary.json.tmp"):
+            with contextlib.suppress(FileNotFoundError):
+                os.remove(f"{run_dir}/{name}")
+        writer.close()
+        say(f"error: cannot write {e.filename or run_dir}: {e.strerror or e}; this run has no record (its "
+            f"agents.npz and figure removed)", sys.stderr)  # fmt: skip
+        stop.restore()
+        return {**summary, "status": "unrecorded"}
     writer.close()
     for arm in arms:
         say(f"{arm} ({len(seeds)} agents): " + arm_report(summary, arm, optimum))
@@ -582,9 +597,14 @@ def make_run_dir(run_name: str) -> str:
 
 
 def write_json_atomic(path: str, data: dict) -> None:
-    with open(path + ".tmp", "w") as f:
-        json.dump(data, f, indent=2)
-    os.replace(path + ".tmp", path)
+    try:
+        with open(path + ".tmp", "w") as f:
+            json.dump(data, f, indent=2)
+        os.replace(path + ".tmp", path)
+    except OSError as e:  # no partial file; the error names the file
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(path + ".tmp")
+        raise OSError(e.errno, e.strerror, path) from None
 
 
 def check_args(args: Args) -> None:
@@ -716,9 +736,12 @@ def resolve_sources(args: Args) -> list[dict]:
         paths = (find_newest_run(args.runs_dir, filename),)
         print(f"gridworld run: {paths[0]} (the newest with a {filename} under {args.runs_dir}/)", flush=True)
     next_cell = gridworld_env.transition_table(gym.make(args.env_id).unwrapped.variant)
-    sources = []
+    sources, seen = [], set()
     for given in paths:
         path = os.path.join(given, filename) if os.path.isdir(given) else given
+        if os.path.realpath(path) in seen:
+            raise ValueError(f"--reward-path names {path} twice: each run's reward counts once (n is the runs given)")
+        seen.add(os.path.realpath(path))
         source = {"path": path, "network": None, "table": None}
         if args.reward_source == "network":
             source["network"], source["meta"] = load_inform_network(path)
@@ -791,7 +814,7 @@ class StopSignals:
         a signal after the summary still says the person wanted the run to stop (a shell loop then stops too)."""
         if status == "interrupted" or self.received:
             return 128 + signal.Signals[self.reason()].value
-        return 0
+        return 0 if status == "completed" else 1  # failed, or unrecorded (no summary.json)
 
 
 def say(text: str, file=None) -> None:
