@@ -976,6 +976,7 @@ def read_checkpoint(path: str, flag: str) -> dict:
         raise InputError(f"{flag} {path}: no such file")
     if not zipfile.is_zipfile(path):  # torch.save writes a zip archive; a truncated one has lost its directory
         raise InputError(f"{flag} {path}: not a torch checkpoint, or a truncated one (not a complete zip archive)")
+    check_crc(path, f"{flag} {path}")
     try:
         ckpt = torch.load(path, weights_only=True, map_location="cpu")
     except Exception as e:  # code in the pickle (UnpicklingError), or a damaged archive (RuntimeError, EOFError, ...)
@@ -1351,6 +1352,18 @@ def save_atomic(obj: dict, path: str) -> None:
             torch.save(obj, f)
         except RuntimeError as e:  # torch reports a failed write (a full disk) so: an OSError, as open() would
             raise OSError(f"{path}: {' '.join(str(e).split())[-120:]}") from None
+
+
+def check_crc(path: str, where: str) -> None:
+    """torch.save writes a zip archive with a CRC-32 per member, which torch.load never checks: a flipped bit would be
+    used. InputError, one line, for an archive that is truncated or whose bytes changed since it was saved."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            damaged = archive.testzip()
+    except (zipfile.BadZipFile, OSError, EOFError) as e:
+        raise InputError(f"{where}: not a complete torch checkpoint, or a damaged one ({e})") from None
+    if damaged is not None:
+        raise InputError(f"{where}: damaged since it was saved ({damaged} fails its CRC-32 check); make it again")
 
 
 def strict_json(value):  # NaN and inf as null, at any depth (a metric this run does not have, e.g. no successes)

@@ -42,6 +42,7 @@ import tempfile
 import time
 import typing
 import xml.etree.ElementTree as ET
+import zipfile
 from dataclasses import dataclass, fields
 from typing import Annotated, Literal
 
@@ -965,6 +966,8 @@ class RecoveredReward:
 
     @classmethod
     def load(cls, run_dir: str, samples: int = 16) -> "RecoveredReward":  # from a run's inform_critic.pt and actor
+        for name in ("inform_critic.pt", "inform_actor.pt"):
+            check_crc(os.path.join(run_dir, name), os.path.join(run_dir, name))
         critic = torch.load(os.path.join(run_dir, "inform_critic.pt"), weights_only=True)
         q_net = QEnsemble(**critic["kwargs"])
         q_net.load_state_dict(critic["state_dict"])
@@ -1239,6 +1242,7 @@ def read_checkpoint(path: str, flag: str, env_id: str) -> dict:
     oracle, where = flag == "--oracle-path", f"{flag} {path}"
     if not os.path.isfile(path):
         raise InputError(f"{where}: no such file" + (" (train one with oracle_train.py)" if oracle else ""))
+    check_crc(path, where)
     try:
         ckpt = torch.load(path, weights_only=True, map_location="cpu")
     except Exception as e:
@@ -1366,6 +1370,7 @@ def load_day(run_dir: str) -> dict:
     path = os.path.join(run_dir, "day.pt")
     if not os.path.isfile(path):
         raise InputError(f"--sleep-from {run_dir}: no day.pt there (make one with --save-buffer)")
+    check_crc(path, f"--sleep-from {path}")
     try:
         day = torch.load(path, weights_only=True, map_location="cpu")
     except Exception as e:
@@ -1638,6 +1643,18 @@ def save_atomic(obj: dict, path: str) -> None:
             torch.save(obj, f)
         except RuntimeError as e:  # torch reports a failed write (a full disk) so: an OSError, as open() would
             raise OSError(f"{path}: {' '.join(str(e).split())[-120:]}") from None
+
+
+def check_crc(path: str, where: str) -> None:
+    """torch.save writes a zip archive with a CRC-32 per member, which torch.load never checks: a flipped bit would be
+    used. InputError, one line, for an archive that is truncated or whose bytes changed since it was saved."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            damaged = archive.testzip()
+    except (zipfile.BadZipFile, OSError, EOFError) as e:
+        raise InputError(f"{where}: not a complete torch checkpoint, or a damaged one ({e})") from None
+    if damaged is not None:
+        raise InputError(f"{where}: damaged since it was saved ({damaged} fails its CRC-32 check); make it again")
 
 
 def strict_json(value):  # NaN and inf as null, at any depth (a metric this run does not have, e.g. no successes)

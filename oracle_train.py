@@ -24,6 +24,7 @@ import signal
 import sys
 import time
 import warnings
+import zipfile
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Annotated, get_type_hints
 
@@ -865,6 +866,7 @@ def save_training_state(path: str, sac: SAC, rb: ReplayBuffer, step: int, args: 
 
 def read_training_state(path: str) -> dict:
     """torch.load(path, weights_only=True) of a training_state.pt; every way it can fail is one InputError."""
+    check_crc(path, f"--resume {path}")
     try:  # weights_only refuses a pickle that could run code
         state = torch.load(path, weights_only=True, map_location="cpu")
     except Exception as e:
@@ -876,8 +878,21 @@ def read_training_state(path: str) -> dict:
     return state
 
 
+def check_crc(path: str, where: str) -> None:
+    """torch.save writes a zip archive with a CRC-32 per member, which torch.load never checks: a flipped bit would be
+    used. InputError, one line, for an archive that is truncated or whose bytes changed since it was saved."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            damaged = archive.testzip()
+    except (zipfile.BadZipFile, OSError, EOFError) as e:
+        raise InputError(f"{where}: not a complete torch checkpoint, or a damaged one ({e})") from None
+    if damaged is not None:
+        raise InputError(f"{where}: damaged since it was saved ({damaged} fails its CRC-32 check); make it again")
+
+
 def read_teacher(path: str, obs_dim: int, act_dim: int, hidden: int) -> dict:
     """--init-from: a SAC teacher's checkpoint (torch.load(weights_only=True)) that fits this env and --hidden-size."""
+    check_crc(path, f"--init-from {path}")
     try:
         teacher = torch.load(path, weights_only=True, map_location="cpu")
     except Exception as e:

@@ -653,6 +653,13 @@ def load_checkpoint(path: str, what: str) -> dict:
         raise ValueError(f"{what} {path} does not exist")
     if not zipfile.is_zipfile(path):  # torch.save writes a zip archive; a truncated one has lost its directory
         raise ValueError(f"cannot read {what} {path} as a torch checkpoint (not a complete zip archive)")
+    try:  # torch.load checks no CRC: a flipped bit would be used
+        with zipfile.ZipFile(path) as archive:
+            damaged = archive.testzip()
+    except (zipfile.BadZipFile, OSError, EOFError) as e:
+        damaged = f"its archive: {e}"
+    if damaged is not None:
+        raise ValueError(f"{what} {path} is damaged since it was saved ({damaged} fails its CRC-32 check)")
     try:
         with warnings.catch_warnings():  # a foreign pickle warns before it fails; the error line says enough
             warnings.simplefilter("ignore")

@@ -7,6 +7,9 @@ distances' mean and quantiles, the return, and each fixed start's final distance
 """
 
 import json
+import os
+import sys
+import warnings
 from dataclasses import dataclass, field
 
 import gymnasium as gym
@@ -14,6 +17,7 @@ import numpy as np
 import torch
 import tyro
 
+import inform_sac_pusher as isp
 from oracle_train import Actor
 
 SUCCESS_DISTANCE = 0.08  # the paper's success tag, on v4 and v5 alike
@@ -50,8 +54,25 @@ def final_distance(actor: Actor, env: gym.Env, reset_seed: int) -> tuple[float, 
     return abs(float(info["reward_dist"])), ep_return
 
 
+def read_teacher(path: str) -> dict:
+    """The SAC teacher at `path`, checked as --oracle-path checks it (its CRCs, weights only, its keys, its env's
+    shapes); isp.InputError, one line, otherwise."""
+    if not os.path.isfile(path):
+        raise isp.InputError(f"{path}: no such file (a teacher of oracle_train.py: oracles/Pusher-v5__sac_oracle.pt)")
+    isp.check_crc(path, path)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ckpt = torch.load(path, weights_only=True, map_location="cpu")
+    except Exception as e:  # code in the pickle, or not a checkpoint at all
+        raise isp.InputError(f"{path}: refused, not a weights-only torch checkpoint ({type(e).__name__})") from None
+    if not isinstance(ckpt, dict) or ckpt.get("algorithm") != "sac":
+        raise isp.InputError(f"{path}: not a SAC teacher of oracle_train.py (a maze teacher has no episodes to check)")
+    return isp.read_checkpoint(path, "--oracle-path", str(ckpt.get("env_id")))
+
+
 def check(args: Args) -> dict:
-    ckpt = torch.load(args.checkpoint, weights_only=True, map_location="cpu")
+    ckpt = read_teacher(args.checkpoint)
     actor = Actor(**ckpt["kwargs"], action_low=ckpt["action_low"], action_high=ckpt["action_high"])
     actor.load_state_dict(ckpt["actor_state_dict"])
     env = gym.make(ckpt["env_id"])
@@ -84,11 +105,24 @@ def check(args: Args) -> dict:
     }
 
 
-if __name__ == "__main__":
-    args = tyro.cli(Args)
-    result = check(args)
+def main(args: Args) -> int:
+    try:
+        if args.episodes < 1:
+            raise isp.InputError(f"--episodes must be >= 1, got {args.episodes}")
+        if args.out is not None and (os.path.isdir(args.out) or not os.path.isdir(os.path.dirname(args.out) or ".")):
+            raise isp.InputError(f"--out {args.out}: must name a file in an existing directory")
+        result = check(args)
+    except isp.InputError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     text = json.dumps(result, indent=1)
     print(text)
     if args.out:
-        with open(args.out, "w") as f:
+        with open(args.out + ".tmp", "w") as f:
             f.write(text + "\n")
+        os.replace(args.out + ".tmp", args.out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(tyro.cli(Args)))
