@@ -175,9 +175,74 @@ def run_flags(args: Args, run: Run) -> dict[str, list[str] | bool]:
     return {**flag_values(args.script_args), **{name: [value] for name, value in run.point}}
 
 
+# In a child process (importing a script runs its top level): the script's own Args, parsed from the flags run_seeds
+# gives a run and completed as the script completes them (its check_args, the Pusher's sleep preset), and its
+# defaults, as JSON (non-finite numbers as null, as the summaries write them). tyro's error, or the check's, for a
+# flag or value the script does not take.
+CAMPAIGN_ARGS = """
+import dataclasses, importlib.util, json, math, os, sys
+import tyro
+script, tokens = sys.argv[1], sys.argv[2:]
+sys.path.insert(0, os.path.dirname(os.path.abspath(script)))
+spec = importlib.util.spec_from_file_location("campaign_script", script)
+module = sys.modules["campaign_script"] = importlib.util.module_from_spec(spec)  # so tyro finds its docstrings
+spec.loader.exec_module(module)
+plain = lambda v: None if isinstance(v, float) and not math.isfinite(v) else list(v) if isinstance(v, tuple) else v
+fields = lambda a: {k: plain(v) for k, v in dataclasses.asdict(a).items()}
+parsed, defaults = tyro.cli(module.Args, args=tokens), tyro.cli(module.Args, args=[])
+try:  # the script's own checks, which also fill what a preset leaves to them (the maze's --teacher defaults)
+    getattr(module, "check_args", lambda args: None)(parsed)
+    if hasattr(module, "sleep_recipe"):  # the Pusher's --sleep-protocol preset, which its summary records
+        names = {f.name for f in dataclasses.fields(parsed)}
+        parsed = dataclasses.replace(parsed, **{k: v for k, v in module.sleep_recipe(parsed).items() if k in names})
+except Exception as e:
+    sys.exit(f"error: {e}")
+print(json.dumps({"args": fields(parsed), "defaults": fields(defaults)}, default=str))
+"""
+_campaign_args: dict[tuple, dict | None] = {}
+
+
+def campaign_args(args: Args, point: Point) -> dict | None:
+    """{"args", "defaults"}: what every run of this campaign at `point` records (but its seed), and the script's
+    defaults; None for a script without a tyro `Args` class (then the flags given are compared). ValueError, one
+    line, for a flag or value the script refuses: checked before anything runs."""
+    key = (os.path.abspath(args.script), tuple(args.script_args), point, args.threads, args.workers, args.launcher)
+    if key not in _campaign_args:
+        with open(args.script) as f:
+            if not re.search(r"^class Args\b", f.read(), re.M):
+                _campaign_args[key] = None
+                return None
+        tokens = command(args, Run(0, point), run_threads(args))[2:]
+        proc = subprocess.run([sys.executable, "-c", CAMPAIGN_ARGS, args.script, *tokens], capture_output=True,
+                              text=True, cwd=os.getcwd())  # fmt: skip
+        if proc.returncode != 0:
+            lines = [line.strip(" │╭╰─") for line in proc.stderr.splitlines()]
+            why = next((line for line in lines if ":" in line and "--help" not in line), "")  # tyro's box's first
+            label = Run(0, point).label or " ".join(args.script_args)
+            raise ValueError(f"{args.script} refuses the campaign's flags ({label}): {why[:200]}")
+        _campaign_args[key] = json.loads(proc.stdout.strip().splitlines()[-1])
+    return _campaign_args[key]
+
+
+def is_campaigns(recorded: dict, campaign: dict) -> bool:
+    """A run's recorded args against the campaign's: every field both know is equal (but the seed, checked by the
+    caller); a field the run does not record (added to the script later) must be at the script's default, as it was
+    then; one the script no longer has is passed over."""
+    for name, value in campaign["args"].items():
+        if name == "seed":
+            continue
+        if name in recorded:
+            if recorded[name] != value:
+                return False
+        elif value != campaign["defaults"].get(name):
+            return False
+    return True
+
+
 def newest_summary(args: Args, run: Run, completed: bool = True, since: float = 0.0) -> tuple[str, dict] | None:
-    """The newest summary.json of this script, experiment, seed and flags (completed only, unless told otherwise;
-    two scripts may share an experiment name: each summary.json names the script that wrote it)."""
+    """The newest summary.json of this campaign's run: this script, experiment name and seed, and every other flag
+    the campaign's (completed only, unless told otherwise; two scripts may share an experiment name: each
+    summary.json names the script that wrote it)."""
     paths = []
     for folder in filter(None, (args.runs_dir, args.results_dir)):
         paths += glob.glob(os.path.join(folder, f"*__{args.exp_name}__{run.seed}__*", "summary.json"))
@@ -189,10 +254,14 @@ def newest_summary(args: Args, run: Run, completed: bool = True, since: float = 
             continue
         with open(path) as f:
             summary = json.load(f)
+        recorded = summary.get("args", {})
         if (
             summary.get("script") == os.path.basename(args.script)
             and (not completed or summary.get("status") == "completed")
-            and ran_with(summary.get("args", {}), flags)
+            and recorded.get("exp_name") == args.exp_name
+            and recorded.get("seed") == run.seed
+            and ran_with(recorded, flags)
+            and ((campaign := campaign_args(args, run.point)) is None or is_campaigns(recorded, campaign))
         ):
             return path, summary
     return None
@@ -300,8 +369,15 @@ class Stop:
                 signal.signal(s, h)
 
 
+def run_threads(args: Args) -> int:
+    """--num-threads of each run: --threads, or 0: the machine's cores among the workers (Slurm: its CPUs a task)."""
+    if args.launcher == "slurm":
+        return args.threads or args.slurm_cpus_per_task
+    return args.threads or max(1, (os.cpu_count() or 1) // args.workers)
+
+
 def run_local(args: Args, todo: list[Run], stop: Stop) -> dict[Run, Outcome]:
-    threads = args.threads or max(1, (os.cpu_count() or 1) // args.workers)
+    threads = run_threads(args)
     print(f"running {args.script} for {len(todo)} run(s): {args.workers} workers, {threads} thread(s) each", flush=True)
     os.makedirs(args.logs_dir, exist_ok=True)
     outcomes: dict[Run, Outcome] = {}
@@ -434,7 +510,7 @@ def run_slurm(args: Args, todo: list[Run], stop: Stop) -> dict[Run, Outcome]:
     import cloudpickle
     import submitit
 
-    threads = args.threads or args.slurm_cpus_per_task
+    threads = run_threads(args)
     if __name__ != "__main__":  # imported (tests): ship slurm_job itself, the nodes need not import this module
         cloudpickle.register_pickle_by_value(sys.modules[__name__])
     executor = submitit.SlurmExecutor(folder=os.path.join(args.logs_dir, "slurm"))
@@ -614,7 +690,15 @@ def validate(args: Args) -> None:
         raise ValueError(f"--results-dir {args.results_dir}: exists and is not a directory")
     if not os.path.isfile(args.script):
         raise ValueError(f"{args.script}: no such script")
-    grid_points(args.grid, args.script_args)
+    given = set(flag_values(args.script_args))
+    if given & {"seed", "exp-name", "num-threads"}:
+        raise ValueError(f"--{sorted(given & {'seed', 'exp-name', 'num-threads'})[0]} after -- is set by run_seeds "
+                         "itself (--seeds, --exp-name, --threads)")  # fmt: skip
+    if os.path.realpath(args.runs_dir) != os.path.realpath("runs"):
+        raise ValueError(f"--runs-dir {args.runs_dir}: the scripts write their runs to runs/ in the working directory; "
+                         "run run_seeds from the directory whose runs/ you mean")  # fmt: skip
+    for point in grid_points(args.grid, args.script_args):  # each flag and value the script takes, before any run
+        campaign_args(args, point)
     if args.launcher == "slurm":
         if args.slurm_time < 1 or args.slurm_cpus_per_task < 1 or not args.poll_seconds > 0:
             raise ValueError("--slurm-time and --slurm-cpus-per-task must be >= 1, --poll-seconds > 0")

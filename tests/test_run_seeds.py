@@ -133,6 +133,9 @@ def test_a_failed_run_is_reported_with_the_tail_of_its_log_and_the_table_has_the
         (["--launcher", "slurm"], "no sbatch on PATH"),
         (["--launcher", "slurm", "--slurm-mem", "4X"], "--slurm-mem '4X': expected a size like 4G or 500M"),
         (["--launcher", "slurm", "--slurm-time", "0"], "--slurm-time and --slurm-cpus-per-task must be >= 1"),
+        (["--", "--seed", "5"], "--seed after -- is set by run_seeds itself"),
+        (["--", "--exp-name=x"], "--exp-name after -- is set by run_seeds itself"),
+        (["--runs-dir", "elsewhere"], "--runs-dir elsewhere: the scripts write their runs to runs/"),
     ],
 )
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path, fake_script, flags, phrase):
@@ -275,3 +278,73 @@ def test_two_campaigns_of_one_name_never_write_one_log(tmp_path, fake_script):
     assert second.returncode == 1 and "another run_seeds is running it" in second.stdout, second.stdout
     assert calls(tmp_path) == [(1, 0.0)]  # the second campaign started nothing
     assert log.read_text().count("fake.py") == 1 and "started" in log.read_text()
+
+
+# a campaign counts only its own runs ----------------------------------------------------------------------------------
+TYRO_SCRIPT = """
+\"\"\"A training script with a tyro Args: runs/Fake-v0__{exp}__{seed}__{ns}/summary.json, args recorded.\"\"\"
+import dataclasses, json, os, sys, time
+import tyro
+
+
+@dataclasses.dataclass
+class Args:
+    seed: int = 1
+    \"\"\"the seed\"\"\"
+    exp_name: str = "x"
+    \"\"\"the experiment\"\"\"
+    noise: float = 0.0
+    \"\"\"the teacher's noise\"\"\"
+
+
+if __name__ == "__main__":
+    args = tyro.cli(Args)
+    with open("calls.txt", "a") as f:
+        f.write(f"{args.seed} {args.noise}\\n")
+    run_dir = f"runs/Fake-v0__{args.exp_name}__{args.seed}__{time.time_ns()}"
+    os.makedirs(run_dir)
+    summary = {"status": "completed", "script": os.path.basename(sys.argv[0]), "seed": args.seed,
+               "eval/x": args.seed + args.noise, "args": dataclasses.asdict(args)}
+    with open(f"{run_dir}/summary.json", "w") as f:
+        json.dump(summary, f)
+"""
+
+
+def test_a_run_of_another_experiment_whose_name_ends_in_the_campaigns_does_not_count(tmp_path, monkeypatch,
+                                                                                     fake_script):  # fmt: skip
+    monkeypatch.chdir(tmp_path)
+    run_seeds.main(run_seeds.Args(script="fake.py", exp_name="pilot__camp", seeds=[1], workers=1))
+    assert glob.glob("runs/Fake-v0__pilot__camp__1__*")  # which *__camp__1__* also matches
+    table = run_seeds.main(run_seeds.Args(script="fake.py", exp_name="camp", seeds=[1], workers=1))[""]
+    assert calls(tmp_path) == [(1, 0.0), (1, 0.0)] and table["eval/x"]["n"] == 1
+
+
+def test_a_run_made_with_a_flag_the_campaign_does_not_pass_does_not_count(tmp_path, monkeypatch):
+    """Every field of the script's Args is compared, not only the flags the campaign passes: a seed run with
+    --noise 0.4 is not a finished seed of the campaign at the default noise (and then is, at --noise 0.4)."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "tyro_fake.py").write_text(TYRO_SCRIPT)
+    run_seeds.main(run_seeds.Args(script="tyro_fake.py", exp_name="camp", seeds=[1], script_args=["--noise", "0.4"]))
+    table = run_seeds.main(run_seeds.Args(script="tyro_fake.py", exp_name="camp", seeds=[1]))[""]
+    assert calls(tmp_path) == [(1, 0.0), (1, 0.4)] and table["eval/x"]["values"] == [1.0]
+    run_seeds.main(run_seeds.Args(script="tyro_fake.py", exp_name="camp", seeds=[1], script_args=["--noise=0.4"]))
+    assert len(calls(tmp_path)) == 2  # both finished now: nothing ran
+
+
+def test_a_grid_of_a_flag_or_value_the_script_refuses_runs_nothing(tmp_path):
+    (tmp_path / "tyro_fake.py").write_text(TYRO_SCRIPT)
+    for grid, phrase in (("nonflag=1,2", "Unrecognized options: --nonflag"), ("noise=abc,2", "Error parsing --noise")):
+        result = subprocess.run([sys.executable, RUN_SEEDS, "--script", "tyro_fake.py", "--grid", grid], cwd=tmp_path,
+                                capture_output=True, text=True, timeout=120)  # fmt: skip
+        lines = result.stderr.splitlines()
+        assert result.returncode == 2 and len(lines) == 1 and phrase in lines[0], result.stderr
+    assert sorted(os.listdir(tmp_path)) == ["tyro_fake.py"]
+
+
+def test_recorded_args_against_the_campaigns():
+    campaign = {"args": {"seed": 0, "exp_name": "c", "noise": 0.1, "new": 3}, "defaults": {"new": 3, "noise": 0.0}}
+    assert run_seeds.is_campaigns({"seed": 7, "exp_name": "c", "noise": 0.1, "new": 3, "removed": 1}, campaign)
+    assert run_seeds.is_campaigns({"seed": 7, "exp_name": "c", "noise": 0.1}, campaign)  # "new" at its default
+    assert not run_seeds.is_campaigns({"seed": 7, "exp_name": "c", "noise": 0.2, "new": 3}, campaign)
+    changed = {**campaign, "args": {**campaign["args"], "new": 4}}
+    assert not run_seeds.is_campaigns({"seed": 7, "exp_name": "c", "noise": 0.1}, changed)  # made before "new"
