@@ -102,6 +102,9 @@ class Args:
     # Oracle (SAC) arguments
     env_id: str = "Pusher-v5"
     """Pusher-v5, Pusher-v4 (where mujoco<3 is installed), any continuous-action Gymnasium env (SAC), or a maze id"""
+    reward_dist_weight: Annotated[float | None, POSITIVE] = None
+    """the weight of the object-to-goal distance in the env reward (Pusher-v5's reward_dist_weight; None: the env's,
+    1): the teacher's Q then values that reward (docs/protocol.md); success stays a final distance"""
     success_distance: Annotated[float, POSITIVE] = 0.08
     """an evaluation episode succeeds if its final distance |info[success_info_key]| is below this"""
     success_info_key: str = "reward_dist"
@@ -193,11 +196,15 @@ class Args:
     """fraction of --maze-dqn-timesteps over which epsilon decays from start to end"""
 
 
-def make_env(env_id: str, seed: int) -> gym.Env:
-    env = gym.make(env_id)
+def make_env(env_id: str, seed: int, reward_dist_weight: float | None = None) -> gym.Env:
+    env = gym.make(env_id, **env_kwargs(reward_dist_weight))
     env.action_space.seed(seed)
     env.observation_space.seed(seed)
     return env
+
+
+def env_kwargs(reward_dist_weight: float | None) -> dict:
+    return {} if reward_dist_weight is None else {"reward_dist_weight": reward_dist_weight}
 
 
 # ALGO LOGIC: the networks (copied verbatim from inform_sac_pusher.py, CleanRL style; a test keeps the copies alike)
@@ -452,7 +459,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     torch.backends.cudnn.deterministic = args.torch_deterministic
     torch.use_deterministic_algorithms(args.torch_deterministic)
 
-    env = make_env(args.env_id, args.seed)
+    env = make_env(args.env_id, args.seed, args.reward_dist_weight)
     obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
     sac = SAC(obs_dim, act_dim, env.action_space.low, env.action_space.high, args.hidden_size, args.policy_lr,
               args.q_lr, args.ent_coef, args.autotune, device, warm=args.init_from is not None)  # fmt: skip
@@ -477,7 +484,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     def save_oracle(step: int, evaluation: dict, path: str) -> None:
         atomic_save(oracle_checkpoint(sac, args, step, evaluation), path)
 
-    outcome = Outcome.from_args(args)
+    outcome, kwargs = Outcome.from_args(args), env_kwargs(args.reward_dist_weight)
     selection = Selection(run_dir, outcome)
     obs, _ = env.reset(seed=args.seed + start_step)  # random starts: seed once, then the env RNG runs on
     obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
@@ -517,8 +524,8 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
             writer.add_scalar("losses/ent_coef", sac.log_ent_coef.exp().item(), step)
             writer.add_scalar("charts/SPS", (step - step_last) / max(time.time() - t_last, 1e-9), step)
         if evaluated := step % args.eval_frequency == 0 or step == args.total_timesteps:
-            last_eval = evaluate(sac.actor, gym.make(args.env_id), args.eval_episodes, SELECTION_EVAL_SEED, device,
-                                 outcome)  # fmt: skip
+            eval_env = gym.make(args.env_id, **kwargs)
+            last_eval = evaluate(sac.actor, eval_env, args.eval_episodes, SELECTION_EVAL_SEED, device, outcome)
             selection.offer(last_eval, step, save_oracle, writer)
         if step % report_every == 0 or evaluated:
             print_progress(step, start_step, args.total_timesteps, t0, last_eval, selection)
@@ -545,8 +552,8 @@ def write_oracle(
     best = torch.load(selection.path, weights_only=True, map_location="cpu")
     sac.actor.load_state_dict(best["actor_state_dict"])
     sac.qf.load_state_dict(best["qf_state_dict"])
-    final = evaluate(sac.actor, gym.make(args.env_id), args.final_eval_episodes, FINAL_EVAL_SEED, device,
-                     Outcome.from_args(args))  # fmt: skip
+    env = gym.make(args.env_id, **env_kwargs(args.reward_dist_weight))
+    final = evaluate(sac.actor, env, args.final_eval_episodes, FINAL_EVAL_SEED, device, Outcome.from_args(args))
     chosen = best["evaluation"]
     print(f"[oracle] best evaluation at step {best['training_steps']}: success rate {chosen['success_rate']:.2f}, "
           f"final distance {chosen['final_distance']:.4f} over {chosen['episodes']:.0f} episodes; held-out eval over "
@@ -771,6 +778,11 @@ def check_env(args: Args) -> None:
         raise InputError(f"--env-id {args.env_id}: Gymnasium cannot make it ({first}); mazes: {', '.join(MAZE_IDS)}"
                          ) from None  # fmt: skip
     obs_space, act_space = env.observation_space, env.action_space
+    if args.reward_dist_weight is not None:
+        try:
+            gym.make(args.env_id, **env_kwargs(args.reward_dist_weight)).close()
+        except TypeError:
+            raise InputError(f"--reward-dist-weight: {args.env_id} has no reward_dist_weight (Pusher-v5 has)") from None
     if not isinstance(act_space, gym.spaces.Box):
         raise InputError(f"--env-id {args.env_id}: its actions are {type(act_space).__name__}, not continuous (Box)")
     if not isinstance(obs_space, gym.spaces.Box) or len(obs_space.shape) != 1:
@@ -826,6 +838,7 @@ def oracle_checkpoint(sac: SAC, args: Args, step: int, evaluation: dict) -> dict
             "qf_state_dict": {k: v.detach().cpu().clone() for k, v in sac.qf.state_dict().items()},
             "training_steps": int(step), "training_seed": args.seed, "random_starts": True,
             "bf16": bool(args.bf16), "num_threads": int(args.num_threads),
+            "reward_dist_weight": args.reward_dist_weight,
             "evaluation": {k: float(v) for k, v in evaluation.items()}}  # fmt: skip
 
 
