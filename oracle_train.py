@@ -103,8 +103,9 @@ class Args:
     env_id: str = "Pusher-v5"
     """Pusher-v5, Pusher-v4 (where mujoco<3 is installed), any continuous-action Gymnasium env (SAC), or a maze id"""
     reward_dist_weight: Annotated[float | None, POSITIVE] = None
-    """the weight of the object-to-goal distance in the env reward (Pusher-v5's reward_dist_weight; None: the env's,
-    1): the teacher's Q then values that reward (docs/protocol.md); success stays a final distance"""
+    """the weight of the object-to-goal distance in the training env's reward (Pusher-v5's reward_dist_weight; None:
+    the env's, 1): the teacher's Q then values that reward (docs/protocol.md). The evaluations that choose and judge
+    the teacher run the env's own reward, so success stays a final distance below --success-distance"""
     success_distance: Annotated[float, POSITIVE] = 0.08
     """an evaluation episode succeeds if its final distance |info[success_info_key]| is below this"""
     success_info_key: str = "reward_dist"
@@ -484,7 +485,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     def save_oracle(step: int, evaluation: dict, path: str) -> None:
         atomic_save(oracle_checkpoint(sac, args, step, evaluation), path)
 
-    outcome, kwargs = Outcome.from_args(args), env_kwargs(args.reward_dist_weight)
+    outcome = Outcome.from_args(args)  # on the env's own reward: info["reward_dist"] is weighted
     selection = Selection(run_dir, outcome)
     obs, _ = env.reset(seed=args.seed + start_step)  # random starts: seed once, then the env RNG runs on
     obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
@@ -506,7 +507,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
         if terminated or truncated:
             writer.add_scalar("charts/episodic_return", ep_return, global_step)
             writer.add_scalar("charts/episodic_length", ep_length, global_step)
-            if not math.isnan(distance := outcome(info, ep_return)[0]):
+            if not math.isnan(distance := outcome(info, ep_return)[0] / (args.reward_dist_weight or 1.0)):
                 writer.add_scalar("charts/final_distance", distance, global_step)
             ep_return, ep_length = 0.0, 0
             next_obs_t = torch.as_tensor(env.reset()[0], dtype=torch.float32, device=device)
@@ -524,8 +525,8 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
             writer.add_scalar("losses/ent_coef", sac.log_ent_coef.exp().item(), step)
             writer.add_scalar("charts/SPS", (step - step_last) / max(time.time() - t_last, 1e-9), step)
         if evaluated := step % args.eval_frequency == 0 or step == args.total_timesteps:
-            eval_env = gym.make(args.env_id, **kwargs)
-            last_eval = evaluate(sac.actor, eval_env, args.eval_episodes, SELECTION_EVAL_SEED, device, outcome)
+            last_eval = evaluate(sac.actor, gym.make(args.env_id), args.eval_episodes, SELECTION_EVAL_SEED, device,
+                                 outcome)  # fmt: skip
             selection.offer(last_eval, step, save_oracle, writer)
         if step % report_every == 0 or evaluated:
             print_progress(step, start_step, args.total_timesteps, t0, last_eval, selection)
@@ -552,8 +553,8 @@ def write_oracle(
     best = torch.load(selection.path, weights_only=True, map_location="cpu")
     sac.actor.load_state_dict(best["actor_state_dict"])
     sac.qf.load_state_dict(best["qf_state_dict"])
-    env = gym.make(args.env_id, **env_kwargs(args.reward_dist_weight))
-    final = evaluate(sac.actor, env, args.final_eval_episodes, FINAL_EVAL_SEED, device, Outcome.from_args(args))
+    final = evaluate(sac.actor, gym.make(args.env_id), args.final_eval_episodes, FINAL_EVAL_SEED, device,
+                     Outcome.from_args(args))  # fmt: skip
     chosen = best["evaluation"]
     print(f"[oracle] best evaluation at step {best['training_steps']}: success rate {chosen['success_rate']:.2f}, "
           f"final distance {chosen['final_distance']:.4f} over {chosen['episodes']:.0f} episodes; held-out eval over "

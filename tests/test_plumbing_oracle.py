@@ -12,6 +12,7 @@ import subprocess
 import sys
 import uuid
 
+import numpy as np
 import pytest
 import torch
 
@@ -286,3 +287,20 @@ def test_a_warm_start_that_does_not_fit_is_refused_in_one_line(oracle, tmp_path)
     result = oracle("--env-id", "Pusher-v5", "--init-from", reacher)
     assert result.returncode == 2 and "its networks are" in result.stderr and "Traceback" not in result.stderr
     assert not list(tmp_path.iterdir())
+
+
+def test_reward_dist_weight_reaches_the_env_and_the_checkpoint_and_is_refused_elsewhere(tmp_path, monkeypatch):
+    with pytest.raises(ot.InputError, match="--reward-dist-weight: InvertedPendulum-v5 has no reward_dist_weight"):
+        ot.check_args(ot.Args(env_id="InvertedPendulum-v5", reward_dist_weight=3.0, success_return=0.0))
+    env = ot.make_env("Pusher-v5", 1, reward_dist_weight=3.0)
+    env.reset(seed=0)
+    _, reward, _, _, info = env.step(env.action_space.sample())
+    assert reward == pytest.approx(info["reward_dist"] + info["reward_near"] + info["reward_ctrl"])
+    plain = ot.make_env("Pusher-v5", 1)
+    plain.reset(seed=0)
+    assert info["reward_dist"] == pytest.approx(3.0 * plain.step(np.zeros(7))[4]["reward_dist"], rel=0.05)
+    monkeypatch.chdir(tmp_path)
+    ot.train_sac(ot.Args(env_id="Pusher-v5", total_timesteps=200, learning_starts=100, batch_size=32, hidden_size=16,
+                         eval_frequency=200, eval_episodes=1, final_eval_episodes=1, output_path="o.pt",
+                         reward_dist_weight=3.0))  # fmt: skip
+    assert torch.load("o.pt", weights_only=True)["reward_dist_weight"] == 3.0
