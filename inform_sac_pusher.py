@@ -1452,6 +1452,8 @@ def check_args(args: Args) -> None:
             )
             raise InputError(f"--{f.name.replace('_', '-')} must be {must}, got {value}")
     check_run_name(args.env_id, args.exp_name, args.seed)
+    if args.num_threads > (cpus := os.cpu_count() or 1):  # torch segfaults on absurd counts
+        raise InputError(f"--num-threads {args.num_threads} is more than this machine's {cpus} CPUs")
     if args.track and importlib.util.find_spec("wandb") is None:
         raise InputError("--track needs Weights & Biases: `pip install wandb`, or run without --track")
     if args.env_id == "Pusher-v4" and mujoco_major() >= 3:

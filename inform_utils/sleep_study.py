@@ -23,6 +23,7 @@ columns are the greedy path from S, the held-out start cells and all 29 cells.
 import glob
 import json
 import os
+import re
 import shutil
 import statistics
 import subprocess
@@ -535,6 +536,9 @@ if __name__ == "__main__":
     argv = sys.argv[1:]
     extra = argv[argv.index("--") + 1 :] if "--" in argv else []  # flags after -- go to every night
     args = tyro.cli(Args, args=argv[: argv.index("--")] if "--" in argv else argv)
+    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._+=-]{0,99}", args.campaign):  # one folder under results/
+        sys.exit(f"error: --campaign {args.campaign[:100]!r}: one folder name under {args.results_dir}/ (letters, "
+                 "digits and ._+=-, no / or ..)")  # fmt: skip
     study = STUDIES[args.script]
     variants = args.variants or list(study.variants)
     unknown = [v for v in variants if v not in study.variants]
