@@ -35,6 +35,7 @@ import json
 import math
 import os
 import random
+import re
 import shutil
 import signal
 import sys
@@ -695,6 +696,7 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, sleep=None, mak
     try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
         run_dir = make_run_dir(f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}")
         print(f"run directory: {run_dir}", flush=True)  # only now: bad input was refused, nothing half-written is left
+        mujoco_log_in(run_dir)
         StopSignals.check()  # a stop while starting ends here, with a summary in the run directory
         random.seed(args.seed)
         np.random.seed(args.seed)
@@ -1498,6 +1500,25 @@ def check_env(args: Args) -> None:
                 )
     finally:
         env.close()
+
+
+def mujoco_log_in(run_dir: str) -> None:
+    """MuJoCo's warnings (an unstable simulation, say) into run_dir/MUJOCO_LOG.TXT, each kind said once on stderr: left
+    to itself, MuJoCo writes MUJOCO_LOG.TXT into the working directory, outside the run."""
+    import mujoco
+
+    if not hasattr(mujoco, "set_mju_user_warning"):  # an older MuJoCo: its default stays
+        return
+    said = set()
+
+    def warning(message: str) -> None:
+        with open(os.path.join(run_dir, "MUJOCO_LOG.TXT"), "a") as f:
+            f.write(message.rstrip() + "\n")
+        if (kind := re.sub(r"[-+\d.e]+", "#", message)) not in said:
+            said.add(kind)
+            say(f"MuJoCo: {message.strip()} (all of them in {run_dir}/MUJOCO_LOG.TXT)", sys.stderr)
+
+    mujoco.set_mju_user_warning(warning)
 
 
 def mujoco_major() -> int:

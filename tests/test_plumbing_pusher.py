@@ -212,3 +212,27 @@ def test_track_stops_within_two_seconds_of_a_signal(tmp_path):
     assert proc.returncode == 143 and took < 2.0, (proc.returncode, took)
     _, summary = summary_of(tmp_path)
     assert summary["status"] == "interrupted" and summary["signal"] == "SIGTERM"
+
+
+def test_mujocos_warnings_go_to_the_run_directory_not_the_working_directory(tmp_path, monkeypatch, capsys):
+    """An unstable simulation (a diverging TAMER drives it there) makes MuJoCo warn: by default into
+    ./MUJOCO_LOG.TXT, the repository when run from it. Here into the run's own MUJOCO_LOG.TXT, said once on stderr."""
+    import gymnasium as gym
+    import mujoco
+
+    monkeypatch.chdir(tmp_path)
+    os.makedirs("runs/r")
+    previous = mujoco.get_mju_user_warning()
+    try:
+        isp.mujoco_log_in("runs/r")
+        env = gym.make("Pusher-v5")
+        env.reset(seed=0)
+        env.unwrapped.data.qvel[:] = 1e30
+        for _ in range(3):
+            env.unwrapped.do_simulation([0.0] * 7, 1)
+    finally:
+        mujoco.set_mju_user_warning(previous)
+    assert sorted(os.listdir(tmp_path)) == ["runs"] and os.listdir("runs/r") == ["MUJOCO_LOG.TXT"]
+    assert "The simulation is unstable" in open("runs/r/MUJOCO_LOG.TXT").read()
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith("MuJoCo: Nan, Inf or huge value") and "runs/r/MUJOCO_LOG.TXT" in line
