@@ -37,6 +37,11 @@ import zipfile
 from dataclasses import dataclass, fields
 from typing import Annotated, Literal
 
+# the signals that stop a run, which then saves what finished: Ctrl-C, kill and Slurm (SIGTERM), a closed terminal
+# (SIGHUP), Ctrl-\ (SIGQUIT), a cluster's CPU-time limit (SIGXCPU, before its SIGKILL) and the user signals
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT, signal.SIGXCPU, signal.SIGUSR1,
+                signal.SIGUSR2)  # fmt: skip
+
 
 def stopped_while_starting(signum, frame):
     """A stop before the run directory exists (torch & co. take seconds to load): one line, nothing to save."""
@@ -46,7 +51,7 @@ def stopped_while_starting(signum, frame):
 
 
 if __name__ == "__main__":  # before the slow imports, so that no stop ever ends in a traceback
-    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+    for sig in STOP_SIGNALS:
         if signal.getsignal(sig) is not signal.SIG_IGN:  # an ignored SIGINT (nohup, `&`) stays ignored
             signal.signal(sig, stopped_while_starting)
 
@@ -1269,7 +1274,7 @@ class StopSignals:
     def __init__(self):
         self.received, self.raised, self.finished = [], False, False
         self.waiting_for_input = self.broken_pipe = False
-        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        for sig in STOP_SIGNALS:
             if signal.getsignal(sig) is not signal.SIG_IGN:
                 signal.signal(sig, self.handler)
         StopSignals.current = self

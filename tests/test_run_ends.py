@@ -107,6 +107,19 @@ def test_sighup_in_each_maze_phase(tmp_path, cmd, phase):
     assert_stopped(tmp_path, "SIGHUP", {phase})
 
 
+@pytest.mark.parametrize("sig", [signal.SIGQUIT, signal.SIGXCPU, signal.SIGUSR1], ids=lambda s: s.name)
+def test_the_other_catchable_stops_save_what_finished(tmp_path, sig):
+    """Ctrl-\\ (SIGQUIT), a cluster's CPU-time limit (SIGXCPU, `ulimit -t`) and SIGUSR1 killed a run with no
+    summary; now they stop it as SIGTERM does."""
+    child = Child([sys.executable, *MAZE_TAMER], tmp_path)
+    child.wait_for_line("[tamer]")
+    child.proc.send_signal(sig)
+    returncode, _, stderr = child.finish(timeout=60)
+    assert returncode == 128 + sig, (returncode, stderr)
+    assert_clean(stderr)
+    assert_stopped(tmp_path, sig.name, {"tamer"})
+
+
 @pytest.mark.parametrize("sig", SIGNALS, ids=lambda s: s.name)
 def test_a_stop_in_the_pusher_final_evaluation(tmp_path, sig):
     """The Pusher's last phase (final evaluation and the obstacle test) is long enough to be hit for sure."""
