@@ -1325,7 +1325,8 @@ def say(text: str, file=None) -> None:  # print; a dead reader (a broken pipe) i
 
 def check_run_name(env_id: str, exp_name: str, seed: int) -> None:  # one plain, short directory name inside runs/
     name = f"{env_id}__{exp_name}__{seed}__{int(time.time())}_99.tmp"  # the longest a run's files get
-    if not exp_name or exp_name in (".", "..") or any(c in name for c in "/\\\0") or len(name.encode()) > 255:
+    plain = exp_name.isprintable() and not any(c in name for c in "/\\")  # no newline, no separator, no NUL
+    if not exp_name or exp_name in (".", "..") or not plain or len(name.encode()) > 255:
         raise InputError(f"--exp-name {exp_name!r}: a run name must be one short directory name inside runs/")
 
 

@@ -758,7 +758,8 @@ def check_args(args: Args) -> None:
     if args.maze_dqn_learning_starts >= args.maze_dqn_timesteps:
         raise InputError(f"--maze-dqn-learning-starts {args.maze_dqn_learning_starts} leaves no step of "
                          f"--maze-dqn-timesteps {args.maze_dqn_timesteps} to learn in")  # fmt: skip
-    if not args.exp_name or any(c in args.exp_name for c in "/\\\0") or args.exp_name in (".", ".."):
+    if not args.exp_name or any(c in args.exp_name for c in "/\\") or not args.exp_name.isprintable() or \
+            args.exp_name in (".", ".."):  # fmt: skip
         raise InputError(f"--exp-name {args.exp_name!r} must name one directory under runs/ (no '/', not '..')")
     if len(run_name(args).encode()) > 240:  # a file name has at most 255 bytes; room for new_run_dir's suffix
         raise InputError(f"--exp-name is too long: the run directory's name would be {len(run_name(args))} characters")

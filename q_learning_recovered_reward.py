@@ -619,6 +619,9 @@ def check_args(args: Args) -> None:
             raise ValueError(f"--{name.replace('_', '-')} must be a positive integer, got {getattr(args, name)}")
     if args.seed < 0:
         raise ValueError(f"--seed must be >= 0, got {args.seed}")
+    name = args.exp_name
+    if not name or name in (".", "..") or not name.isprintable() or any(c in name for c in "/\\") or len(name) > 150:
+        raise ValueError(f"--exp-name {name[:160]!r}: a run name must be one short directory name inside runs/")
     if not 0.0 < args.alpha <= 1.0:
         raise ValueError(f"--alpha must be in (0, 1], got {args.alpha}")
     if not 0.0 <= args.gamma < 1.0:
