@@ -7,8 +7,10 @@ The standard library, not a server package (Flask, aiohttp): six routes and long
 new pin is needed to run it.
 Safe by default: it listens on 127.0.0.1 unless told otherwise; the printed address carries a random token and a
 request without it gets 403; only the routes below exist (any other path: 404) and no part of a request reaches the
-file system. One person per run: the first browser session to load the page teaches (a session cookie), any later
-one watches read-only.
+file system. One person per run, by a session cookie: loading the page takes no role (a `curl` of the address, a link
+preview or a prefetch teaches nothing); the first session to act (answer, or end the day) teaches, any other watches
+read-only. If every page of the teaching session goes silent for `takeover_after` seconds (no long poll open: a
+crashed browser, a closed lid), another page holding the token may take over by acting; nothing answered is lost.
 
     GET  /            the page
     GET  /state       the page's state as JSON; ?since=VERSION waits (up to 10 s) until it changes (long polling)
@@ -44,6 +46,7 @@ import json
 import os
 import re
 import secrets
+import select
 import socket
 import struct
 import threading
@@ -184,6 +187,7 @@ class BrowserTeacher:
         close_grace: float = 5.0,
         linger: float = 5.0,
         quiet: bool = False,
+        takeover_after: float = 5.0,
     ):
         if task not in TASKS:
             raise ValueError(f"task must be one of {TASKS}, got {task!r}")
@@ -198,6 +202,7 @@ class BrowserTeacher:
         self.delay = (float(delay[0]), float(delay[1]))
         self.close_grace = close_grace
         self.linger = linger
+        self.takeover_after = takeover_after
         self.token = secrets.token_urlsafe(24)
         self.run_id = hashlib.sha256(self.token.encode()).hexdigest()[:12]  # names the cookie and the page's storage
         self.cookie = f"inform_{self.run_id}"
@@ -207,8 +212,8 @@ class BrowserTeacher:
         self._started = time.monotonic()
         self._closed = self._closing = False
         self._sessions: set[str] = set()
-        self._owner: str | None = None
-        self._pages: dict[str, float] = {}  # the person's pages (one a load of the page): when each was last heard
+        self._owner: str | None = None  # the session that teaches: the first to act, or one that took over
+        self._pages: dict[str, float] = {}  # the owner's pages (one a load of the page): when each was last heard
         self._pages_gone: set[str] = set()  # the pages that said goodbye (closed, or reloaded)
         self._bye_at: float | None = None
         self._step: int | None = None
@@ -309,7 +314,7 @@ class BrowserTeacher:
         """Whether the person's page has opened (or the day ended), waiting at most `timeout` s for it: a stream
         starts when someone watches. Short waits in a loop let the caller's signal handling run between them."""
         with self._cond:
-            return self._cond.wait_for(lambda: self._owner is not None or self.ended is not None, timeout)
+            return self._cond.wait_for(lambda: bool(self._sessions) or self.ended is not None, timeout)
 
     def answers(self) -> list[Answer]:
         """The streamed answers that came since the last call, oldest first."""
@@ -462,6 +467,7 @@ class BrowserTeacher:
             "version": self._version,
             "mode": "closed" if self._closed else self._mode,
             "role": role,
+            "takeover": role == "teacher" and self._owner is not None and self._owner_silent(),
             "task": self.task,
             "participant": self.participant,
             "step": self._step,
@@ -483,10 +489,20 @@ class BrowserTeacher:
             "pace": self.pace,
         }
 
-    def _wait_state(self, since: int | None, role: str) -> dict:
+    def _wait_state(self, since: int | None, role: str, session, page, connected) -> dict:
+        """The state once it differs from version `since` (at most LONG_POLL_S later). While it waits, an open poll
+        of the owner's page keeps it heard; a poll whose browser went away ends at once (`connected()` says so)."""
         with self._cond:
-            if since is not None:
-                self._cond.wait_for(lambda: self._version != since or self._closed, LONG_POLL_S)
+            deadline = time.monotonic() + LONG_POLL_S
+            while since is not None and self._version == since and not self._closed:
+                if (left := deadline - time.monotonic()) <= 0 or not connected():
+                    break
+                if (role == "teacher") != self._may_teach(session):  # the owner went silent: say so at once
+                    break
+                self._cond.wait(min(left, 0.5))
+                if session is not None and session == self._owner and page is not None:
+                    self._pages[page] = time.monotonic()
+            role = "teacher" if role == "teacher" and self._may_teach(session) else "watcher"  # it may have changed
             if role == "teacher":
                 self._owner_version = self._version
                 self._cond.notify_all()  # close() may wait for this
@@ -576,17 +592,32 @@ class BrowserTeacher:
                 return None, None
             session = secrets.token_urlsafe(18)
             self._sessions.add(session)
-            if self._owner is None:
-                self._owner = session
             return session, session
 
-    def _role(self, session: str | None, page: str | None) -> str:
+    def _owner_silent(self) -> bool:
+        now = time.monotonic()
+        return not any(now - t < self.takeover_after for p, t in self._pages.items() if p not in self._pages_gone)
+
+    def _may_teach(self, session: str | None) -> bool:
+        """A session of this run teaches if it owns the role, if nobody has acted yet, or if the owner went silent."""
+        return session in self._sessions and (self._owner in (None, session) or self._owner_silent())
+
+    def _role(self, session: str | None, page: str | None, act: bool = False) -> str:
+        """ "teacher" or "watcher" for one request; `act` (an answer, the end of the day): a session that may teach
+        takes the role, and a takeover is said on every page and in answers.jsonl."""
         with self._cond:
-            if session is not None and session == self._owner:
-                if page is not None:
-                    self._pages[page] = time.monotonic()
-                return "teacher"
-            return "watcher"
+            if not self._may_teach(session):
+                return "watcher"
+            if act and session != self._owner:
+                if self._owner is not None:
+                    self._message = "Another page took over teaching: the page that taught had gone silent."
+                    self._record({"event": "takeover", "step": self._step, "answers": sum(self._counts.values())})
+                    self._pages.clear()
+                    self._changed()
+                self._owner = session
+            if session == self._owner and page is not None:
+                self._pages[page] = time.monotonic()
+            return "teacher"
 
 
 class _Server(ThreadingHTTPServer):
@@ -638,8 +669,18 @@ class _Handler(BaseHTTPRequestHandler):
             return self.reply(405, b"405\n", "text/plain", {"Allow": allowed})
         session, new = self.teacher._session(self.headers.get("Cookie"), make=path == "/")
         page = query.get("page", [""])[0]
-        role = self.teacher._role(session, page if NONCE.fullmatch(page) else None)
+        page = page if NONCE.fullmatch(page) else None
+        role = self.teacher._role(session, page, act=path in ("/answer", "/end"))
+        self.session, self.page_id = session, page
         handle(query, role, new)
+
+    def connected(self) -> bool:
+        """Whether the client still holds the connection: a long poll's socket reads as empty once it has gone."""
+        try:
+            readable, _, _ = select.select([self.connection], [], [], 0)
+            return not readable or bool(self.connection.recv(1, socket.MSG_PEEK))
+        except OSError:
+            return False
 
     def reply(self, status: int, body: bytes, content_type: str, headers: dict | None = None):
         try:
@@ -685,7 +726,7 @@ class _Handler(BaseHTTPRequestHandler):
     def state(self, query, role, new_session):
         since = query.get("since", [""])[0]
         since = int(since) if since.lstrip("-").isdigit() and len(since) < 12 else None
-        self.reply_json(200, self.teacher._wait_state(since, role))
+        self.reply_json(200, self.teacher._wait_state(since, role, self.session, self.page_id, self.connected))
 
     def frame(self, query, role, new_session):
         seq, png = self.teacher._png()
@@ -716,8 +757,8 @@ class _Handler(BaseHTTPRequestHandler):
 
     def bye(self, query, role, new_session):
         page = query.get("page", [""])[0]
-        if role == "teacher" and NONCE.fullmatch(page):
-            with self.teacher._cond:
+        with self.teacher._cond:  # only the teaching session's pages: closing a page that never acted ends nothing
+            if role == "teacher" and NONCE.fullmatch(page) and self.session == self.teacher._owner:
                 self.teacher._pages_gone.add(page)
                 self.teacher._bye_at = time.monotonic()
         self.reply(204, b"", "text/plain")
@@ -869,6 +910,7 @@ function render() {
   if (gone) { note = "The run has finished: this page is no longer served."; cls = "over"; }
   else if (offline) { note = "Reconnecting… your answers are kept, and sent once it is back."; cls = "offline"; }
   else if (s.role !== "teacher") { note = "You are watching read-only: another page teaches this run."; cls = "watch"; }
+  else if (s.takeover) { note = "The page that taught has gone silent: answering here takes over."; cls = "watch"; }
   const banner = $("banner");
   banner.hidden = !note;
   banner.className = "banner " + cls;

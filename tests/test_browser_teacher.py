@@ -153,7 +153,9 @@ def wait_until(condition, what: str, timeout: float = WAIT_S):
 def teacher(tmp_path):
     """A page served to urllib sessions, which do not long-poll: close() need not wait for them (linger 0)."""
     run_dir = str(tmp_path / "run")
-    with BrowserTeacher(run_dir, participant="P07", budget=5, quiet=True, close_grace=0.3, linger=0) as page:
+    # urllib sessions are heard only while they request: a teacher silent for a minute could be taken over
+    with BrowserTeacher(run_dir, participant="P07", budget=5, quiet=True, close_grace=0.3, linger=0,
+                        takeover_after=60.0) as page:  # fmt: skip
         yield page
 
 
@@ -231,19 +233,57 @@ def test_answers_reach_the_loop_and_answers_jsonl(teacher):
     assert (state["answers"], state["yes"], state["no"], state["none"], state["budget"]) == (3, 1, 1, 1, 5)
 
 
-def test_a_second_session_watches_read_only(teacher):
-    loop = Loop(teacher, moves=1)
-    person, watcher, stranger = Session(teacher), Session(teacher), Session(teacher)
-    assert person.load() == 200 and watcher.load() == 200  # the first session to load the page teaches
-    assert person.state()["role"] == "teacher"
-    assert watcher.open_question(1)["role"] == "watcher" and stranger.state()["role"] == "watcher"
-    assert watcher.answer("yes", 1, "w1")[0] == 403
-    assert stranger.answer("yes", 1, "s1")[0] == 403  # no cookie at all
-    assert watcher.request("POST", "/end", body={})[0] == 403 and teacher.ended is None
-    assert not lines(teacher)
+def test_loading_takes_no_role_the_first_session_to_act_teaches(teacher):
+    """A fetch of the address (a curl, a link preview, a prefetch) and a page that only loads take no role: the
+    first session to answer teaches and every other watches read-only; a request without the cookie never teaches."""
+    loop = Loop(teacher, moves=2)
+    curl, other, person, stranger = Session(teacher), Session(teacher), Session(teacher), Session(teacher)
+    assert curl.load() == 200 and other.load() == 200 and person.load() == 200  # the plain fetch came first
+    assert person.open_question(1)["role"] == "teacher" and other.state()["role"] == "teacher"  # nobody acted yet
+    assert stranger.state()["role"] == "watcher" and stranger.answer("yes", 1, "s1")[0] == 403  # no cookie at all
     assert person.answer("no", 1, "p1") == (200, {"taken": True})
+    assert other.open_question(2)["role"] == "watcher" and curl.state()["role"] == "watcher"
+    assert other.answer("yes", 2, "o2")[0] == 403 and other.request("POST", "/end", body={})[0] == 403
+    assert curl.request("POST", "/end", body={})[0] == 403 and teacher.ended is None
+    assert person.answer("yes", 2, "p2") == (200, {"taken": True})
     loop.join()
-    assert loop.returned == [0.0] and watcher.state()["answers"] == 1
+    assert loop.returned == [0.0, 1.0] and [row["answer"] for row in lines(teacher)] == ["no", "yes"]
+    assert other.state()["answers"] == 2 and not lines(teacher, "takeover")
+
+
+def test_a_silent_teacher_is_taken_over_and_nothing_answered_is_lost(tmp_path):
+    """The teaching session's pages heard last takeover_after ago (no request, no long poll open): another session
+    may teach, says so, and the takeover is in answers.jsonl beside every answer given before and after it. While
+    the owner is heard, nobody else may (its open long poll keeps it heard)."""
+    with BrowserTeacher(str(tmp_path / "run"), quiet=True, close_grace=0.3, linger=0, takeover_after=0.5) as teacher:
+        loop = Loop(teacher, moves=3)
+        first, second = Session(teacher), Session(teacher)
+        assert first.load() == 200 and second.load() == 200
+        first.open_question(1)
+        assert first.answer("yes", 1, "f1") == (200, {"taken": True})
+        with teacher._cond:  # the rule itself, at fixed times: heard now, then heard 0.6 s ago
+            (page,) = teacher._pages
+            teacher._pages[page] = time.monotonic()
+            assert teacher._may_teach(teacher._owner) and not teacher._may_teach(second_session(teacher, first))
+            teacher._pages[page] = time.monotonic() - 0.6
+            assert teacher._may_teach(second_session(teacher, first))
+        state = second.open_question(2)
+        assert state["role"] == "teacher" and state["takeover"] is True  # urllib's first session polls no more
+        assert second.answer("no", 2, "s2") == (200, {"taken": True})
+        state = second.open_question(3)
+        assert "took over" in state["message"] and state["takeover"] is False
+        assert second.answer("none", 3, "s3") == (200, {"taken": True})
+        loop.join()
+    assert loop.returned == [1.0, 0.0, None]
+    assert [row["answer"] for row in lines(teacher)] == ["yes", "no", "none"]
+    (takeover,) = lines(teacher, "takeover")
+    assert takeover["answers"] == 1 and takeover["step"] == 2
+
+
+def second_session(teacher: BrowserTeacher, first: Session) -> str:
+    """The session id of the other session than `first`'s (the owner's) among the teacher's two."""
+    (other,) = teacher._sessions - {teacher._owner}
+    return other
 
 
 def test_a_reload_or_a_retried_answer_loses_nothing(teacher):
@@ -526,13 +566,13 @@ def test_keys_a_watcher_and_a_closed_page(new_page, tmp_path):
         loop = Loop(teacher, moves=10)
         person = new_page(teacher.url)
         wait_for_question(person, 1)
+        person.keyboard.press("n")  # the first to act teaches
+        wait_for_question(person, 2)
         watcher = new_page(teacher.url)  # another browser session
-        watcher.wait_for_selector('#day[data-question="1"]')
+        watcher.wait_for_selector('#day[data-question="2"]')
         assert "read-only" in watcher.text_content("#banner") and watcher.is_disabled("#yes")
         assert watcher.is_disabled("#end")
         watcher.keyboard.press("y")
-        person.keyboard.press("n")
-        wait_for_question(person, 2)
         person.keyboard.press("y")
         wait_for_question(person, 3)
         person.keyboard.press(" ")
@@ -549,6 +589,37 @@ def test_keys_a_watcher_and_a_closed_page(new_page, tmp_path):
         assert teacher.ended == "page closed" and loop.returned[-1] is None
         watcher.wait_for_selector('#day[data-mode="ended"]')
     assert [row["answer"] for row in lines(teacher)] == ["no", "yes", "none", "yes"]
+
+
+def test_a_plain_fetch_takes_no_role_and_a_second_browser_takes_over_from_a_closed_one(new_page, tmp_path):
+    """The address fetched by plain HTTP first (a curl, a link preview), then a browser teaches; it goes away
+    without its goodbye (offline, then closed: its /bye never arrives), and a second browser with the token takes
+    over, answers and ends the day. Nothing answered is lost."""
+    with BrowserTeacher(str(tmp_path / "run"), quiet=True, close_grace=0.5, takeover_after=1.0) as teacher:
+        loop = Loop(teacher, moves=10)
+        with urllib.request.urlopen(teacher.url, timeout=WAIT_S) as reply:
+            assert reply.status == 200 and "Set-Cookie" in reply.headers
+        first = new_page(teacher.url)
+        wait_for_question(first, 1)
+        first.keyboard.press("y")
+        wait_for_question(first, 2)
+        second = new_page(teacher.url)
+        second.wait_for_selector('#day[data-question="2"]')
+        assert "read-only" in second.text_content("#banner") and second.is_disabled("#yes")
+        first.context.set_offline(True)  # the network gone (a lid closed, a crash): no goodbye reaches the server
+        first.context.close()
+        # its open long poll ends within LONG_POLL_S, then takeover_after passes: the second page may teach
+        second.wait_for_selector("#banner:has-text('takes over')", timeout=3 * WAIT_S * 1000)
+        wait_for_question(second, 2)
+        second.keyboard.press("n")
+        wait_for_question(second, 3)
+        second.wait_for_selector("#message:has-text('took over')")
+        second.click("#end")
+        second.wait_for_selector("#end:text('Click again')")
+        second.click("#end")
+        loop.join()
+        assert teacher.ended == "end of day" and loop.returned == [1.0, 0.0, None]
+    assert [row["answer"] for row in lines(teacher)] == ["yes", "no"] and len(lines(teacher, "takeover")) == 1
 
 
 def test_the_pusher_streams_and_answers_arrive_with_their_step(new_page, tmp_path):
