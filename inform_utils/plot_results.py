@@ -212,6 +212,8 @@ def fig6(runs: dict, path: str) -> None:
 def main(args: Args) -> None:
     if not os.path.isdir(args.runs_dir):
         raise ValueError(f"--runs-dir {args.runs_dir}: no such directory (run the experiments first, see README)")
+    if os.path.exists(args.out) and not os.path.isdir(args.out):
+        raise ValueError(f"--out {args.out}: exists and is not a directory (the figures go into a directory)")
     os.makedirs(args.out, exist_ok=True)
     written = []
     maze = completed_runs(args.runs_dir, f"KnoxStoneMaze-v0__{args.maze_exp}__*")

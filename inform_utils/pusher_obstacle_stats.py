@@ -219,6 +219,9 @@ if __name__ == "__main__":
         args = tyro.cli(Args)  # a malformed flag: tyro's own message, exit 2
         if not args.run_dirs:
             raise ValueError("pass at least one run directory")
+        for flag, path in (("--fig5a", args.fig5a), ("--output", args.output)):  # before any work: a file to write
+            if path is not None and (os.path.isdir(path) or not os.path.isdir(os.path.dirname(path) or ".")):
+                raise ValueError(f"{flag} {path}: must name a file in an existing directory")
         main(args)
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)

@@ -113,6 +113,10 @@ CASES = [
          "seed 1 given more than once"),
     case("obstacle-summary-without-args", "inform_utils/pusher_obstacle_stats.py", "pusher_run",
          "not a summary of inform_sac_pusher.py"),
+    case("obstacle-fig5a-a-directory", "inform_utils/pusher_obstacle_stats.py", "seed1_a --fig5a seed1_b",
+         "--fig5a seed1_b: must name a file"),
+    case("plot_results-out-an-existing-file", "inform_utils/plot_results.py", "--runs-dir seed1_a --out notes.txt",
+         "--out notes.txt: exists and is not a directory"),
 ]  # fmt: skip
 
 
