@@ -710,7 +710,7 @@ class _Handler(BaseHTTPRequestHandler):
             return None
         try:
             value = json.loads(self.rfile.read(length) or b"{}")
-        except (ValueError, UnicodeDecodeError):
+        except (ValueError, UnicodeDecodeError, RecursionError):  # a body nested thousands deep too: 400, not a drop
             return None
         return value if isinstance(value, dict) else None
 

@@ -233,6 +233,17 @@ def test_answers_reach_the_loop_and_answers_jsonl(teacher):
     assert (state["answers"], state["yes"], state["no"], state["none"], state["budget"]) == (3, 1, 1, 1, 5)
 
 
+def test_a_body_nested_thousands_deep_gets_a_400(teacher):
+    person = Session(teacher)
+    person.load()
+    deep = ("[" * 2000 + "]" * 2000).encode()  # within MAX_BODY; json.loads recurses past Python's limit
+    req = urllib.request.Request(f"{person.base}/answer?token={teacher.token}", data=deep, method="POST",
+                                 headers={"Content-Type": "application/json"})  # fmt: skip
+    with pytest.raises(urllib.error.HTTPError) as refused:
+        person.opener.open(req, timeout=WAIT_S)
+    assert refused.value.code == 400
+
+
 def test_loading_takes_no_role_the_first_session_to_act_teaches(teacher):
     """A fetch of the address (a curl, a link preview, a prefetch) and a page that only loads take no role: the
     first session to answer teaches and every other watches read-only; a request without the cookie never teaches."""
