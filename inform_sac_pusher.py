@@ -1143,25 +1143,34 @@ def video_camera() -> dict:
     }
 
 
+GL_HINT = "install EGL (Debian: apt-get install libegl1 libegl-mesa0) or OSMesa (libosmesa6, MUJOCO_GL=osmesa)"
+
+
 def check_video(env_id: str) -> None:
     """Before anything is written: pick the headless GL backend (egl when MUJOCO_GL is unset and there is no display)
     and render one frame; InputError, one line, if it cannot."""
     import warnings
 
-    if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
-        os.environ["MUJOCO_GL"] = "egl"
+    if not os.environ.get("MUJOCO_GL") and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+        os.environ["MUJOCO_GL"] = "egl"  # unset or empty, and no screen
+    if os.environ.get("MUJOCO_GL") not in (None, "egl", "osmesa", "glfw"):
+        raise InputError(f"--capture-video: MUJOCO_GL={os.environ['MUJOCO_GL']!r} is none of egl, osmesa, glfw")
     if importlib.util.find_spec("imageio_ffmpeg") is None:
         raise InputError("--capture-video writes mp4 with imageio-ffmpeg: pip install imageio-ffmpeg")
-    gl, frame = f"MUJOCO_GL={os.environ.get('MUJOCO_GL')}", None
-    with contextlib.suppress(Exception), warnings.catch_warnings():  # a failing backend warns, then raises
-        warnings.simplefilter("ignore")
-        env = make_env(env_id, 0, render_mode="rgb_array", width=16, height=16)
-        env.reset(seed=0)
-        frame = env.render()
-        env.close()
+    gl, frame, hook = f"MUJOCO_GL={os.environ.get('MUJOCO_GL')}", None, sys.unraisablehook
+    sys.unraisablehook = lambda unraisable: None  # a viewer that failed to start raises again as it is collected
+    try:
+        with contextlib.suppress(Exception), warnings.catch_warnings():  # a failing backend warns, then raises
+            warnings.simplefilter("ignore")
+            env = make_env(env_id, 0, render_mode="rgb_array", width=16, height=16)
+            env.reset(seed=0)
+            frame = env.render()
+            env.close()
+        gc.collect()
+    finally:
+        sys.unraisablehook = hook
     if not isinstance(frame, np.ndarray) or frame.shape != (16, 16, 3):
-        hint = "install EGL (Debian: apt-get install libegl1 libegl-mesa0) or OSMesa (libosmesa6, MUJOCO_GL=osmesa)"
-        raise InputError(f"--capture-video: MuJoCo cannot render with {gl}; {hint}")
+        raise InputError(f"--capture-video: MuJoCo cannot render with {gl}; {GL_HINT}")
 
 
 def video_env(env_id: str, seed: int, obstacles=None, size: int = VIDEO_SIZE) -> gym.Env:
@@ -1486,6 +1495,11 @@ def check_env(args: Args) -> None:
         env = gym.make(args.env_id)
     except Exception as e:  # unknown id, a missing extra (box2d, ...), a version that needs other packages
         first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
+        if os.environ.get("MUJOCO_GL") and re.search(
+            r"\bgl[A-Z]|OSMesa|EGL|GLFW|MUJOCO_GL", str(e)
+        ):  # the backend, not the id
+            raise InputError(f"MUJOCO_GL={os.environ['MUJOCO_GL']}: MuJoCo cannot load that GL backend ({first}); "
+                             f"{GL_HINT}, or unset MUJOCO_GL") from None  # fmt: skip
         raise InputError(f"--env-id {args.env_id}: Gymnasium cannot make it ({first})") from None
     try:
         obs_space, act_space, key = env.observation_space, env.action_space, args.success_info_key

@@ -189,6 +189,28 @@ def test_no_backend_is_one_line_and_leaves_nothing(tmp_path, script, flags):
     assert not os.path.exists(tmp_path / "runs") and os.listdir(tmp_path) == []
 
 
+@pytest.mark.parametrize(("gl", "phrase"), [("osmesa", "MUJOCO_GL=osmesa: MuJoCo cannot load that GL backend"),
+                                           ("bogus", "MUJOCO_GL=bogus: MuJoCo cannot load")])  # fmt: skip
+def test_a_gl_backend_that_cannot_load_is_named_not_the_env(tmp_path, gl, phrase):
+    """Without OSMesa installed (or with no such backend), the error names MUJOCO_GL and how to fix it, not --env-id."""
+    if gl == "osmesa" and glob.glob("/usr/lib/*/libOSMesa.so*"):
+        pytest.skip("OSMesa is installed here")
+    proc = run("inform_sac_pusher.py", tmp_path, "--oracle-path", SHIPPED, *TINY, env={**os.environ, "MUJOCO_GL": gl})
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1 and lines[0].startswith(f"error: {phrase}"), proc.stderr
+    assert os.listdir(tmp_path) == []
+
+
+def test_an_empty_mujoco_gl_is_unset_and_no_viewer_complains(headless, monkeypatch, capfd):
+    """MUJOCO_GL= (empty) printed eight lines of 'Exception ignored' from a viewer that never started: now it means
+    unset, and the headless default (egl) renders."""
+    monkeypatch.setenv("MUJOCO_GL", "")
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    isp.check_video("Pusher-v5")
+    assert os.environ["MUJOCO_GL"] == "egl" and "Exception ignored" not in capfd.readouterr().err
+
+
 def test_a_maze_episode_draws_to_gif(tmp_path):
     """The maze's own rgb_array frames, collected by Gymnasium's RenderCollection, as a GIF: one frame a step."""
     from PIL import Image, ImageSequence
