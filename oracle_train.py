@@ -679,9 +679,19 @@ def train_maze(args: Args) -> None:
 
 
 def main() -> None:
-    # Ctrl-C, SIGTERM (Slurm's cancel and time limit, kill) and SIGHUP (a closed terminal) stop training: recorded
-    # here, acted on by Stop.check() at the next loop head. An ignored signal stays ignored (nohup, `&`).
-    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+    # Ctrl-C, SIGTERM (Slurm's cancel and time limit, kill), SIGHUP (a closed terminal), Ctrl-\ (SIGQUIT), a CPU-time
+    # limit (SIGXCPU) and SIGUSR1/2 stop training: recorded here, acted on by Stop.check() at the next loop head. An
+    # ignored signal stays ignored (nohup, `&`).
+    stops = (
+        signal.SIGINT,
+        signal.SIGTERM,
+        signal.SIGHUP,
+        signal.SIGQUIT,
+        signal.SIGXCPU,
+        signal.SIGUSR1,
+        signal.SIGUSR2,
+    )
+    for sig in stops:
         if signal.getsignal(sig) is not signal.SIG_IGN:
             signal.signal(sig, lambda signum, frame: Stop.signals.append(signal.Signals(signum).name))
     args = tyro.cli(Args)
