@@ -1360,26 +1360,6 @@ def save_atomic(obj: dict, path: str) -> None:
             raise OSError(f"{path}: {' '.join(str(e).split())[-120:]}") from None
 
 
-def check_crc(path: str, where: str) -> None:
-    """torch.save writes a zip archive with a CRC-32 per member, which torch.load never checks: a flipped bit would be
-    used. InputError, one line, for an archive that is truncated or whose bytes changed since it was saved."""
-    try:
-        with zipfile.ZipFile(path) as archive:
-            damaged = archive.testzip()
-    except (zipfile.BadZipFile, OSError, EOFError) as e:
-        raise InputError(f"{where}: not a complete torch checkpoint, or a damaged one ({e})") from None
-    if damaged is not None:
-        raise InputError(f"{where}: damaged since it was saved ({damaged} fails its CRC-32 check); make it again")
-
-
-def strict_json(value):  # NaN and inf as null, at any depth (a metric this run does not have, e.g. no successes)
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: strict_json(v) for k, v in value.items()}
-    return [strict_json(v) for v in value] if isinstance(value, list | tuple) else value
-
-
 def write_json_atomic(path: str, data: dict) -> None:
     with atomic(path) as tmp, open(tmp, "w") as f:
         json.dump(strict_json(data), f, indent=2, allow_nan=False)
@@ -1417,6 +1397,26 @@ def end_run(args, summary, status, phase, run_dir, run_start, evaluator, closing
 
 
 # --- end of shared plumbing ---
+
+
+def strict_json(value):  # NaN and inf as null, at any depth (a metric this run does not have, e.g. no successes)
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: strict_json(v) for k, v in value.items()}
+    return [strict_json(v) for v in value] if isinstance(value, list | tuple) else value
+
+
+def check_crc(path: str, where: str) -> None:
+    """torch.save writes a zip archive with a CRC-32 per member, which torch.load never checks: a flipped bit would be
+    used. InputError, one line, for an archive that is truncated or whose bytes changed since it was saved."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            damaged = archive.testzip()
+    except Exception as e:  # a damaged archive fails in many ways (BadZipFile, EOFError, a garbled name)
+        raise InputError(f"{where}: not a complete torch checkpoint, or a damaged one ({e})") from None
+    if damaged is not None:
+        raise InputError(f"{where}: damaged since it was saved ({damaged} fails its CRC-32 check); make it again")
 
 
 if __name__ == "__main__":

@@ -13,10 +13,10 @@ through a web page.
 
 Imported by inform_utils/, the only names other code may use (a test holds it to them): Args, main, cli, evaluate,
 make_env, Teacher, oracle_q, oracle_feedback, linear_schedule, oracle_from_checkpoint, check_args, Evaluator,
-obstacle_test, obstacle_skipped, read_checkpoint, actor_from_checkpoint, check_video, video_env, mujoco_major,
-InputError, Outcome, object_xy, In, QEnsemble, Actor, iq_loss, actor_loss, tamer_loss, update_actor, soft_update,
-soft_value, recover_reward, sleep_recipe, sleep_batch, check_finite, StopSignals, Progress, HIDDEN_SIZE, TAU,
-SLEEP_GAMMA, TAMER_POLICY_LR, SLEEP_EVAL_FREQUENCY, PERIODIC_EVAL_EPISODES, LOG_FREQUENCY.
+obstacle_test, obstacle_skipped, read_checkpoint, check_crc, actor_from_checkpoint, check_video, video_env,
+mujoco_major, InputError, Outcome, object_xy, In, QEnsemble, Actor, iq_loss, actor_loss, tamer_loss, update_actor,
+soft_update, soft_value, recover_reward, sleep_recipe, sleep_batch, check_finite, StopSignals, Progress, HIDDEN_SIZE,
+TAU, SLEEP_GAMMA, TAMER_POLICY_LR, SLEEP_EVAL_FREQUENCY, PERIODIC_EVAL_EPISODES, LOG_FREQUENCY.
 
     python inform_sac_pusher.py --seed 1                            # Pusher-v5, the authors' budget
     python inform_sac_pusher.py --env-id Pusher-v4 --seed 1         # the paper's Pusher (needs mujoco==2.3.7)
@@ -1688,26 +1688,6 @@ def save_atomic(obj: dict, path: str) -> None:
             raise OSError(f"{path}: {' '.join(str(e).split())[-120:]}") from None
 
 
-def check_crc(path: str, where: str) -> None:
-    """torch.save writes a zip archive with a CRC-32 per member, which torch.load never checks: a flipped bit would be
-    used. InputError, one line, for an archive that is truncated or whose bytes changed since it was saved."""
-    try:
-        with zipfile.ZipFile(path) as archive:
-            damaged = archive.testzip()
-    except (zipfile.BadZipFile, OSError, EOFError) as e:
-        raise InputError(f"{where}: not a complete torch checkpoint, or a damaged one ({e})") from None
-    if damaged is not None:
-        raise InputError(f"{where}: damaged since it was saved ({damaged} fails its CRC-32 check); make it again")
-
-
-def strict_json(value):  # NaN and inf as null, at any depth (a metric this run does not have, e.g. no successes)
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: strict_json(v) for k, v in value.items()}
-    return [strict_json(v) for v in value] if isinstance(value, list | tuple) else value
-
-
 def write_json_atomic(path: str, data: dict) -> None:
     with atomic(path) as tmp, open(tmp, "w") as f:
         json.dump(strict_json(data), f, indent=2, allow_nan=False)
@@ -1745,6 +1725,26 @@ def end_run(args, summary, status, phase, run_dir, run_start, evaluator, closing
 
 
 # --- end of shared plumbing ---
+
+
+def strict_json(value):  # NaN and inf as null, at any depth (a metric this run does not have, e.g. no successes)
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: strict_json(v) for k, v in value.items()}
+    return [strict_json(v) for v in value] if isinstance(value, list | tuple) else value
+
+
+def check_crc(path: str, where: str) -> None:
+    """torch.save writes a zip archive with a CRC-32 per member, which torch.load never checks: a flipped bit would be
+    used. InputError, one line, for an archive that is truncated or whose bytes changed since it was saved."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            damaged = archive.testzip()
+    except Exception as e:  # a damaged archive fails in many ways (BadZipFile, EOFError, a garbled name)
+        raise InputError(f"{where}: not a complete torch checkpoint, or a damaged one ({e})") from None
+    if damaged is not None:
+        raise InputError(f"{where}: damaged since it was saved ({damaged} fails its CRC-32 check); make it again")
 
 
 if __name__ == "__main__":

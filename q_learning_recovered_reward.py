@@ -664,7 +664,7 @@ def load_checkpoint(path: str, what: str) -> dict:
     try:  # torch.load checks no CRC: a flipped bit would be used
         with zipfile.ZipFile(path) as archive:
             damaged = archive.testzip()
-    except (zipfile.BadZipFile, OSError, EOFError) as e:
+    except Exception as e:  # a damaged archive fails in many ways (BadZipFile, EOFError, a garbled name)
         damaged = f"its archive: {e}"
     if damaged is not None:
         raise ValueError(f"{what} {path} is damaged since it was saved ({damaged} fails its CRC-32 check)")
