@@ -1522,20 +1522,16 @@ def check_env(args: Args) -> None:
 
 
 def mujoco_log_in(run_dir: str) -> None:
-    """MuJoCo's warnings (an unstable simulation, say) into run_dir/MUJOCO_LOG.TXT, each kind said once on stderr: left
-    to itself, MuJoCo writes MUJOCO_LOG.TXT into the working directory, outside the run."""
+    """MuJoCo's warnings (an unstable simulation, say) into run_dir/MUJOCO_LOG.TXT: left to itself, MuJoCo prints them
+    and writes MUJOCO_LOG.TXT into the working directory, outside the run. The run's error line says what failed."""
     import mujoco
 
     if not hasattr(mujoco, "set_mju_user_warning"):  # an older MuJoCo: its default stays
         return
-    said = set()
 
     def warning(message: str) -> None:
         with open(os.path.join(run_dir, "MUJOCO_LOG.TXT"), "a") as f:
             f.write(message.rstrip() + "\n")
-        if (kind := re.sub(r"[-+\d.e]+", "#", message)) not in said:
-            said.add(kind)
-            say(f"MuJoCo: {message.strip()} (all of them in {run_dir}/MUJOCO_LOG.TXT)", sys.stderr)
 
     mujoco.set_mju_user_warning(warning)
 

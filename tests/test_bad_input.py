@@ -70,7 +70,7 @@ CASES = [
          "--maze-dqn-batch-size 128 is larger than --maze-dqn-timesteps 50"),
     case("oracle_train-resume-pickle-with-code", "oracle_train.py", "--resume evil.pt", "refused"),
     case("oracle_train-resume-random-bytes", "oracle_train.py", "--resume random.pt",
-         "random.pt: not a torch checkpoint"),
+         "random.pt: not a complete torch checkpoint"),
     case("gridworld-text-file-as-oracle", "inform_dqn_gridworld.py", "--oracle-path notes.txt",
          "notes.txt: not a torch checkpoint"),
     case("gridworld-pusher-oracle", "inform_dqn_gridworld.py", f"--oracle-path {shlex.quote(PUSHER_ORACLE)}",

@@ -189,15 +189,16 @@ def test_no_backend_is_one_line_and_leaves_nothing(tmp_path, script, flags):
     assert not os.path.exists(tmp_path / "runs") and os.listdir(tmp_path) == []
 
 
-@pytest.mark.parametrize(("gl", "phrase"), [("osmesa", "MUJOCO_GL=osmesa: MuJoCo cannot load that GL backend"),
-                                           ("bogus", "MUJOCO_GL=bogus: MuJoCo cannot load")])  # fmt: skip
-def test_a_gl_backend_that_cannot_load_is_named_not_the_env(tmp_path, gl, phrase):
+@pytest.mark.parametrize("gl", ["osmesa", "bogus"])
+def test_a_gl_backend_that_cannot_load_is_named_not_the_env(tmp_path, gl):
     """Without OSMesa installed (or with no such backend), the error names MUJOCO_GL and how to fix it, not --env-id."""
     if gl == "osmesa" and glob.glob("/usr/lib/*/libOSMesa.so*"):
         pytest.skip("OSMesa is installed here")
-    proc = run("inform_sac_pusher.py", tmp_path, "--oracle-path", SHIPPED, *TINY, env={**os.environ, "MUJOCO_GL": gl})
+    flags = ["--oracle-path", SHIPPED, *TINY, "--capture-video"]
+    proc = run("inform_sac_pusher.py", tmp_path, *flags, env={**os.environ, "MUJOCO_GL": gl})
     lines = proc.stderr.strip().splitlines()
-    assert proc.returncode == 2 and len(lines) == 1 and lines[0].startswith(f"error: {phrase}"), proc.stderr
+    assert proc.returncode == 2 and len(lines) == 1 and f"MUJOCO_GL={gl}" in lines[0], proc.stderr
+    assert "--env-id" not in lines[0] and (gl == "bogus" or "apt-get install" in lines[0]), lines[0]
     assert os.listdir(tmp_path) == []
 
 

@@ -215,8 +215,8 @@ def test_track_stops_within_two_seconds_of_a_signal(tmp_path):
 
 
 def test_mujocos_warnings_go_to_the_run_directory_not_the_working_directory(tmp_path, monkeypatch, capsys):
-    """An unstable simulation (a diverging TAMER drives it there) makes MuJoCo warn: by default into
-    ./MUJOCO_LOG.TXT, the repository when run from it. Here into the run's own MUJOCO_LOG.TXT, said once on stderr."""
+    """An unstable simulation (a diverging TAMER drives it there) makes MuJoCo warn: by default on stderr and into
+    ./MUJOCO_LOG.TXT, the repository when run from it. Here into the run's own MUJOCO_LOG.TXT only."""
     import gymnasium as gym
     import mujoco
 
@@ -234,5 +234,4 @@ def test_mujocos_warnings_go_to_the_run_directory_not_the_working_directory(tmp_
         mujoco.set_mju_user_warning(previous)
     assert sorted(os.listdir(tmp_path)) == ["runs"] and os.listdir("runs/r") == ["MUJOCO_LOG.TXT"]
     assert "The simulation is unstable" in open("runs/r/MUJOCO_LOG.TXT").read()
-    (line,) = capsys.readouterr().err.strip().splitlines()
-    assert line.startswith("MuJoCo: Nan, Inf or huge value") and "runs/r/MUJOCO_LOG.TXT" in line
+    assert capsys.readouterr().err == ""

@@ -178,7 +178,7 @@ def test_sleep_from_refuses_what_is_not_a_day(tmp_path):
     assert proc.returncode == 2 and proc.stderr.strip().count("\n") == 0 and "no day.pt" in proc.stderr
     (tmp_path / "empty" / "day.pt").write_bytes(b"not a checkpoint")
     proc = run(tmp_path, "--sleep-from", str(tmp_path / "empty"))
-    assert proc.returncode == 2 and "not a readable weights-only day" in proc.stderr
+    assert proc.returncode == 2 and "day.pt: not a complete torch checkpoint" in proc.stderr  # its archive is checked
     proc = run(tmp_path, "--sleep-from", str(tmp_path / "empty"), "--save-buffer")
     assert proc.returncode == 2
     assert not (tmp_path / "runs").exists()
