@@ -548,10 +548,13 @@ def test_malformed_flags_get_tyros_message(tmp_path, script, flags, phrase):
 def test_both_scripts_carry_the_same_networks_and_judge_episodes_alike():
     import inspect
 
+    import inform_dqn_gridworld
     import oracle_train
 
-    for name in ("BatchedLinear", "QEnsemble", "Actor", "soft_update", "Outcome"):
+    for name in ("BatchedLinear", "QEnsemble", "Actor", "soft_update", "Outcome", "check_crc"):
         assert inspect.getsource(getattr(isp, name)) == inspect.getsource(getattr(oracle_train, name)), name
+    for name in ("check_crc", "strict_json"):  # beside the shared plumbing: the maze's copy is the same code
+        assert inspect.getsource(getattr(isp, name)) == inspect.getsource(getattr(inform_dqn_gridworld, name)), name
 
 
 def test_both_scripts_train_the_same_oracle_and_load_each_others(tmp_path):

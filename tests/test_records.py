@@ -3,12 +3,12 @@ as the last file is written, each script says so in one line and exits 1: the IN
 the reward experiment (its agents, figure and summary), the oracle trainer (its checkpoint and report). A caller
 (run_seeds, Slurm, CI) then counts the run as failed; nothing half-written is left."""
 
-import contextlib
 import os
 import subprocess
 import sys
 
 import pytest
+from test_plumbing_maze import small_disk  # a tmpfs of the given options, or a skip without root
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 REWARD_RUN = os.path.join(REPO, "results", "maze_reward12", "KnoxStoneMaze-v0__reward12__1__1796039345")
@@ -31,17 +31,6 @@ def run(name: str, cwd) -> subprocess.CompletedProcess:
     script, *flags = COMMANDS[name]
     return subprocess.run([sys.executable, os.path.join(REPO, script), *flags], cwd=cwd, capture_output=True,
                           text=True, timeout=600)  # fmt: skip
-
-
-@contextlib.contextmanager
-def tmpfs(path, options: str):
-    path.mkdir()
-    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(path)]).returncode:
-        pytest.skip("needs root to mount a small tmpfs")
-    try:
-        yield path
-    finally:
-        subprocess.run(["umount", "-l", str(path)])
 
 
 def written(root) -> list[tuple[str, int]]:
@@ -70,7 +59,7 @@ def test_a_disk_out_of_inodes_at_the_last_file_is_no_completed_run(tmp_path, nam
     proc = run(name, reference)
     assert proc.returncode == 0, proc.stderr[-3000:]
     inodes = sum(len(dirs) + len(files) for _, dirs, files in os.walk(reference))
-    with tmpfs(tmp_path / "disk", f"size=50m,nr_inodes={inodes}") as disk:  # root + all but the last
+    with small_disk(tmp_path / "disk", f"size=50m,nr_inodes={inodes}") as disk:  # root + all but the last
         assert_no_record(run(name, disk), disk, name)
 
 
@@ -81,5 +70,5 @@ def test_the_reward_experiment_on_a_disk_that_fills_at_its_figure(tmp_path):
     assert run("reward", reference).returncode == 0
     pages = {os.path.basename(f).split(".")[0]: -(-size // 4096) for f, size in written(reference)}
     room = pages["events"] + pages["agents"] + pages["fig6"] // 2  # the figure is several times a page
-    with tmpfs(tmp_path / "disk", f"size={room * 4096}") as disk:
+    with small_disk(tmp_path / "disk", f"size={room * 4096}") as disk:
         assert_no_record(run("reward", disk), disk, "reward")
