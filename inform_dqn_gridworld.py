@@ -8,9 +8,8 @@ Gymnasium's toy-text tasks that carry their model (`--env-id FrozenLake-v1`, `Cl
 their id alone: exact Q* by value iteration on `env.unwrapped.P`, one-hot observations, and an episode succeeds if it
 ends on the task's goal (the terminal that earns its top reward); the maze's own tests are skipped there.
 
-Imported by inform_utils/, the only names other code may use (a test holds it to them): Args, Sleep, cli, main,
-check_args, Evaluator, StopSignals, Teacher, ReplayBuffer, tamer_loss, iq_loss, greedy_actions, load_q_network,
-InputError. inform_utils/evaluate_policy.py re-evaluates a saved network.
+inform_utils/ imports only the names that tests/test_surface.py declares for this script;
+inform_utils/evaluate_policy.py re-evaluates a saved network.
 
     python inform_dqn_gridworld.py --seed 1
     python inform_dqn_gridworld.py --teacher-noise 0.2 --teacher-delay 1 --credit-window 2   # a human-like teacher
@@ -28,6 +27,7 @@ import json
 import math
 import os
 import random
+import select
 import signal
 import sys
 import tempfile
@@ -179,13 +179,19 @@ class Args:
     """greedy episodes of each evaluation on a toy-text env, on fixed reset seeds (the maze's tests are one episode
     from each of their start cells)"""
 
+    def night_settings(self) -> dict:
+        """What the night's learner runs with (setting x from flag sleep_x)."""
+        return {"q_lr": self.sleep_q_lr, "temperature": self.sleep_temperature, "chi2_coef": self.sleep_chi2_coef}
+
     def sleep_learner(self, obs_dim: int, n_actions: int, h_net: nn.Module, device) -> "Sleep":
-        """The night's learner (the study module's Args returns its variants here)."""
-        return Sleep(obs_dim, n_actions, self.sleep_q_lr, self.sleep_temperature, self.sleep_chi2_coef, device)
+        """The night's learner (the study module's Args returns its variants here; only its sham uses H)."""
+        return Sleep(obs_dim, n_actions, device, **self.night_settings())
 
     def sleep_variant(self) -> str:
-        """The night in a line, for summary.json."""
-        return f"iq-learn temperature={self.sleep_temperature} steps={self.sleep_gradient_steps} seed={self.sleep_seed}"
+        """The night in a line, for summary.json: what it runs with."""
+        settings = {"gradient_steps": self.sleep_gradient_steps, "batch_size": self.sleep_batch_size,
+                    **self.night_settings(), "seed": self.sleep_seed}  # fmt: skip
+        return " ".join(f"{k}={v}" for k, v in settings.items())
 
 
 def make_env(env_id: str) -> gym.Env:
@@ -503,6 +509,7 @@ class HumanTeacher:
         self.refused = np.zeros((gridworld_env.N_CELLS, gridworld_env.N_ACTIONS))  # Enter answers per (cell, move)
         self.answers_to_goal = None  # answers given when the agent's own (greedy) way from S first reached G
         self.echo = page is None and not sys.stdin.isatty()  # piped answers are not echoed by a terminal: print them
+        self.unread = b""  # input read but not yet answered (a pipe can bring several answers at once)
         if page is not None:
             return
         say("You are the teacher. The agent A must reach G by the shortest path (19 steps from S).\nFor each move "
@@ -528,7 +535,7 @@ class HumanTeacher:
         while True:
             print("good move? [y / Enter / q] ", end="", flush=True)
             with StopSignals.waiting():  # Ctrl-C while you think stops the run at once
-                line = sys.stdin.readline()
+                line = self.read_line()
             answer = line.strip().lower() if line else "q"
             if self.echo:
                 say(answer or "(Enter)")
@@ -537,6 +544,20 @@ class HumanTeacher:
             if answer in ("y", ""):
                 return self.counted(cell, action, float(answer == "y"), h_oracle)
             say(f"{answer!r}? type y for +1, press Enter for no feedback, or type q to stop teaching")
+
+    def read_line(self) -> str:
+        """The next line of standard input ('' at its end), waited for in short slices: a stop signal is seen within
+        them even if the kernel handed it to another of our threads, which would not wake a blocking read."""
+        fd = sys.stdin.fileno()
+        while b"\n" not in self.unread:
+            StopSignals.check()
+            if select.select([fd], [], [], 0.25)[0]:
+                chunk = os.read(fd, 4096)
+                if not chunk:  # the end of the input
+                    break
+                self.unread += chunk
+        line, newline, self.unread = self.unread.partition(b"\n")
+        return (line + newline).decode(errors="replace")
 
     def ask_page(self, cell, action, step, maze, move, way, positives, successes, h_oracle) -> float | None:
         """The move on the web page; None once the day is over (End the day, or the page closed)."""
@@ -601,21 +622,22 @@ def draw_greedy_path(policy: np.ndarray, variant: str) -> str:
 
 class Sleep:
     """The night's learner: soft Q by IQ-Learn (Eq. 2) on replay rows, then expert rows; its target follows softly.
-    The study module (inform_utils/sleep_variants_maze.py) subclasses it for its controls and loss rows."""
+    The study module (inform_utils/sleep_variants_maze.py) subclasses it for its controls and loss rows: `loss` is
+    where a variant changes the night."""
 
     tag = "iq_loss"  # the loss's name in the logs
 
-    def __init__(self, obs_dim: int, n_actions: int, lr: float, temperature: float, chi2_coef: float, device):
+    def __init__(self, obs_dim: int, n_actions: int, device, *, q_lr: float, temperature: float, chi2_coef: float):
         self.q_net = QNetwork(obs_dim, n_actions).to(device)
         self.q_target = QNetwork(obs_dim, n_actions).to(device)
         self.q_target.load_state_dict(self.q_net.state_dict())
-        self.optimizer = torch.optim.Adam(self.q_net.parameters(), lr=lr, fused=True)
+        self.optimizer = torch.optim.Adam(self.q_net.parameters(), lr=q_lr, fused=True)
         self.gamma, self.temperature, self.chi2_coef = GAMMA, temperature, chi2_coef
 
-    def loss(self, obs, actions, next_obs, feedback, terminated, is_expert):
-        """The loss of one batch and its named terms."""
+    def loss(self, obs, actions, next_obs, feedback, terminated, is_expert, **kw):
+        """The loss of one batch and its named terms (a variant calls this, so that a term added here reaches it)."""
         return iq_loss(self.q_net, self.q_target, obs, actions, next_obs, terminated, is_expert, self.gamma,
-                       self.temperature, self.chi2_coef)  # fmt: skip
+                       self.temperature, self.chi2_coef, **kw)  # fmt: skip
 
     def update(self, batch, is_expert) -> tuple[torch.Tensor, dict]:
         loss, terms = self.loss(*batch, is_expert)
@@ -847,11 +869,10 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
     return summary
 
 
-def cli(args_type: type = Args) -> int:
-    """The command line: parse, check, load what the flags name, run; the exit code. The study module passes its own
-    Args (a subclass with the study's flags)."""
+def cli(args: Args) -> int:
+    """The command line after tyro (a malformed flag: tyro's own message, exit 2): check, load what the flags name,
+    run; the exit code. The study module passes its own Args (a subclass with the study's flags)."""
     try:
-        args = tyro.cli(args_type)  # a malformed flag: tyro's own message, exit 2
         if gridworld_env is None:
             raise InputError("gridworld_env.py (the maze) is not importable: copy it next to this script")
         check_args(args)
@@ -1420,4 +1441,4 @@ def check_crc(path: str, where: str) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(cli(Args))
+    sys.exit(cli(tyro.cli(Args)))

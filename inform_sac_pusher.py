@@ -11,12 +11,7 @@ The sleep study's variants of the night are in inform_utils/sleep_variants_pushe
 inform_utils/evaluate_policy.py re-evaluates a saved policy; inform_utils/browser_pusher.py lets a person teach
 through a web page.
 
-Imported by inform_utils/, the only names other code may use (a test holds it to them): Args, main, cli, evaluate,
-make_env, Teacher, oracle_q, oracle_feedback, linear_schedule, oracle_from_checkpoint, check_args, Evaluator,
-obstacle_test, obstacle_skipped, read_checkpoint, check_crc, actor_from_checkpoint, check_video, video_env,
-mujoco_major, InputError, Outcome, object_xy, In, QEnsemble, Actor, iq_loss, actor_loss, tamer_loss, update_actor,
-soft_update, soft_value, recover_reward, sleep_recipe, sleep_batch, check_finite, StopSignals, Progress, HIDDEN_SIZE,
-TAU, SLEEP_GAMMA, TAMER_POLICY_LR, SLEEP_EVAL_FREQUENCY, PERIODIC_EVAL_EPISODES, LOG_FREQUENCY.
+inform_utils/ imports only the names that tests/test_surface.py declares for this script.
 
     python inform_sac_pusher.py --seed 1                            # Pusher-v5, the authors' budget
     python inform_sac_pusher.py --env-id Pusher-v4 --seed 1         # the paper's Pusher (needs mujoco==2.3.7)
@@ -210,6 +205,23 @@ class Args:
     """bisector: on the bisector of the object's start and the goal, the middle box on the path; paper: the paper's"""
     authors_test_episodes: Annotated[int, In(0)] = 100
     """episodes of the authors' test: sampled actions from the run's initial state (eval/authors_test/...)"""
+
+    def night_settings(self) -> dict:
+        """What the night runs with: these flags and the --sleep-protocol preset (setting x from flag sleep_x)."""
+        recipe = {k.removeprefix("sleep_"): v for k, v in sleep_recipe(self).items() if k != "sleep_gradient_steps"}
+        return {"batch_size": self.sleep_batch_size, "q_lr": self.sleep_q_lr, "policy_lr": self.sleep_policy_lr,
+                "temperature": self.sleep_temperature, "chi2_coef": self.sleep_chi2_coef, **recipe}  # fmt: skip
+
+    def sleep_variant(self) -> str:
+        """The night in a line, for summary.json: what it runs with."""
+        settings = {"protocol": self.sleep_protocol, "gradient_steps": sleep_recipe(self)["sleep_gradient_steps"],
+                    **self.night_settings(), "seed": self.sleep_seed}  # fmt: skip
+        return " ".join(f"{k}={v}" for k, v in settings.items())
+
+    def night(self, tamer_actor: "Actor", device, tamer: dict) -> "Night":
+        """The night's learner (`tamer`: TAMER's H and entropy coefficient at the day's end, which only the study's
+        sham control uses)."""
+        return Night(tamer_actor, device, **self.night_settings())
 
 
 def make_env(env_id: str, seed: int, obstacles=None, **render) -> gym.Env:
@@ -611,65 +623,107 @@ def sleep_batch(buffer: ReplayBuffer, batch_size: int, expert_idx: torch.Tensor,
     return buffer.batch(torch.cat([replay, expert]))
 
 
-def sleep_phase(args: Args, buffer: ReplayBuffer, tamer_actor: Actor, evaluator, writer, device, **tamer):
-    """The night: offline IQ-Learn (Eq. 2) on the buffer, the successful trajectories as the expert set. Returns the
-    soft Q, the INFORM actor, the stats and a checkpoint picked offline (none here; `tamer`: TAMER's H and entropy
-    coefficient, for the study's variants that go on with TAMER)."""
-    recipe = sleep_recipe(args)
-    expert_idx, fallback_episodes = buffer.expert_indices()
+class Night:
+    """The night's learner: soft Q by IQ-Learn (Eq. 2) on replay rows then expert rows, the INFORM actor on Q (SAC's
+    objective at a fixed temperature), the target Q following softly. The sleep study
+    (inform_utils/sleep_variants_pusher.py) subclasses it: `loss`, `actor_loss` and `update_actor` are where a
+    variant changes the night (calling these, so that a term added here reaches every variant), `memories` what it
+    sleeps on."""
+
+    n_critics = 1  # soft Q networks (twins: their minimum in V(s) and in the actor's objective)
+
+    def __init__(self, tamer_actor: Actor, device, *, batch_size: int, q_lr: float, policy_lr: float,
+                 temperature: float, chi2_coef: float, init_actor_from_tamer: bool, actor_states: str,
+                 policy_frequency: int):  # fmt: skip
+        obs_dim, act_dim = tamer_actor.fc1.in_features, tamer_actor.fc_mean.out_features
+        self.q_net = QEnsemble(obs_dim, act_dim, HIDDEN_SIZE, n=self.n_critics).to(device)
+        self.q_target = QEnsemble(obs_dim, act_dim, HIDDEN_SIZE, n=self.n_critics).to(device)
+        self.q_target.load_state_dict(self.q_net.state_dict())
+        scale, bias = tamer_actor.action_scale, tamer_actor.action_bias
+        self.actor = Actor(obs_dim, act_dim, HIDDEN_SIZE, bias - scale, bias + scale).to(device)
+        if init_actor_from_tamer:  # consolidation: the night starts from the day's actor
+            self.actor.load_state_dict(tamer_actor.state_dict())
+        self.q_optimizer = torch.optim.Adam(self.q_net.parameters(), lr=q_lr, foreach=True)
+        self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=policy_lr, foreach=True)
+        self.temperature, self.chi2_coef, self.frequency = temperature, chi2_coef, policy_frequency
+        self.is_expert = torch.arange(2 * batch_size, device=device) >= batch_size  # replay rows, then expert rows
+        rows = {"replay": ~self.is_expert, "expert": self.is_expert, "replay+expert": slice(None)}
+        self.actor_rows = rows[actor_states]  # the states the actor learns on
+        self.pi_loss = torch.zeros((), device=device)  # the last actor loss, for the logs
+        self.selected = None  # a checkpoint picked offline ({"step", "actor"}), beside the last one: none here
+
+    def memories(self, buffer: ReplayBuffer) -> tuple[torch.Tensor | None, torch.Tensor, int]:
+        """What the night sleeps on: the replay rows' indices (None: the whole buffer), the success set's and, if it
+        is empty, how many closest episodes stand in for it."""
+        return None, *buffer.expert_indices()
+
+    def loss(self, obs, actions, next_obs, feedback, terminated, **kw) -> tuple[torch.Tensor, dict]:
+        """Eq. 2 on one batch, and its named terms (the logs show whatever terms come back)."""
+        return iq_loss(self.q_net, self.q_target, obs, actions, next_obs, terminated, self.is_expert, SLEEP_GAMMA,
+                       self.temperature, self.chi2_coef, self.actor, **kw)  # fmt: skip
+
+    def actor_loss(self, obs, actions, feedback) -> torch.Tensor:
+        return actor_loss(self.q_net, self.actor, obs[self.actor_rows], self.temperature)[0]
+
+    def update_actor(self, obs, actions, feedback) -> None:
+        self.q_net.requires_grad_(False)  # the actor's gradient flows through Q, but none is kept on it
+        self.pi_loss = self.actor_loss(obs, actions, feedback)
+        self.actor_optimizer.zero_grad(set_to_none=True)
+        self.pi_loss.backward()
+        self.q_net.requires_grad_(True)
+        self.actor_optimizer.step()
+
+    def update(self, step: int, batch) -> tuple[torch.Tensor, dict]:
+        """One gradient step of Q, the actor's updates (the authors': 2 every 2nd step), the target's soft step."""
+        obs, actions, next_obs, feedback, terminated = batch
+        loss, terms = self.loss(obs, actions, next_obs, feedback, terminated)
+        self.q_optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        self.q_optimizer.step()
+        for _ in range(self.frequency if step % self.frequency == 0 else 0):
+            self.update_actor(obs, actions, feedback)
+        soft_update(self.q_target, self.q_net, TAU)
+        return loss, terms
+
+    def evaluated(self, step: int, writer) -> dict:  # after each periodic evaluation: more to report (the study's)
+        return {}
+
+    def stats(self) -> dict:  # what the night adds to the summary
+        return {}
+
+
+def sleep_phase(night: Night, buffer: ReplayBuffer, steps: int, batch_size: int, evaluator, writer, device) -> dict:
+    """The night: `night` learns offline on the buffer, the successful trajectories as the expert set, no environment
+    steps; its stats and last losses."""
+    replay_idx, expert_idx, fallback_episodes = night.memories(buffer)
     if fallback_episodes:
         closest = "the smallest final distance, or with --success-return the highest return"
         print(f"[sleep] warning: no successful episode; the {fallback_episodes} closest ({closest}) are the expert set")
-    print(f"[sleep] {expert_idx.numel()} expert transitions, {buffer.size} in the buffer", flush=True)
-    obs_dim, act_dim = buffer.obs.shape[1], buffer.actions.shape[1]
-    q_net = QEnsemble(obs_dim, act_dim, HIDDEN_SIZE, n=1).to(device)
-    q_target = QEnsemble(obs_dim, act_dim, HIDDEN_SIZE, n=1).to(device)
-    q_target.load_state_dict(q_net.state_dict())
-    low, high = tamer_actor.action_bias - tamer_actor.action_scale, tamer_actor.action_bias + tamer_actor.action_scale
-    inform_actor = Actor(obs_dim, act_dim, HIDDEN_SIZE, low, high).to(device)
-    if recipe["sleep_init_actor_from_tamer"]:  # consolidation: the night starts from the day's actor
-        inform_actor.load_state_dict(tamer_actor.state_dict())
-    q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_q_lr, foreach=True)
-    inform_optimizer = torch.optim.Adam(inform_actor.parameters(), lr=args.sleep_policy_lr, foreach=True)
-    batch_size, temp, chi2 = args.sleep_batch_size, args.sleep_temperature, args.sleep_chi2_coef
-    is_expert = torch.arange(2 * batch_size, device=device) >= batch_size  # the batch: replay rows, then expert rows
-    actor_rows = {"replay": ~is_expert, "expert": is_expert, "replay+expert": slice(None)}[recipe["sleep_actor_states"]]
-    frequency, steps = recipe["sleep_policy_frequency"], recipe["sleep_gradient_steps"]
+    replay = buffer.size if replay_idx is None else replay_idx.numel()
+    print(f"[sleep] {expert_idx.numel()} expert transitions, {replay} in the buffer", flush=True)
     stats = {"sleep/expert_transitions": int(expert_idx.numel()), "sleep/expert_fallback": int(fallback_episodes > 0)}
-    losses, pi_loss = {}, torch.zeros((), device=device)
+    losses = {}
     progress = Progress("sleep", steps, evaluator=evaluator)
     for step in range(1, steps + 1):
         StopSignals.check()
         # ALGO LOGIC: the sleep update: Q by IQ-Learn (Eq. 2), the INFORM actor on Q, the target Q follows softly
-        obs, actions, next_obs, _, terminated = sleep_batch(buffer, batch_size, expert_idx)
-        loss, terms = iq_loss(q_net, q_target, obs, actions, next_obs, terminated, is_expert, SLEEP_GAMMA, temp, chi2,
-                              inform_actor)  # fmt: skip
-        q_optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        q_optimizer.step()
-        for _ in range(frequency if step % frequency == 0 else 0):  # the authors': 2 updates every 2nd step
-            q_net.requires_grad_(False)  # the actor's gradient flows through Q, but none is kept on it
-            pi_loss, _ = actor_loss(q_net, inform_actor, obs[actor_rows], temp)
-            inform_optimizer.zero_grad(set_to_none=True)
-            pi_loss.backward()
-            q_net.requires_grad_(True)
-            inform_optimizer.step()
-        soft_update(q_target, q_net, TAU)
+        loss, terms = night.update(step, sleep_batch(buffer, batch_size, expert_idx, replay_idx))
 
         # TRY NOT TO MODIFY: logging (one host sync per 100 steps to catch divergence) and periodic evaluation
         last_step = step == steps
         if step % 100 == 0 or step % LOG_FREQUENCY == 0 or last_step:
-            tags = {"iq_loss": loss, **terms, "inform_actor_loss": pi_loss}
+            tags = {"iq_loss": loss, **terms, "inform_actor_loss": night.pi_loss}
             losses = check_finite(tags, losses, "the sleep loss", f"gradient step {step}", SLEEP_LRS)
         if step % LOG_FREQUENCY == 0 or last_step:
             for tag, value in {**losses, "sleep/SPS": progress.sps(step)}.items():
                 writer.add_scalar(tag, value, step)
         report = {"iq_loss": losses.get("losses/iq_loss")}
         if step % SLEEP_EVAL_FREQUENCY == 0 or last_step:
-            metrics = evaluator("inform", inform_actor, step, PERIODIC_EVAL_EPISODES)
+            metrics = evaluator("inform", night.actor, step, PERIODIC_EVAL_EPISODES)
             report["eval return"] = metrics["eval/inform_return"]
+            report.update(night.evaluated(step, writer))
         progress(step, **report)
-    return q_net, inform_actor, {**stats, **losses}, None
+    return {**stats, **night.stats(), **losses}
 
 
 SLEEP_LRS = "--sleep-q-lr or --sleep-policy-lr"  # what helps a diverging night
@@ -685,8 +739,8 @@ def check_finite(tags: dict, last: dict, what: str, when: str, flag: str) -> dic
     return {f"losses/{tag}": value for tag, value in zip(tags, values, strict=True)}
 
 
-def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, sleep=None, make_teacher=None) -> dict:
-    """oracle -> day (the forward phase) -> night (`sleep`, by default sleep_phase) -> Eq. 3 and the tests.
+def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, make_teacher=None) -> dict:
+    """oracle -> day (the forward phase) -> night (`args.night`, the study's Args give theirs) -> Eq. 3 and the tests.
     `make_teacher(args, env, run_dir)`: the day's teacher in place of the simulated one (a person at a web page)."""
     recipe = sleep_recipe(args)  # the preset's values that ran go into the summary's args
     args = dataclasses.replace(args, **{k: v for k, v in recipe.items() if hasattr(args, k)})
@@ -695,8 +749,7 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, sleep=None, mak
     summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
     summary["oracle_path"] = oracle_ckpt["path"] if oracle_ckpt is not None else None
     summary["sleep_from"] = os.path.abspath(args.sleep_from) if day is not None else None
-    settings = {k.removeprefix("sleep_"): v for k, v in {**vars(args), **recipe}.items() if k.startswith("sleep_")}
-    summary["sleep_variant"] = " ".join(f"{k}={v}" for k, v in settings.items() if k != "from")  # the night's settings
+    summary["sleep_variant"] = args.sleep_variant()
     status, failure, phase = "completed", None, "startup"
     try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
         run_dir = make_run_dir(f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}")
@@ -762,10 +815,10 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, sleep=None, mak
         phase, t0 = "sleep", time.time() - evaluator.seconds
         if args.sleep_seed is not None:  # another night on the same day
             torch.manual_seed(args.sleep_seed)
-        tamer = {"h_net": h_net, "ent_coef": stats["losses/tamer_entropy_coef"]}  # for the study's sham night
-        night = sleep or sleep_phase
-        q_net, inform_actor, stats, selected = night(args, buffer, tamer_actor, evaluator, writer, device, **tamer)
-        summary.update(stats)
+        night = args.night(tamer_actor, device, tamer={"h_net": h_net, "ent_coef": stats["losses/tamer_entropy_coef"]})
+        summary.update(sleep_phase(night, buffer, args.sleep_gradient_steps, args.sleep_batch_size, evaluator, writer,
+                                   device))  # fmt: skip
+        q_net, inform_actor, selected = night.q_net, night.actor, night.selected
         summary["time/sleep_s"] = time.time() - evaluator.seconds - t0
         summary["sps/sleep"] = args.sleep_gradient_steps / max(summary["time/sleep_s"], 1e-9)
         save_actor(f"{run_dir}/inform_actor.pt", inform_actor, env_id=args.env_id)
@@ -1554,9 +1607,9 @@ def print_results(summary: dict, run_dir: str) -> None:
     say(f"{summary['status']} in {summary['wall_time_s']:.1f}s; summary: {run_dir}/summary.json")
 
 
-def cli(args: Args, sleep=None, make_teacher=None) -> int:
+def cli(args: Args, make_teacher=None) -> int:
     """The command line after tyro: a saved day, the checks, then the run; returns the exit code. The study
-    module (inform_utils/sleep_variants_pusher.py) runs it with its own Args and `sleep`, the web page
+    module (inform_utils/sleep_variants_pusher.py) runs it with its own Args (and their night), the web page
     (inform_utils/browser_pusher.py) with its own Args and `make_teacher`."""
     day = None
     try:
@@ -1573,7 +1626,7 @@ def cli(args: Args, sleep=None, make_teacher=None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
     stop = StopSignals()
-    summary = main(args, oracle_ckpt, stop, day, sleep, make_teacher)
+    summary = main(args, oracle_ckpt, stop, day, make_teacher)
     gc.freeze()  # the interpreter's last collections over torch's objects take seconds on a busy machine; skip them
     return stop.exit_code(summary["status"])
 

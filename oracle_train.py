@@ -7,9 +7,9 @@ evaluation's networks (as SB3's EvalCallback keeps), judged again on held-out st
 value-iteration` (exact Q*, the default), `q-learning` (an imperfect teacher like the authors') or `dqn` (CleanRL's
 dqn.py), saved as the 30 x 4 `q_table` that `inform_dqn_gridworld.py --oracle-path` loads.
 
-Imported by inform_utils/, the only names other code may use (a test holds it to them): Actor.
+inform_utils/ imports only the names that tests/test_surface.py declares for this script.
 
-    python oracle_train.py --env-id Pusher-v5 --total-timesteps 200000 --output-path oracles/Pusher-v5__sac_oracle.pt
+    python oracle_train.py --env-id Pusher-v5 --total-timesteps 200000   # into runs/{run}/oracle.pt, never oracles/
     python oracle_train.py --env-id KnoxStoneMaze-v0 --method dqn --maze-dqn-timesteps 20000
 """
 

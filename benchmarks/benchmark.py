@@ -20,7 +20,8 @@ script) runs in this process for two budgets past learning starts, and the diffe
   and random-action steps included).
 `--baseline-script` measures another copy of the script (e.g. the previous commit's) side by side, interleaved, and
 `--variants threads` the opt-in speed (two threads; or any boolean flag of the script) against the default,
-interleaved. The baseline must have the same phase functions as the script (the refactored ones: commit 1009352 on).
+interleaved. The baseline must have the same phase functions as the script (the night as an object, `Args.night`:
+the commit that made it one on).
 
     python benchmarks/benchmark.py                # about 5 minutes on 2 cores
     python benchmarks/benchmark.py --repeats 1 --oracle-steps 600 --tamer-steps 600 --sleep-steps 200   # a smoke run
@@ -384,8 +385,10 @@ def phase_runner(module, args: Args, phase: str, flags: dict):
                     module.forward_phase(day, module.make_env(args.env_id, 1), oracle_actor, oracle_qf, memory[0],
                                          NullEvaluator(), NullWriter(), cpu)  # fmt: skip
                     memory[0].success[:200] |= not memory[0].success.any()  # an expert set, whatever the luck
-                module.sleep_phase(module.Args(**common, sleep_gradient_steps=steps), memory[0], oracle_actor,
-                                   NullEvaluator(), NullWriter(), cpu)  # fmt: skip
+                night_args = module.Args(**common, sleep_gradient_steps=steps)
+                night = night_args.night(oracle_actor, cpu, tamer={})
+                module.sleep_phase(night, memory[0], steps, night_args.sleep_batch_size, NullEvaluator(), NullWriter(),
+                                   cpu)  # fmt: skip
 
     return run
 

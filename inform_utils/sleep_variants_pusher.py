@@ -1,15 +1,19 @@
 """The sleep study's variants of the Pusher night, on inform_sac_pusher.py's declared surface (as CleanRL's evaluation
 helpers import a script's agent): the actor's start and its states, its schedule, the rows of Eq. 2's value and
-chi-squared terms, twin critics, a behaviour-cloning term, the sham and cloning controls, and the hold-out offline
-criterion that picks a checkpoint without the environment.
+chi-squared terms, twin critics, a behaviour-cloning term, the sham and cloning controls, the hold-out offline
+criterion that picks a checkpoint without the environment, and nights of other methods built for a night's data
+(--sleep-method: DWBC).
 
 It runs like the core script, normally on a saved day, with the study's switches on top, and writes the same run
 directory, files and summary.json (`sleep_variant` and the study's flags in `args`). With no study flag it gives the
-core's numbers; with the flags of commit cdfc757's script it gives that script's numbers.
+core's numbers; with the flags of commit cdfc757's script it gives that script's numbers. Each variant subclasses the
+core's Night and calls its loss and actor objective, so a term added there runs here too; a night flag that the chosen
+control or method does not use (`hears`) is refused in one line, never recorded as if it ran.
 
     python -m inform_utils.sleep_variants_pusher --sleep-from runs/<day> --sleep-seed 1 --sleep-control sham
     python -m inform_utils.sleep_variants_pusher --sleep-from runs/<day> --sleep-holdout-fraction 0.15 \
         --sleep-twin-critics --sleep-loss-rows expert
+    python -m inform_utils.sleep_variants_pusher --sleep-from runs/<day> --sleep-seed 1 --sleep-method dwbc
 """
 
 import contextlib
@@ -48,6 +52,10 @@ class Args(core.Args):
     """a control in place of the INFORM actor's update, same steps: bc = behaviour cloning on the success set (the
     mean action's squared error on the expert rows); sham = TAMER's own update (H on the feedback, the actor on H),
     no consolidation. The soft Q network sleeps as usual"""
+    sleep_method: Literal["iq", "dwbc"] = "iq"
+    """the night's method (docs/results.md, "A night built for INFORM's data"): iq = the core's IQ-Learn night; dwbc =
+    discriminator-weighted behaviour cloning (Xu et al., ICML 2022): a discriminator tells the success set from the
+    rest of the day, and its output weights the cloning of both"""
     sleep_init_actor_from_tamer: bool = True
     """start the INFORM actor from the TAMER actor (consolidation); False starts it from scratch (unset: the
     protocol's)"""
@@ -68,6 +76,36 @@ class Args(core.Args):
     sleep_holdout_fraction: Annotated[float, core.In(0, 1)] = 0.0
     """hold this fraction of the day's episodes out of the sleep (split by episode, fixed by the seed) and log the
     offline criterion on them every 1,000 steps; the checkpoint it picks is kept and tested as `inform_selected`"""
+
+    def night_settings(self) -> dict:
+        """The core's settings and the study's switches; the sham's actor learns at TAMER's rate from TAMER's actor."""
+        settings = super().night_settings() | {
+            "loss_rows": self.sleep_loss_rows, "twin_critics": self.sleep_twin_critics, "bc_coef": self.sleep_bc_coef,
+            "holdout_fraction": self.sleep_holdout_fraction,
+        }  # fmt: skip
+        if self.sleep_control == "sham":
+            settings |= {"policy_lr": core.TAMER_POLICY_LR, "init_actor_from_tamer": True}
+        return settings
+
+    def sleep_variant(self) -> str:
+        return f"method={self.sleep_method} control={self.sleep_control} " + super().sleep_variant()
+
+    def night_kind(self) -> type:
+        return CONTROLS[self.sleep_control] if self.sleep_control != "none" else METHODS[self.sleep_method]
+
+    def night(self, tamer_actor, device, tamer: dict):
+        kind = self.night_kind()
+        extra = tamer | {"h_lr": self.tamer_h_lr} if kind is ShamControl else {}  # it goes on from the day's H
+        return kind(tamer_actor, device, holdout_seed=self.seed, **self.night_settings(), **extra)
+
+
+def unheard(args: Args) -> list[str]:
+    """The night flags set (away from their defaults) that the chosen night does not use: a control hears only some."""
+    hears = args.night_kind().hears
+    defaults = {f.name: f.default for f in dataclasses.fields(Args)}
+    flags = [f"sleep_{k}" for k in args.night_settings() if hears is not None and k not in hears]
+    return [f"--{flag.replace('_', '-')}" for flag in flags
+            if getattr(args, flag, None) is not None and getattr(args, flag) != defaults.get(flag)]  # fmt: skip
 
 
 def untyped_to_protocol(args: Args, argv: list[str]) -> Args:
@@ -105,9 +143,7 @@ class OfflineCriterion:
     of Q(s, a~pi) and the AUC with which the recovered reward (Eq. 3) separates success from failure transitions. The
     criterion, fixed before any test return was seen: the highest expert log-likelihood picks the checkpoint."""
 
-    def __init__(self, args: Args, buffer, held: torch.Tensor, writer):
-        self.args = args
-        self.writer = writer
+    def __init__(self, buffer, held: torch.Tensor):
         self.batch = buffer.batch(held)
         self.success = buffer.success[held]
         starts = torch.tensor([start for start, _, _ in buffer.episodes], device=held.device)
@@ -118,18 +154,16 @@ class OfflineCriterion:
         self.q_pi_previous = None
 
     @torch.no_grad()
-    def __call__(self, step: int, q_net, q_target, actor) -> float:
-        args = self.args
+    def __call__(self, step: int, night: "StudyNight", writer) -> float:
         obs, actions, next_obs, _, terminated = self.batch
+        q_net, actor, gamma, temp = night.q_net, night.actor, core.SLEEP_GAMMA, night.temperature
         cuda = obs.device.type == "cuda"
         with torch.random.fork_rng(devices=[torch.cuda.current_device()] if cuda else []):  # the sleep's RNG untouched
             expert = self.success.nonzero().squeeze(-1)
             loglik = actor.log_prob(obs[expert], actions[expert]).mean().item() if expert.numel() else float("nan")
-            rows = self.success if args.sleep_loss_rows == "expert" else None
-            gamma, temp, chi2 = core.SLEEP_GAMMA, args.sleep_temperature, args.sleep_chi2_coef
-            loss, terms = core.iq_loss(
-                q_net, q_target, obs, actions, next_obs, terminated, self.success, gamma, temp, chi2, actor, rows
-            )
+            rows = self.success if night.loss_rows == "expert" else None
+            loss, terms = core.iq_loss(q_net, night.q_target, obs, actions, next_obs, terminated, self.success, gamma,
+                                       temp, night.chi2_coef, actor, rows)  # fmt: skip
             q_pi = q_net(obs, actor.get_action(obs)[0]).min(0).values.mean().item()
             v_next = core.soft_value(q_net, actor, next_obs, temp)
             reward = core.recover_reward(q_net(obs, actions).min(0).values, v_next, terminated, gamma)
@@ -144,7 +178,7 @@ class OfflineCriterion:
             values["holdout/q_pi_drift"] = (q_pi - self.q_pi_previous[1]) * 1000 / (step - self.q_pi_previous[0])
         self.q_pi_previous = (step, q_pi)
         for tag, value in values.items():
-            self.writer.add_scalar(tag, value, step)
+            writer.add_scalar(tag, value, step)
         self.last = values
         if math.isfinite(loglik) and loglik > self.best:
             self.best = loglik
@@ -162,113 +196,223 @@ class OfflineCriterion:
         }
 
 
-def sleep_phase(args: Args, buffer, tamer_actor, evaluator, writer, device, h_net=None, ent_coef=1.0):
-    """The core's night with the study's switches (the core's sleep_phase is this with every switch at its default).
-    TAMER's H and entropy coefficient at the day's end are needed only by the sham control. Returns the soft Q, the
-    INFORM actor, the stats and, with a hold-out, the checkpoint the offline criterion picked (else None)."""
-    recipe = core.sleep_recipe(args)
-    held = held_out(args.sleep_holdout_fraction, args.seed, buffer, device)  # episodes the sleep never sees
-    keep = torch.ones(buffer.size, dtype=torch.bool, device=device)
-    if held is not None:
-        keep[held] = False
-    replay_idx = keep.nonzero().squeeze(-1)
-    expert_idx, fallback_episodes = buffer.expert_indices(keep)
-    if fallback_episodes:
-        print(
-            f"[sleep] warning: no successful episode; using the {fallback_episodes} episodes that came closest "
-            "(the smallest final distance, or with --success-return the highest return) as the expert set",
-            flush=True,
-        )
-    print(f"[sleep] {expert_idx.numel()} expert transitions, {replay_idx.numel()} in the buffer", flush=True)
-    obs_dim, act_dim, hidden = buffer.obs.shape[1], buffer.actions.shape[1], core.HIDDEN_SIZE
-    n_critics = 2 if args.sleep_twin_critics else 1
-    q_net = core.QEnsemble(obs_dim, act_dim, hidden, n=n_critics).to(device)
-    q_target = core.QEnsemble(obs_dim, act_dim, hidden, n=n_critics).to(device)
-    q_target.load_state_dict(q_net.state_dict())
-    low = tamer_actor.action_bias - tamer_actor.action_scale
-    high = tamer_actor.action_bias + tamer_actor.action_scale
-    inform_actor = core.Actor(obs_dim, act_dim, hidden, low, high).to(device)
-    if recipe["sleep_init_actor_from_tamer"] or args.sleep_control == "sham":
-        inform_actor.load_state_dict(tamer_actor.state_dict())
-    q_optimizer = torch.optim.Adam(q_net.parameters(), lr=args.sleep_q_lr, foreach=True)
-    policy_lr = core.TAMER_POLICY_LR if args.sleep_control == "sham" else args.sleep_policy_lr
-    inform_optimizer = torch.optim.Adam(inform_actor.parameters(), lr=policy_lr, foreach=True)
-    if args.sleep_control == "sham":  # TAMER goes on learning from its memories: H and the actor, TAMER's rates
-        sham_h = core.QEnsemble(obs_dim, act_dim, hidden, n=2).to(device)
-        sham_h.load_state_dict(h_net.state_dict())
-        sham_h_optimizer = torch.optim.Adam(sham_h.parameters(), lr=args.tamer_h_lr, foreach=True)
-        log_ent_coef = torch.full((1,), math.log(ent_coef), device=device, requires_grad=True)
-        ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.tamer_h_lr, foreach=True)
-    batch_size, gamma = args.sleep_batch_size, core.SLEEP_GAMMA
-    temp, chi2 = args.sleep_temperature, args.sleep_chi2_coef
-    is_expert = torch.arange(2 * batch_size, device=device) >= batch_size  # the batch: replay rows, then expert rows
-    rows = is_expert if args.sleep_loss_rows == "expert" else None  # of the value and chi2 terms
-    actor_rows = {"replay": ~is_expert, "expert": is_expert, "replay+expert": slice(None)}[recipe["sleep_actor_states"]]
-    frequency, steps = recipe["sleep_policy_frequency"], recipe["sleep_gradient_steps"]
-    stats = {"sleep/expert_transitions": int(expert_idx.numel()), "sleep/expert_fallback": int(fallback_episodes > 0)}
-    losses = {}
-    criterion = OfflineCriterion(args, buffer, held, writer) if held is not None else None
-    pi_loss = torch.zeros((), device=device)
-    progress = core.Progress("sleep", steps, evaluator=evaluator)
-    for step in range(1, steps + 1):
-        core.StopSignals.check()
-        obs, actions, next_obs, feedback, terminated = core.sleep_batch(buffer, batch_size, expert_idx, replay_idx)
-        loss, terms = core.iq_loss(
-            q_net, q_target, obs, actions, next_obs, terminated, is_expert, gamma, temp, chi2, inform_actor, rows
-        )
-        q_optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        q_optimizer.step()
-        for _ in range(frequency if step % frequency == 0 else 0):
-            if args.sleep_control == "sham":  # control: TAMER's own update (Eq. 1, then its actor on H), no Q
-                pi_loss = core.tamer_loss(sham_h, obs[~is_expert], actions[~is_expert], feedback[~is_expert])
-                sham_h_optimizer.zero_grad(set_to_none=True)
-                pi_loss.backward()
-                sham_h_optimizer.step()
-                core.update_actor(
-                    sham_h, inform_actor, obs[~is_expert], log_ent_coef, inform_optimizer, ent_coef_optimizer
-                )
-                continue
-            q_net.requires_grad_(False)  # the actor's gradient flows through Q, but none is kept on it
-            if args.sleep_control == "bc":  # control: behaviour cloning on the success set, no Q
-                pi_loss = (inform_actor.get_action(obs[is_expert])[2] - actions[is_expert]).pow(2).mean()
-            else:
-                pi_loss, _ = core.actor_loss(q_net, inform_actor, obs[actor_rows], temp)
-            if args.sleep_bc_coef > 0:  # TD3+BC: the Q objective made scale-free, plus cloning the experts
-                pi_loss = (
-                    pi_loss / q_net(obs, actions).abs().mean().detach()
-                    + args.sleep_bc_coef
-                    * (inform_actor.get_action(obs[is_expert])[2] - actions[is_expert]).pow(2).mean()
-                )
-            inform_optimizer.zero_grad(set_to_none=True)
-            pi_loss.backward()
-            q_net.requires_grad_(True)
-            inform_optimizer.step()
-        core.soft_update(q_target, q_net, core.TAU)
+class StudyNight(core.Night):
+    """The core's night with the study's switches: the rows of Eq. 2's value and chi-squared terms, twin critics, a
+    cloning term on the actor, and a hold-out whose offline criterion picks a checkpoint. Every switch at its default
+    gives the core's night, number for number; a term added to the core's `loss` or `actor_loss` runs here too."""
 
-        last_step = step == steps
-        if step % core.LOG_FREQUENCY == 0 or last_step or step % 100 == 0:
-            tags = {"iq_loss": loss, **terms, "inform_actor_loss": pi_loss}
-            losses = core.check_finite(
-                tags, losses, "the sleep loss", f"gradient step {step}", "--sleep-q-lr or --sleep-policy-lr"
-            )
-        if step % core.LOG_FREQUENCY == 0 or last_step:
-            for tag, value in losses.items():
-                writer.add_scalar(tag, value, step)
-            writer.add_scalar("sleep/SPS", progress.sps(step), step)
-        report = {"iq_loss": losses.get("losses/iq_loss")}
-        if step % core.SLEEP_EVAL_FREQUENCY == 0 or last_step:
-            metrics = evaluator("inform", inform_actor, step, core.PERIODIC_EVAL_EPISODES)
-            report["eval return"] = metrics["eval/inform_return"]
-            if criterion is not None:  # no environment: the held-out episodes only
-                report["criterion"] = criterion(step, q_net, q_target, inform_actor)
-        progress(step, **report)
-    selected = None
-    if criterion is not None:
-        stats.update(criterion.stats())
-        selected = criterion.selected
-    return q_net, inform_actor, {**stats, **losses}, selected
+    hears = None  # the night settings this night uses (None: all); a flag for any other is refused
+
+    def __init__(self, tamer_actor, device, *, loss_rows: str, twin_critics: bool, bc_coef: float,
+                 holdout_fraction: float, holdout_seed: int, **settings):  # fmt: skip
+        self.n_critics = 2 if twin_critics else 1
+        super().__init__(tamer_actor, device, **settings)
+        self.loss_rows, self.bc_coef = loss_rows, bc_coef
+        self.holdout = (holdout_fraction, holdout_seed)
+        self.criterion = None  # with a hold-out: the offline criterion on it
+
+    def memories(self, buffer):  # the held-out episodes are never slept on, nor experts
+        held = held_out(*self.holdout, buffer, self.is_expert.device)
+        if held is None:
+            return super().memories(buffer)
+        self.criterion = OfflineCriterion(buffer, held)
+        keep = torch.ones(buffer.size, dtype=torch.bool, device=held.device)
+        keep[held] = False
+        return keep.nonzero().squeeze(-1), *buffer.expert_indices(keep)
+
+    def loss(self, obs, actions, next_obs, feedback, terminated, **kw):
+        rows = self.is_expert if self.loss_rows == "expert" else None
+        return super().loss(obs, actions, next_obs, feedback, terminated, rows=rows, **kw)
+
+    def actor_loss(self, obs, actions, feedback):
+        pi_loss = self.objective(obs, actions, feedback)
+        if self.bc_coef > 0:  # TD3+BC: the objective made scale-free, plus cloning the experts
+            pi_loss = pi_loss / self.q_net(obs, actions).abs().mean().detach()
+            pi_loss = pi_loss + self.bc_coef * self.cloning_loss(obs, actions)
+        return pi_loss
+
+    def objective(self, obs, actions, feedback):  # the actor's own objective: the core's, on Q
+        return super().actor_loss(obs, actions, feedback)
+
+    def cloning_loss(self, obs, actions):  # the mean action's squared error on the expert rows
+        return (self.actor.get_action(obs[self.is_expert])[2] - actions[self.is_expert]).pow(2).mean()
+
+    def evaluated(self, step, writer):
+        if self.criterion is None:
+            return {}
+        return {"criterion": self.criterion(step, self, writer)}  # the held-out episodes only: no environment
+
+    def stats(self):
+        if self.criterion is None:
+            return {}
+        self.selected = self.criterion.selected
+        return self.criterion.stats()
+
+
+class CloningControl(StudyNight):
+    """Behaviour cloning on the success set in place of the actor's objective (the soft Q sleeps as usual)."""
+
+    hears = {
+        "batch_size",
+        "q_lr",
+        "policy_lr",
+        "temperature",
+        "chi2_coef",
+        "init_actor_from_tamer",
+        "policy_frequency",
+        "loss_rows",
+        "twin_critics",
+        "bc_coef",
+        "holdout_fraction",
+    }  # not actor_states: it clones the expert rows
+
+    def objective(self, obs, actions, feedback):
+        return self.cloning_loss(obs, actions)
+
+
+class ShamControl(StudyNight):
+    """TAMER goes on learning from its memories at its own rates: H from the day's by Eq. 1 on the replay rows, then
+    its actor on H with its autotuned entropy; no consolidation (the soft Q sleeps as usual, unused)."""
+
+    hears = {
+        "batch_size",
+        "q_lr",
+        "temperature",
+        "chi2_coef",
+        "policy_frequency",
+        "loss_rows",
+        "twin_critics",
+        "holdout_fraction",
+    }  # TAMER's rates, from TAMER's actor, on the replay rows, no cloning term
+
+    def __init__(self, tamer_actor, device, *, h_net, ent_coef: float, h_lr: float, **settings):
+        super().__init__(tamer_actor, device, **settings)
+        obs_dim, act_dim = tamer_actor.fc1.in_features, tamer_actor.fc_mean.out_features
+        self.h_net = core.QEnsemble(obs_dim, act_dim, core.HIDDEN_SIZE, n=2).to(device)
+        self.h_net.load_state_dict(h_net.state_dict())
+        self.h_optimizer = torch.optim.Adam(self.h_net.parameters(), lr=h_lr, foreach=True)
+        self.log_ent_coef = torch.full((1,), math.log(ent_coef), device=device, requires_grad=True)
+        self.ent_coef_optimizer = torch.optim.Adam([self.log_ent_coef], lr=h_lr, foreach=True)
+
+    def update_actor(self, obs, actions, feedback):  # Eq. 1 on the replay rows, then TAMER's actor step on H
+        replay = ~self.is_expert
+        self.pi_loss = core.tamer_loss(self.h_net, obs[replay], actions[replay], feedback[replay])
+        self.h_optimizer.zero_grad(set_to_none=True)
+        self.pi_loss.backward()
+        self.h_optimizer.step()
+        core.update_actor(self.h_net, self.actor, obs[replay], self.log_ent_coef, self.actor_optimizer,
+                          self.ent_coef_optimizer)  # fmt: skip
+
+
+# DWBC's published settings (Xu et al., ICML 2022): the weight of the expert cloning term, the class prior of the
+# positive-unlabelled discriminator, the learning rate of both networks, the policy's weight decay (the authors'
+# release), and the range d is clipped to, which keeps every expert weight positive (alpha - eta / (d (1 - d)) > 0)
+DWBC = {"alpha": 7.5, "eta": 0.5, "lr": 1e-4, "weight_decay": 5e-3, "d_range": (0.1, 0.9)}
+
+
+def dwbc_discriminator_loss(d_expert: torch.Tensor, d_other: torch.Tensor, eta: float) -> torch.Tensor:
+    # positive-unlabelled: the success set is positive, the rest of the day unlabelled, with the class prior eta
+    # L_d = eta E_e[-log d] + E_o[-log(1 - d)] - eta E_e[-log(1 - d)]
+    return -eta * d_expert.log().mean() - (1 - d_other).log().mean() + eta * (1 - d_expert).log().mean()
+
+
+def dwbc_policy_loss(nll_expert, nll_other, d_expert, d_other, alpha: float, eta: float) -> torch.Tensor:
+    # the cloning loss that L_d's dependence on log pi gives, d held fixed (nll = -log pi(a|s)):
+    # L_pi = alpha E_e[nll] - E_e[nll eta / (d (1 - d))] + E_o[nll / (1 - d)]
+    expert = (alpha - eta / (d_expert * (1 - d_expert))) * nll_expert
+    return expert.mean() + (nll_other / (1 - d_other)).mean()
+
+
+class Discriminator(torch.nn.Module):
+    """DWBC's d(s, a, log pi(a|s)) in (0, 1): it sees how likely the policy finds the action (per action dimension,
+    clipped to [-20, 10] and scaled to [0, 1]; no gradient flows back into the policy through it)."""
+
+    def __init__(self, obs_dim: int, act_dim: int, hidden: int = core.HIDDEN_SIZE):
+        super().__init__()
+        nn = torch.nn
+        self.net = nn.Sequential(nn.Linear(obs_dim + act_dim + 1, hidden), nn.ReLU(), nn.Linear(hidden, hidden),
+                                 nn.ReLU(), nn.Linear(hidden, 1))  # fmt: skip
+        self.act_dim = act_dim
+
+    def forward(self, obs, actions, log_pi) -> torch.Tensor:
+        seen = ((log_pi.detach() / self.act_dim).clamp(-20, 10) + 20) / 30
+        d = torch.sigmoid(self.net(torch.cat([obs, actions, seen.unsqueeze(-1)], -1))).squeeze(-1)
+        return d.clamp(*DWBC["d_range"])
+
+
+class DWBCNight(StudyNight):
+    """Discriminator-weighted behaviour cloning (Xu et al., ICML 2022) as the night: each step the discriminator
+    learns to tell the success set (expert rows) from the rest of the day (the replay rows here hold only the day's
+    other transitions), then the actor clones both, weighted by d (dwbc_policy_loss). The actor starts from TAMER's
+    (consolidation, as every night here); the soft Q sleeps as usual and only gives the recovered reward."""
+
+    # not the actor's learning rate (its own), the actor's states (it clones the rows it needs) or the bc term
+    hears = {"batch_size", "q_lr", "temperature", "chi2_coef", "init_actor_from_tamer", "policy_frequency", "loss_rows",
+             "twin_critics", "holdout_fraction"}  # fmt: skip
+
+    def __init__(self, tamer_actor, device, **settings):
+        super().__init__(tamer_actor, device, **settings)
+        obs_dim, act_dim = tamer_actor.fc1.in_features, tamer_actor.fc_mean.out_features
+        self.discriminator = Discriminator(obs_dim, act_dim).to(device)
+        self.d_optimizer = torch.optim.Adam(self.discriminator.parameters(), lr=DWBC["lr"], foreach=True)
+        self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=DWBC["lr"],
+                                                weight_decay=DWBC["weight_decay"], foreach=True)  # fmt: skip
+        self.d_terms = {"dwbc_d_loss": torch.zeros((), device=device)}
+
+    def memories(self, buffer):  # the unlabelled set: the day without its success set (all of it if it all succeeded)
+        replay_idx, expert_idx, fallback_episodes = super().memories(buffer)
+        replay_idx = torch.arange(buffer.size, device=expert_idx.device) if replay_idx is None else replay_idx
+        other = replay_idx[~buffer.success[replay_idx]]
+        return (other if other.numel() else replay_idx), expert_idx, fallback_episodes
+
+    def update_actor(self, obs, actions, feedback):
+        expert, other = self.is_expert, ~self.is_expert
+        log_pi = self.actor.log_prob(obs, actions)
+        d = self.discriminator(obs, actions, log_pi)
+        d_loss = dwbc_discriminator_loss(d[expert], d[other], DWBC["eta"])
+        self.d_optimizer.zero_grad(set_to_none=True)
+        d_loss.backward()
+        self.d_optimizer.step()
+        d = d.detach()  # the weights of this step: d before its update
+        self.pi_loss = dwbc_policy_loss(
+            -log_pi[expert], -log_pi[other], d[expert], d[other], DWBC["alpha"], DWBC["eta"]
+        )
+        self.actor_optimizer.zero_grad(set_to_none=True)
+        self.pi_loss.backward()
+        self.actor_optimizer.step()
+        self.d_terms = {
+            "dwbc_d_loss": d_loss.detach(),
+            "dwbc_d_expert": d[expert].mean(),
+            "dwbc_d_other": d[other].mean(),
+        }
+
+    def update(self, step, batch):
+        loss, terms = super().update(step, batch)
+        return loss, {**terms, **self.d_terms}
+
+
+CONTROLS = {"bc": CloningControl, "sham": ShamControl}  # by --sleep-control
+METHODS = {"iq": StudyNight, "dwbc": DWBCNight}  # by --sleep-method
+
+
+def run(argv: list[str]) -> int:
+    args = untyped_to_protocol(tyro.cli(Args, args=argv), argv)
+    if args.sleep_control != "none" and args.sleep_method != "iq":
+        print(f"error: --sleep-control {args.sleep_control} replaces the night, so --sleep-method {args.sleep_method} "
+              "would not run: give one of them", file=sys.stderr)  # fmt: skip
+        return 2
+    if flags := unheard(args):
+        night = (
+            f"--sleep-control {args.sleep_control}"
+            if args.sleep_control != "none"
+            else f"--sleep-method {args.sleep_method}"
+        )
+        uses = ", ".join(sorted(args.night_kind().hears))
+        print(f"error: {' and '.join(flags)} would not change {night} (it uses only {uses}): leave it unset",
+              file=sys.stderr)  # fmt: skip
+        return 2
+    return core.cli(args)
 
 
 if __name__ == "__main__":
-    sys.exit(core.cli(untyped_to_protocol(tyro.cli(Args), sys.argv[1:]), sleep=sleep_phase))
+    sys.exit(run(sys.argv[1:]))

@@ -87,7 +87,7 @@ def pusher(tmp_path_factory):
         pytest.skip("shipped oracle missing")
     rec = SimpleNamespace(h_losses=[], iq_losses=[], alphas=[], h_init=None, actor_init=None, q_init=None)
     real = SimpleNamespace(tamer_loss=isp.tamer_loss, update_actor=isp.update_actor, iq_loss=isp.iq_loss,
-                           oracle_feedback=isp.oracle_feedback)  # fmt: skip
+                           oracle_feedback=isp.oracle_feedback, sleep_phase=isp.sleep_phase)  # fmt: skip
 
     def tamer_loss(h_net, obs, actions, feedback):
         if rec.h_init is None:  # the first call comes before H's first step
@@ -102,11 +102,11 @@ def pusher(tmp_path_factory):
         rec.h_net = h_net
         return real.update_actor(h_net, actor, *rest)
 
-    def iq_loss(q_net, target_net, *rest):
+    def iq_loss(q_net, target_net, *rest, **kwargs):  # keywords pass through, as a hack's new term would
         if rec.q_init is None:  # before the critic's first step
             rec.q_init = copy.deepcopy(q_net)
         rec.q_net, rec.q_target = q_net, target_net
-        loss, terms = real.iq_loss(q_net, target_net, *rest)
+        loss, terms = real.iq_loss(q_net, target_net, *rest, **kwargs)
         rec.iq_losses.append(loss.item())
         return loss, terms
 
@@ -114,19 +114,22 @@ def pusher(tmp_path_factory):
         rec.alphas.append(alpha)
         return real.oracle_feedback(q_star_sa, q_star_best, alpha)
 
-    def night(args, buffer, tamer_actor, *rest, **tamer):
-        rec.buffer, rec.tamer_actor = buffer, tamer_actor
-        out = isp.sleep_phase(args, buffer, tamer_actor, *rest, **tamer)
-        rec.inform_actor = out[1]
-        return out
+    class Night(isp.Night):
+        def __init__(self, tamer_actor, *rest, **settings):
+            rec.tamer_actor = tamer_actor
+            super().__init__(tamer_actor, *rest, **settings)
+
+    def sleep_phase(night, buffer, *rest, **kwargs):
+        rec.buffer, rec.inform_actor = buffer, night.actor
+        return real.sleep_phase(night, buffer, *rest, **kwargs)
 
     args = tyro.cli(isp.Args, args=PUSHER_RUN)
     rec.args = args
     with pytest.MonkeyPatch.context() as mp, in_process(mp, tmp_path_factory.mktemp("pusher")):
-        for wrapper in (tamer_loss, update_actor, iq_loss, oracle_feedback):
+        for wrapper in (tamer_loss, update_actor, iq_loss, oracle_feedback, sleep_phase, Night):
             mp.setattr(isp, wrapper.__name__, wrapper)
         mp.setattr(isp, "PERIODIC_EVAL_EPISODES", 1)  # evaluation draws from its own generator: no number moves
-        rec.summary = isp.main(args, isp.load_oracle(args), isp.StopSignals(), sleep=night)
+        rec.summary = isp.main(args, isp.load_oracle(args), isp.StopSignals())
     assert rec.summary["status"] == "completed", rec.summary.get("error")
     n = rec.buffer.size
     rec.obs, rec.actions, rec.feedback = rec.buffer.obs[:n], rec.buffer.actions[:n], rec.buffer.feedback[:n]

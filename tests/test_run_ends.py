@@ -147,8 +147,10 @@ def test_a_signal_after_the_end(tmp_path, sig):
 
 
 def start_piped(cmd, cwd, **kwargs):
-    """The script with its stdout on a pipe we read ourselves (to close it), stderr collected by a thread."""
-    proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs)
+    """The script with its stdout on a pipe we read ourselves (to close it), stderr collected by a thread; with
+    Python's fault handler on, so that a hang can be shown (finish_piped)."""
+    env = {**os.environ, "PYTHONFAULTHANDLER": "1"}
+    proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, **kwargs)
     err = []
     thread = threading.Thread(target=lambda: err.extend(proc.stderr), daemon=True)
     thread.start()
@@ -172,12 +174,18 @@ def read_until(proc, prefix: str, timeout: float = 180) -> None:
 
 
 def finish_piped(proc, err, thread, timeout: float, what: str) -> str:
-    """Wait for a process of start_piped, bounded; its collected stderr."""
+    """Wait for a process of start_piped, bounded; its collected stderr. A hang fails with the stack of every thread of
+    the child (the fault handler prints them on SIGABRT)."""
     try:
         proc.wait(timeout)
     except subprocess.TimeoutExpired:
-        proc.kill()
-        pytest.fail(f"{what} {timeout} s after the stop")
+        proc.send_signal(signal.SIGABRT)
+        try:
+            proc.wait(15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+        thread.join(15)
+        pytest.fail(f"{what} {timeout} s after the stop; the child's threads:\n{''.join(err)[-6000:]}")
     thread.join(30)
     return "".join(err)
 

@@ -240,3 +240,24 @@ def test_iq_loss_on_expert_rows_only_by_hand():
     assert expert.item() == expert_e.item() == pytest.approx(2 * 0.25)  # -(0 - y) over expert rows, twice (twins)
     assert value.item() == pytest.approx(-(0.5 * 3) / 4) and value_e.item() == pytest.approx(-0.25)
     assert chi2.item() == pytest.approx(2 * 0.5 * 0.75 / 4) and chi2_e.item() == pytest.approx(2 * 0.5 * 0.25 / 2)
+
+
+def test_a_dwbc_night_runs_on_a_saved_day_and_records_what_ran(day):
+    """--sleep-method dwbc: the night completes, its discriminator's loss and outputs are logged, the summary records
+    the method, and the IQ critic still sleeps (the recovered reward's stats)."""
+    summary = night(day, "--sleep-method", "dwbc", "--sleep-holdout-fraction", "0.2", study=True)
+    assert summary["status"] == "completed"
+    assert summary["args"]["sleep_method"] == "dwbc" and "method=dwbc" in summary["sleep_variant"]
+    assert 0.1 <= summary["losses/dwbc_d_expert"] <= 0.9 and 0.1 <= summary["losses/dwbc_d_other"] <= 0.9
+    assert math.isfinite(summary["losses/dwbc_d_loss"]) and math.isfinite(summary["losses/iq_loss"])
+
+
+@pytest.mark.parametrize("flags", [["--sleep-control", "bc"], ["--sleep-policy-lr", "1e-3"], ["--sleep-bc-coef", "1"]],
+                         ids=["a_control_too", "its_own_lr", "a_bc_term"])  # fmt: skip
+def test_a_flag_dwbc_would_not_hear_is_refused_in_one_line(day, flags):
+    cwd, run_dir, _ = day
+    before = set(os.listdir(os.path.join(cwd, "runs")))
+    proc = run(cwd, *NIGHT, "--sleep-from", run_dir, "--sleep-method", "dwbc", *flags, study=True)
+    assert proc.returncode == 2 and proc.stderr.startswith("error: ") and proc.stderr.count("\n") == 1, proc.stderr
+    assert flags[0] in proc.stderr
+    assert set(os.listdir(os.path.join(cwd, "runs"))) == before  # nothing made
