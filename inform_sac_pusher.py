@@ -1356,20 +1356,22 @@ def actor_from_checkpoint(ckpt: dict) -> Actor:  # a saved actor, or an oracle's
 def load_oracle(args: Args) -> dict | None:
     """The oracle checkpoint to use (--oracle-path, else the shipped one), or None to train one here."""
     path, name = args.oracle_path, os.path.join("oracles", f"{args.env_id}__sac_oracle.pt")
-    places = list(dict.fromkeys([os.path.join(REPO_DIR, name), os.path.abspath(name)]))  # beside the script, or cwd
-    if path is None and not args.train_oracle:
+    if path is None and not args.train_oracle:  # the repository's oracles/: beside the script, or above it, or cwd's
+        above = [d for start in (REPO_DIR, os.getcwd()) for d in directories_up(start)]
+        places = list(dict.fromkeys(os.path.join(d, name) for d in above))
         path = next((p for p in places if os.path.isfile(p)), None)
-        if path is None:  # a copied script: say so before an hour of training starts
-            hint = (
-                "pass --oracle-path PATH (a checkpoint of oracle_train.py, e.g. the repo's oracles/), or --train-oracle"
-            )
-            where = " and ".join(places)
-            say(
-                f"[oracle] no shipped teacher found (looked for {where}); training one here for "
+        if path is None:  # a copied script far from the repository: say so before an hour of training starts
+            hint = "pass --oracle-path PATH (a checkpoint of oracle_train.py, as in oracles/), or --train-oracle"
+            say(f"[oracle] no shipped teacher found (looked for {name} beside the script, in the working directory and "
+                f"in every directory above them: {', '.join(places)}); training one here for "
                 f"{args.oracle_total_timesteps} env steps (~100 steps/s on one core). To skip this, {hint}",
-                sys.stderr,
-            )
+                sys.stderr)  # fmt: skip
     return None if path is None else {**read_checkpoint(path, "--oracle-path", args.env_id), "path": path}
+
+
+def directories_up(path: str) -> list[str]:  # the directory and each one above it, to the root
+    path = os.path.abspath(path)
+    return [path] if os.path.dirname(path) == path else [path, *directories_up(os.path.dirname(path))]
 
 
 def state_dict_cpu(net: nn.Module) -> dict:
@@ -1449,7 +1451,7 @@ def load_day(run_dir: str) -> dict:
         day["episode_shortfall"] = day.pop("episode_final_distance")
         day["day_args"] = {"success_info_key": "reward_dist", "success_return": None, **day["day_args"]}
         day["format"] = DAY_FORMAT
-    if not isinstance(day, dict) or day.get("format") != DAY_FORMAT or day.get("script") != os.path.basename(__file__):
+    if not isinstance(day, dict) or day.get("format") != DAY_FORMAT:  # this script's or a copy's, under any name
         raise InputError(f"--sleep-from {path}: not a day saved by this script's --save-buffer ({DAY_FORMAT})")
     if day["env_id"] == "Pusher-v4" and mujoco_major() >= 3:
         raise InputError(f"--sleep-from {path}: the day is on Pusher-v4, which needs mujoco<3 (a separate venv)")

@@ -6,6 +6,7 @@ day is shared by the module."""
 import json
 import math
 import os
+import shutil
 import subprocess
 import sys
 
@@ -261,3 +262,31 @@ def test_a_flag_dwbc_would_not_hear_is_refused_in_one_line(day, flags):
     assert proc.returncode == 2 and proc.stderr.startswith("error: ") and proc.stderr.count("\n") == 1, proc.stderr
     assert flags[0] in proc.stderr
     assert set(os.listdir(os.path.join(cwd, "runs"))) == before  # nothing made
+
+
+def test_a_copy_under_another_name_reads_the_originals_days_and_the_original_reads_the_copys(day, tmp_path):
+    """A researcher's copy (my_night.py, in a folder of its own inside a repository) sleeps on a day the original
+    saved, with the original's numbers, and finds the repository's teacher by looking above itself; the original
+    sleeps on a day the copy saved."""
+    _, run_dir, original = day
+    repo = tmp_path / "repo"
+    (repo / "experiments").mkdir(parents=True)
+    (repo / "oracles").mkdir()
+    shutil.copy(os.path.join(REPO, "oracles", "Pusher-v5__sac_oracle.pt"), repo / "oracles")
+    copy = repo / "experiments" / "my_night.py"
+    shutil.copy(SCRIPT, copy)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+
+    def by(script, *flags):
+        proc = subprocess.run([sys.executable, str(script), *NIGHT, *flags], cwd=elsewhere, capture_output=True,
+                              text=True, timeout=300)  # fmt: skip
+        return summary_of(proc, elsewhere)
+
+    _, again = by(copy, "--sleep-from", run_dir)
+    keys = [k for k in original if k.startswith(COMPARED)]
+    assert {k: again[k] for k in keys} == {k: original[k] for k in keys}
+    copys_dir, copys_day = by(copy, *DAY, "--save-buffer")  # its teacher: the repository's, found above the copy
+    assert copys_day["oracle_path"] == str(repo / "oracles" / "Pusher-v5__sac_oracle.pt")
+    _, by_original = by(SCRIPT, "--sleep-from", copys_dir)
+    assert {k: by_original[k] for k in keys} == {k: copys_day[k] for k in keys}
