@@ -665,7 +665,8 @@ class Night:
     def actor_loss(self, obs, actions, feedback) -> torch.Tensor:
         return actor_loss(self.q_net, self.actor, obs[self.actor_rows], self.temperature)[0]
 
-    def update_actor(self, obs, actions, feedback) -> None:
+    def update_actor(self, batch) -> None:
+        obs, actions, _, feedback, _ = batch
         self.q_net.requires_grad_(False)  # the actor's gradient flows through Q, but none is kept on it
         self.pi_loss = self.actor_loss(obs, actions, feedback)
         self.actor_optimizer.zero_grad(set_to_none=True)
@@ -681,7 +682,7 @@ class Night:
         loss.backward()
         self.q_optimizer.step()
         for _ in range(self.frequency if step % self.frequency == 0 else 0):
-            self.update_actor(obs, actions, feedback)
+            self.update_actor(batch)
         soft_update(self.q_target, self.q_net, TAU)
         return loss, terms
 

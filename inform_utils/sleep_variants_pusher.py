@@ -2,7 +2,7 @@
 helpers import a script's agent): the actor's start and its states, its schedule, the rows of Eq. 2's value and
 chi-squared terms, twin critics, a behaviour-cloning term, the sham and cloning controls, the hold-out offline
 criterion that picks a checkpoint without the environment, and nights of other methods built for a night's data
-(--sleep-method: DWBC).
+(--sleep-method: DWBC, ORIL).
 
 It runs like the core script, normally on a saved day, with the study's switches on top, and writes the same run
 directory, files and summary.json (`sleep_variant` and the study's flags in `args`). With no study flag it gives the
@@ -40,6 +40,7 @@ from dataclasses import dataclass  # noqa: E402
 from typing import Annotated, Literal  # noqa: E402
 
 import torch  # noqa: E402
+import torch.nn.functional as F  # noqa: E402
 import tyro  # noqa: E402
 
 import inform_sac_pusher as core  # noqa: E402
@@ -52,10 +53,11 @@ class Args(core.Args):
     """a control in place of the INFORM actor's update, same steps: bc = behaviour cloning on the success set (the
     mean action's squared error on the expert rows); sham = TAMER's own update (H on the feedback, the actor on H),
     no consolidation. The soft Q network sleeps as usual"""
-    sleep_method: Literal["iq", "dwbc"] = "iq"
+    sleep_method: Literal["iq", "dwbc", "oril"] = "iq"
     """the night's method (docs/results.md, "A night built for INFORM's data"): iq = the core's IQ-Learn night; dwbc =
     discriminator-weighted behaviour cloning (Xu et al., ICML 2022): a discriminator tells the success set from the
-    rest of the day, and its output weights the cloning of both"""
+    rest of the day, and its output weights the cloning of both; oril = a positive-unlabelled reward of observations
+    (Zolna et al. 2020), then TD3+BC on the day relabelled with it"""
     sleep_init_actor_from_tamer: bool = True
     """start the INFORM actor from the TAMER actor (consolidation); False starts it from scratch (unset: the
     protocol's)"""
@@ -78,14 +80,12 @@ class Args(core.Args):
     offline criterion on them every 1,000 steps; the checkpoint it picks is kept and tested as `inform_selected`"""
 
     def night_settings(self) -> dict:
-        """The core's settings and the study's switches; the sham's actor learns at TAMER's rate from TAMER's actor."""
+        """The core's settings and the study's switches, under what the chosen night fixes (its `fixed`)."""
         settings = super().night_settings() | {
             "loss_rows": self.sleep_loss_rows, "twin_critics": self.sleep_twin_critics, "bc_coef": self.sleep_bc_coef,
             "holdout_fraction": self.sleep_holdout_fraction,
         }  # fmt: skip
-        if self.sleep_control == "sham":
-            settings |= {"policy_lr": core.TAMER_POLICY_LR, "init_actor_from_tamer": True}
-        return settings
+        return settings | self.night_kind().fixed  # what the night fixes itself, recorded as what ran
 
     def sleep_variant(self) -> str:
         return f"method={self.sleep_method} control={self.sleep_control} " + super().sleep_variant()
@@ -202,6 +202,7 @@ class StudyNight(core.Night):
     gives the core's night, number for number; a term added to the core's `loss` or `actor_loss` runs here too."""
 
     hears = None  # the night settings this night uses (None: all); a flag for any other is refused
+    fixed = {}  # settings this night sets itself (a method's published values), recorded as what ran
 
     def __init__(self, tamer_actor, device, *, loss_rows: str, twin_critics: bool, bc_coef: float,
                  holdout_fraction: float, holdout_seed: int, **settings):  # fmt: skip
@@ -252,19 +253,9 @@ class StudyNight(core.Night):
 class CloningControl(StudyNight):
     """Behaviour cloning on the success set in place of the actor's objective (the soft Q sleeps as usual)."""
 
-    hears = {
-        "batch_size",
-        "q_lr",
-        "policy_lr",
-        "temperature",
-        "chi2_coef",
-        "init_actor_from_tamer",
-        "policy_frequency",
-        "loss_rows",
-        "twin_critics",
-        "bc_coef",
-        "holdout_fraction",
-    }  # not actor_states: it clones the expert rows
+    # not actor_states: it clones the expert rows
+    hears = {"batch_size", "q_lr", "policy_lr", "temperature", "chi2_coef", "init_actor_from_tamer", "policy_frequency",
+             "loss_rows", "twin_critics", "bc_coef", "holdout_fraction"}  # fmt: skip
 
     def objective(self, obs, actions, feedback):
         return self.cloning_loss(obs, actions)
@@ -274,16 +265,10 @@ class ShamControl(StudyNight):
     """TAMER goes on learning from its memories at its own rates: H from the day's by Eq. 1 on the replay rows, then
     its actor on H with its autotuned entropy; no consolidation (the soft Q sleeps as usual, unused)."""
 
-    hears = {
-        "batch_size",
-        "q_lr",
-        "temperature",
-        "chi2_coef",
-        "policy_frequency",
-        "loss_rows",
-        "twin_critics",
-        "holdout_fraction",
-    }  # TAMER's rates, from TAMER's actor, on the replay rows, no cloning term
+    # TAMER's rates, from TAMER's actor, on the replay rows, no cloning term
+    hears = {"batch_size", "q_lr", "temperature", "chi2_coef", "policy_frequency", "loss_rows", "twin_critics",
+             "holdout_fraction"}  # fmt: skip
+    fixed = {"policy_lr": core.TAMER_POLICY_LR, "init_actor_from_tamer": True}
 
     def __init__(self, tamer_actor, device, *, h_net, ent_coef: float, h_lr: float, **settings):
         super().__init__(tamer_actor, device, **settings)
@@ -294,7 +279,8 @@ class ShamControl(StudyNight):
         self.log_ent_coef = torch.full((1,), math.log(ent_coef), device=device, requires_grad=True)
         self.ent_coef_optimizer = torch.optim.Adam([self.log_ent_coef], lr=h_lr, foreach=True)
 
-    def update_actor(self, obs, actions, feedback):  # Eq. 1 on the replay rows, then TAMER's actor step on H
+    def update_actor(self, batch):  # Eq. 1 on the replay rows, then TAMER's actor step on H
+        obs, actions, _, feedback, _ = batch
         replay = ~self.is_expert
         self.pi_loss = core.tamer_loss(self.h_net, obs[replay], actions[replay], feedback[replay])
         self.h_optimizer.zero_grad(set_to_none=True)
@@ -310,9 +296,9 @@ class ShamControl(StudyNight):
 DWBC = {"alpha": 7.5, "eta": 0.5, "lr": 1e-4, "weight_decay": 5e-3, "d_range": (0.1, 0.9)}
 
 
-def dwbc_discriminator_loss(d_expert: torch.Tensor, d_other: torch.Tensor, eta: float) -> torch.Tensor:
-    # positive-unlabelled: the success set is positive, the rest of the day unlabelled, with the class prior eta
-    # L_d = eta E_e[-log d] + E_o[-log(1 - d)] - eta E_e[-log(1 - d)]
+def pu_loss(d_expert: torch.Tensor, d_other: torch.Tensor, eta: float) -> torch.Tensor:
+    # positive-unlabelled (DWBC's discriminator, ORIL's reward): the success set is positive, the other rows
+    # unlabelled, eta the class prior: L = eta E_e[-log d] + E_o[-log(1 - d)] - eta E_e[-log(1 - d)]
     return -eta * d_expert.log().mean() - (1 - d_other).log().mean() + eta * (1 - d_expert).log().mean()
 
 
@@ -349,13 +335,14 @@ class DWBCNight(StudyNight):
     # not the actor's learning rate (its own), the actor's states (it clones the rows it needs) or the bc term
     hears = {"batch_size", "q_lr", "temperature", "chi2_coef", "init_actor_from_tamer", "policy_frequency", "loss_rows",
              "twin_critics", "holdout_fraction"}  # fmt: skip
+    fixed = {"policy_lr": DWBC["lr"]}
 
     def __init__(self, tamer_actor, device, **settings):
         super().__init__(tamer_actor, device, **settings)
         obs_dim, act_dim = tamer_actor.fc1.in_features, tamer_actor.fc_mean.out_features
         self.discriminator = Discriminator(obs_dim, act_dim).to(device)
         self.d_optimizer = torch.optim.Adam(self.discriminator.parameters(), lr=DWBC["lr"], foreach=True)
-        self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=DWBC["lr"],
+        self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=settings["policy_lr"],
                                                 weight_decay=DWBC["weight_decay"], foreach=True)  # fmt: skip
         self.d_terms = {"dwbc_d_loss": torch.zeros((), device=device)}
 
@@ -365,11 +352,12 @@ class DWBCNight(StudyNight):
         other = replay_idx[~buffer.success[replay_idx]]
         return (other if other.numel() else replay_idx), expert_idx, fallback_episodes
 
-    def update_actor(self, obs, actions, feedback):
+    def update_actor(self, batch):
+        obs, actions, *_ = batch
         expert, other = self.is_expert, ~self.is_expert
         log_pi = self.actor.log_prob(obs, actions)
         d = self.discriminator(obs, actions, log_pi)
-        d_loss = dwbc_discriminator_loss(d[expert], d[other], DWBC["eta"])
+        d_loss = pu_loss(d[expert], d[other], DWBC["eta"])
         self.d_optimizer.zero_grad(set_to_none=True)
         d_loss.backward()
         self.d_optimizer.step()
@@ -391,8 +379,95 @@ class DWBCNight(StudyNight):
         return loss, {**terms, **self.d_terms}
 
 
+# ORIL (Zolna et al. 2020): a reward from a positive-unlabelled classifier of observations (the success set against
+# the whole day, prior eta), then offline RL on it; the offline learner here is TD3+BC (Fujimoto & Gu 2021) at its
+# published settings: the BC weight alpha, target policy noise and its clip (times the action scale), the actor's
+# delay, the target networks' rate, the discount and the learning rate of every network
+ORIL = {"eta": 0.5, "alpha": 2.5, "policy_noise": 0.2, "noise_clip": 0.5, "delay": 2, "tau": 0.005, "gamma": 0.99,
+        "lr": 3e-4}  # fmt: skip
+
+
+def nn_pu_loss(f_expert: torch.Tensor, f_other: torch.Tensor, eta: float) -> torch.Tensor:
+    # pu_loss on logits f (d = sigmoid(f), -log d = softplus(-f), -log(1 - d) = softplus(f)), its negative part
+    # E_o[-log(1 - d)] - eta E_e[-log(1 - d)] kept at or above 0 (the non-negative estimator, Kiryo et al. 2017):
+    # without it the loss runs to -inf once the success rows are fitted (NaN by 2,000 steps on the tests' day)
+    negative = F.softplus(f_other).mean() - eta * F.softplus(f_expert).mean()
+    return eta * F.softplus(-f_expert).mean() + negative.clamp(min=0.0)
+
+
+def td3bc_actor_loss(q_pi: torch.Tensor, pi_action: torch.Tensor, action: torch.Tensor, alpha: float) -> torch.Tensor:
+    # TD3+BC: -lambda E[Q(s, pi(s))] + E[(pi(s) - a)^2], lambda = alpha / E|Q(s, pi(s))| held fixed
+    return -alpha / q_pi.abs().mean().detach() * q_pi.mean() + (pi_action - action).pow(2).mean()
+
+
+def mean_action(actor, obs: torch.Tensor) -> torch.Tensor:  # the actor as a deterministic policy, in the env's bounds
+    return torch.tanh(actor(obs)[0]) * actor.action_scale + actor.action_bias
+
+
+class ORILNight(StudyNight):
+    """ORIL as the night: each step its reward R(s) = sigmoid(f(s)) learns, by the positive-unlabelled loss (its
+    non-negative form, nn_pu_loss), to tell the success set's observations from the whole day's (the replay rows),
+    and TD3+BC learns on the day relabelled with R: twin critics towards R(s) + gamma min Q'(s', pi'(s') + clipped
+    noise), the actor (its mean action) every 2nd step on lambda Q plus cloning the day's actions. The actor starts
+    from TAMER's; the soft Q sleeps as usual."""
+
+    hears = {"batch_size", "q_lr", "temperature", "chi2_coef", "init_actor_from_tamer", "loss_rows", "twin_critics",
+             "holdout_fraction"}  # fmt: skip
+    fixed = {"policy_lr": ORIL["lr"], "policy_frequency": 1}  # one TD3+BC step per night step; the actor's own delay
+
+    def __init__(self, tamer_actor, device, **settings):
+        super().__init__(tamer_actor, device, **settings)
+        obs_dim, act_dim, nn = tamer_actor.fc1.in_features, tamer_actor.fc_mean.out_features, torch.nn
+        self.reward = nn.Sequential(nn.Linear(obs_dim, core.HIDDEN_SIZE), nn.ReLU(),
+                                    nn.Linear(core.HIDDEN_SIZE, core.HIDDEN_SIZE), nn.ReLU(),
+                                    nn.Linear(core.HIDDEN_SIZE, 1)).to(device)  # fmt: skip
+        self.critic = core.QEnsemble(obs_dim, act_dim, core.HIDDEN_SIZE, n=2).to(device)
+        self.critic_target, self.actor_target = copy.deepcopy(self.critic), copy.deepcopy(self.actor)
+        self.r_optimizer = torch.optim.Adam(self.reward.parameters(), lr=ORIL["lr"], foreach=True)
+        self.critic_optimizer = torch.optim.Adam(self.critic.parameters(), lr=ORIL["lr"], foreach=True)
+        self.calls = 0
+        self.oril_terms = {}
+
+    def update_actor(self, batch):
+        obs, actions, next_obs, _, terminated = batch
+        scale, bias = self.actor.action_scale, self.actor.action_bias
+        f = self.reward(obs).squeeze(-1)  # R(s) = sigmoid(f(s))
+        r_loss = nn_pu_loss(f[self.is_expert], f[~self.is_expert], ORIL["eta"])
+        self.r_optimizer.zero_grad(set_to_none=True)
+        r_loss.backward()
+        self.r_optimizer.step()
+        with torch.no_grad():  # TD3's target: clipped noise on the target actor's action, the twins' minimum
+            noise = (torch.randn_like(actions) * ORIL["policy_noise"]).clamp(-ORIL["noise_clip"], ORIL["noise_clip"])
+            next_action = (mean_action(self.actor_target, next_obs) + noise * scale).clamp(bias - scale, bias + scale)
+            next_q = self.critic_target(next_obs, next_action).min(0).values
+            r = torch.sigmoid(f)
+            y = r + (1.0 - terminated) * ORIL["gamma"] * next_q
+        critic_loss = (self.critic(obs, actions) - y).pow(2).mean(-1).sum()
+        self.critic_optimizer.zero_grad(set_to_none=True)
+        critic_loss.backward()
+        self.critic_optimizer.step()
+        self.calls += 1
+        if self.calls % ORIL["delay"] == 0:
+            self.critic.requires_grad_(False)  # the actor's gradient flows through Q1, but none is kept on it
+            pi = mean_action(self.actor, obs)
+            self.pi_loss = td3bc_actor_loss(self.critic(obs, pi)[0], pi, actions, ORIL["alpha"])
+            self.actor_optimizer.zero_grad(set_to_none=True)
+            self.pi_loss.backward()
+            self.critic.requires_grad_(True)
+            self.actor_optimizer.step()
+            core.soft_update(self.critic_target, self.critic, ORIL["tau"])
+            core.soft_update(self.actor_target, self.actor, ORIL["tau"])
+        self.oril_terms = {"oril_reward_loss": r_loss.detach(), "oril_critic_loss": critic_loss.detach(),
+                           "oril_reward_expert": r[self.is_expert].mean(),
+                           "oril_reward_other": r[~self.is_expert].mean()}  # fmt: skip
+
+    def update(self, step, batch):
+        loss, terms = super().update(step, batch)
+        return loss, {**terms, **self.oril_terms}
+
+
 CONTROLS = {"bc": CloningControl, "sham": ShamControl}  # by --sleep-control
-METHODS = {"iq": StudyNight, "dwbc": DWBCNight}  # by --sleep-method
+METHODS = {"iq": StudyNight, "dwbc": DWBCNight, "oril": ORILNight}  # by --sleep-method
 
 
 def run(argv: list[str]) -> int:

@@ -243,14 +243,18 @@ def test_iq_loss_on_expert_rows_only_by_hand():
     assert chi2.item() == pytest.approx(2 * 0.5 * 0.75 / 4) and chi2_e.item() == pytest.approx(2 * 0.5 * 0.25 / 2)
 
 
-def test_a_dwbc_night_runs_on_a_saved_day_and_records_what_ran(day):
-    """--sleep-method dwbc: the night completes, its discriminator's loss and outputs are logged, the summary records
-    the method, and the IQ critic still sleeps (the recovered reward's stats)."""
-    summary = night(day, "--sleep-method", "dwbc", "--sleep-holdout-fraction", "0.2", study=True)
+@pytest.mark.parametrize(("method", "probability"), [("dwbc", "dwbc_d"), ("oril", "oril_reward")])
+def test_a_method_night_runs_on_a_saved_day_and_records_what_ran(day, method, probability):
+    """--sleep-method dwbc / oril: the night completes, its own model's loss and outputs are logged (DWBC's
+    discriminator, ORIL's reward, each a probability on the success rows and on the others), the summary records the
+    method and the learning rate it fixes, and the IQ critic still sleeps (its loss)."""
+    summary = night(day, "--sleep-method", method, "--sleep-holdout-fraction", "0.2", study=True)
     assert summary["status"] == "completed"
-    assert summary["args"]["sleep_method"] == "dwbc" and "method=dwbc" in summary["sleep_variant"]
-    assert 0.1 <= summary["losses/dwbc_d_expert"] <= 0.9 and 0.1 <= summary["losses/dwbc_d_other"] <= 0.9
-    assert math.isfinite(summary["losses/dwbc_d_loss"]) and math.isfinite(summary["losses/iq_loss"])
+    assert summary["args"]["sleep_method"] == method and f"method={method}" in summary["sleep_variant"]
+    assert f"policy_lr={variants.METHODS[method].fixed['policy_lr']}" in summary["sleep_variant"]
+    for rows in ("expert", "other"):
+        assert 0 <= summary[f"losses/{probability}_{rows}"] <= 1
+    assert math.isfinite(summary["losses/iq_loss"])
 
 
 @pytest.mark.parametrize("flags", [["--sleep-control", "bc"], ["--sleep-policy-lr", "1e-3"], ["--sleep-bc-coef", "1"]],
