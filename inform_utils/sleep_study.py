@@ -51,6 +51,8 @@ PUSHER_VARIANTS = {
     "td3bc2.5": ["--sleep-bc-coef", "2.5"],
     "temperature0.1": ["--sleep-temperature", "0.1"],
     "iqlearn_offline": ["--sleep-loss-rows", "expert", "--sleep-actor-states", "expert", "--sleep-policy-lr", "3e-5"],
+    "dwbc": ["--sleep-method", "dwbc"],  # nights of other methods, built for a night's data
+    "oril": ["--sleep-method", "oril"],
     "authors": ["--sleep-protocol", "authors"],  # last: 100k gradient steps, 20 times the others
 }
 MAZE_VARIANTS = {
@@ -66,6 +68,11 @@ CONTROLS = ("sham", "bc")
 RULE_SEEDS, RULE_P, RULE_CLOSER_DAYS, RULE_ORACLE_GAP = (1, 2, 3, 4, 5), 0.01, 4, 0.15
 # then it must hold on new days: the same tests on the days of these seeds alone, one day allowed to miss as above
 CONFIRM_SEEDS, CONFIRM_CLOSER_DAYS = (6, 7, 8), 2
+# the rule for a night built for INFORM's data (docs/results.md, fixed before any of its nights ran): per task, over
+# its five days, with the boxes closer than each control (a two-sided paired t-test over the days, p < METHOD_P), and
+# on the plain task a sampled return not below TAMER's by more than TAMER's own sampling spread
+METHODS, METHOD_P, METHOD_DAYS = ("dwbc", "oril"), 0.05, 5
+OBSTACLE, SAMPLED = "eval/obstacle/{p}_final_distance", "eval/{p}_return_sampled"
 TOLERANCE = 1e-9  # differences of means below this are rounding (0.32 - 0.30 is a little over 0.02 in floating point)
 # the smallest difference a measure can show: one episode of the random-start test, one start cell, one step. A
 # variant must beat a control by more than this even where the default's sleep seeds happened to agree exactly.
@@ -97,7 +104,7 @@ STUDIES = {
         "inform_utils.sleep_variants_pusher",
         PUSHER_VARIANTS,
         ("--sleep-holdout-fraction", "0.15"),  # every night logs the offline criterion on the same held-out episodes
-        ("default", "sham", "bc", "authors"),
+        ("default", "sham", "bc", "authors", "dwbc", "oril"),
         (
             ("fixed-start return", "eval/{p}_return", 1),
             ("authors' test distance", "eval/authors_test/{p}_final_distance", -1),
@@ -401,6 +408,7 @@ def table(args: Args) -> str:
             lines.append(table_row(row))
     lines += ["", verdict(rows, ran, columns, spread, ("inform", "inform_selected") if study.pusher else ("inform",))]
     lines += ["", default_rule(args, rows, ran, noise)] if study.pusher else []
+    lines += ["", method_rule(rows, [v for v in ran if v in METHODS])] if study.pusher else []
     for path in unfinished:  # kept for their curves, left out of the table: say so
         with open(os.path.join(path, "summary.json")) as f:
             summary = json.load(f)
@@ -530,6 +538,62 @@ def default_rule(args: Args, rows: list[dict], variants: list[str], noise: float
     stay = "; the defaults stay" if said[0] == "none" else ""
     verdict_line = f"a new default by the per-day test: {said[0]}{stay} (by the pooled test: {said[1]})"
     return "\n".join([*lines, "", verdict_line])
+
+
+def return_spread(rows: list[dict]) -> float:
+    """TAMER's own sampling spread on the plain task: the largest range, over the days, of its sampled return between
+    one day's sampling streams (every night evaluates TAMER again in its own); 0 where each day had one stream."""
+    spreads = [0.0]
+    for day in {r["day"] for r in rows}:
+        values = [r[SAMPLED.format(p="tamer")] for r in rows if r["day"] == day and SAMPLED.format(p="tamer") in r]
+        spreads += [max(values) - min(values)] if values else []
+    return max(spreads)
+
+
+def versus(mine: dict, theirs: dict, days: list[str]) -> tuple[str, bool]:
+    """One control of the rule for a night built for the data: the mean of the method's day means minus the
+    control's (negative: closer), the paired t-test over the days (two-sided), the days closer; and whether it passes
+    (p < METHOD_P, closer on average)."""
+    from scipy.stats import ttest_rel
+
+    diff = statistics.mean(mine[d] - theirs[d] for d in days)
+    p = float(ttest_rel([mine[d] for d in days], [theirs[d] for d in days]).pvalue) if len(days) > 1 else None
+    closer = sum(mine[d] < theirs[d] - TOLERANCE for d in days)
+    text = f"{diff:+.4f} m, p = {'-' if p is None else f'{p:.2g}'}, closer on {closer} of {len(days)}"
+    return text, p is not None and p < METHOD_P and diff < 0
+
+
+def method_rule(rows: list[dict], methods: list[str]) -> str:
+    """The rule for a night built for the data, per task (env id) and method, on the days that hold the method and
+    both controls: versus() each control with the boxes, the plain task's sampled return against TAMER's in the same
+    nights with TAMER's sampling spread, and the verdict: yes, no, or open while fewer than METHOD_DAYS days ran."""
+    if not methods:
+        return "the rule for a night built for the data: no night of a method (--sleep-method) in this campaign"
+    rule = (
+        f"the rule for a night built for the data (per task: with the boxes closer than each control, paired "
+        f"t-test over the days p < {METHOD_P}; on the plain task not below TAMER by more than its spread)"
+    )
+    lines = [rule, ""]
+    head = ["task", "method", "days", "with the boxes vs bc", "vs sham", "plain task vs TAMER", "consolidates?"]
+    lines += table_head(head)
+    task_of = lambda r: r.get("args", {}).get("env_id", "?")  # noqa: E731
+    for task in sorted({task_of(r) for r in rows}):
+        on_task = [r for r in rows if task_of(r) == task]
+        spread = return_spread(on_task)
+        for method in methods:
+            mine = day_means(on_task, method, OBSTACLE)
+            controls = [day_means(on_task, control, OBSTACLE) for control in ("bc", "sham")]
+            days = [d for d in mine if all(d in c for c in controls)]
+            if not days:
+                continue
+            tests = [versus(mine, theirs, days) for theirs in controls]
+            ret, tamer = day_means(on_task, method, SAMPLED), day_means(on_task, method, SAMPLED, "tamer")
+            gap = statistics.mean(ret[d] - tamer[d] for d in days)
+            tests.append((f"{gap:+.2f} (spread {spread:.2f})", gap >= -spread - TOLERANCE))
+            answer = "yes" if all(ok for _, ok in tests) else "no"
+            answer = answer if len(days) >= METHOD_DAYS else f"open: {len(days)} of {METHOD_DAYS} days"
+            lines.append(table_row([task, method, str(len(days)), *(text for text, _ in tests), answer]))
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

@@ -325,3 +325,40 @@ def test_the_per_seed_table_reads_each_runs_summary():
     assert "| 1.00 / 0.50 / 0.90 |" in rows[3]  # a rate that is not 0 or 1: every success of the row as a rate
     # the returns' mean and sd over the seeds: TAMER -23 ± sqrt(8) = 2.83, INFORM -26 ± sqrt(32) = 5.66
     assert rows[4].startswith("| mean ± std | -20.00 ± 0.00 | -23.00 ± 2.83 | -26.00 ± 5.66 |")
+
+
+def method_night(task, day, variant, seed, distance, ret, tamer_ret):
+    return {"day": day, "variant": variant, "sleep_seed": seed, "args": {"env_id": task},
+            "eval/obstacle/inform_final_distance": distance, "eval/inform_return_sampled": ret,
+            "eval/tamer_return_sampled": tamer_ret}  # fmt: skip
+
+
+def test_the_rule_for_a_night_built_for_the_data_per_task_against_both_controls():
+    """Five Pusher-v4 days, two sleep seeds a night. bc ends at 0.20 m with the boxes, the sham at 0.19 (0.15 on day
+    5). dwbc: 0.18 (0.181 on day 3), closer than bc on every day (p tiny), but closer than the sham by 0.01 on four
+    days and farther by 0.03 on day 5: mean -0.0018, so no. oril: 0.17 (0.171 on day 2, 0.13 on day 5), closer than
+    both on every day, and on the plain task 0.5 below TAMER where TAMER's streams differ by up to 1.0: yes; x, as
+    oril but 1.5 below TAMER: no. On Pusher-v5, two days so far: open."""
+    rows = []
+    for day in range(1, 6):
+        for seed in (1, 2):
+            tamer = -30.0 + (seed - 1.5) * (day == 4)  # day 4's two streams: TAMER's sampled return differs by 1.0
+            rows.append(method_night("Pusher-v4", f"d{day}", "bc", seed, 0.20, -30.0, tamer))
+            rows.append(method_night("Pusher-v4", f"d{day}", "sham", seed, 0.19 if day < 5 else 0.15, -30.0, tamer))
+            rows.append(method_night("Pusher-v4", f"d{day}", "dwbc", seed, 0.181 if day == 3 else 0.18, -30.0, tamer))
+            oril = {2: 0.171, 5: 0.13}.get(day, 0.17)
+            rows.append(method_night("Pusher-v4", f"d{day}", "oril", seed, oril, -30.5, tamer))
+            rows.append(method_night("Pusher-v4", f"d{day}", "x", seed, oril, -31.5, tamer))  # oril, 1.5 below TAMER
+    for day in (1, 2):
+        for variant in ("bc", "sham", "dwbc"):
+            rows.append(method_night("Pusher-v5", f"v5d{day}", variant, 1, 0.3, -40.0, -40.0))
+    text = ss.method_rule(rows, ["dwbc", "oril", "x"])
+    table = {tuple(c.strip() for c in line.strip("| ").split(" | ")[:2]): line.strip("| ").split(" | ")
+             for line in text.splitlines() if line.startswith("| Pusher")}  # fmt: skip
+    dwbc, oril, v5 = table[("Pusher-v4", "dwbc")], table[("Pusher-v4", "oril")], table[("Pusher-v5", "dwbc")]
+    assert dwbc[3].startswith("-0.0198 m") and "closer on 5 of 5" in dwbc[3]
+    assert dwbc[4].startswith("-0.0018 m") and "closer on 4 of 5" in dwbc[4] and dwbc[6] == "no"
+    assert oril[5] == "-0.50 (spread 1.00)" and oril[6] == "yes"
+    assert table[("Pusher-v4", "x")][5:] == ["-1.50 (spread 1.00)", "no"]  # as oril with the boxes; loses the task
+    assert v5[2] == "2" and v5[6] == "open: 2 of 5 days"
+    assert "no night of a method" in ss.method_rule(rows, [])
