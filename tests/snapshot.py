@@ -37,6 +37,8 @@ PUSHER_DAY = ["--tamer-total-timesteps", "600", "--tamer-learning-starts", "300"
               "--success-distance", "1.0"]  # fmt: skip
 PUSHER_NIGHT = ["--sleep-gradient-steps", "100", "--sleep-batch-size", "64", "--eval-episodes", "1",
                 "--obstacle-episodes", "2", "--authors-test-episodes", "2"]  # fmt: skip
+# the v5 teacher the values were recorded with (the default teacher since 2026-12-04 is another one)
+V5_TEACHER = ["--oracle-path", os.path.join(REPO, "oracles", "Pusher-v5__sac_oracle_890k_below_bar.pt")]
 MAZE_TINY = ["--tamer-total-timesteps", "2000", "--tamer-learning-starts", "500", "--sleep-gradient-steps", "200"]
 TEACHER = ["--teacher-noise", "0.1", "--teacher-sparsity", "0.7", "--teacher-delay", "2", "--credit-window", "3"]
 
@@ -76,8 +78,19 @@ def case(name, script, *flags, new=None, needs=None, python="main", stdin=None, 
 
 
 CASES = [
-    case("pusher_day", PUSHER, *PUSHER_DAY, *PUSHER_NIGHT, "--save-buffer"),
-    case("pusher_teachers", PUSHER, "--seed", "2", *PUSHER_DAY, *PUSHER_NIGHT, *TEACHER, "--feedback-budget", "100"),
+    case("pusher_day", PUSHER, *PUSHER_DAY, *PUSHER_NIGHT, *V5_TEACHER, "--save-buffer"),
+    case(
+        "pusher_teachers",
+        PUSHER,
+        "--seed",
+        "2",
+        *PUSHER_DAY,
+        *PUSHER_NIGHT,
+        *TEACHER,
+        *V5_TEACHER,
+        "--feedback-budget",
+        "100",
+    ),  # fmt: skip
     case(
         "pusher_budget_ends_random_starts",
         PUSHER,
@@ -89,6 +102,7 @@ CASES = [
         "--feedback-budget",
         "40",
         "--budget-ends-forward-phase",
+        *V5_TEACHER,
     ),  # fmt: skip
     case("pusher_night_core", PUSHER, "--sleep-from", "{day}", *PUSHER_NIGHT, "--sleep-seed", "1", needs="pusher_day"),
     case(
