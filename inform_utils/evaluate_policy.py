@@ -60,6 +60,8 @@ class Pusher:
     """as the run's --success-return"""
     num_threads: int = 1
     """torch CPU threads"""
+    stream: int = 0
+    """another stream of sampled actions from the same starts (0: the stream of --seed, as the run's final tests)"""
 
 
 @dataclass
@@ -81,7 +83,7 @@ SUBCOMMANDS = {"pusher": Pusher, "maze": Maze}
 
 def run_args(script, args, path_field: str):
     """The script's own Args with these values, checked by the script's check_args (its ranges, its messages)."""
-    values = {f.name: getattr(args, f.name) for f in dataclasses.fields(args) if f.name != path_field}
+    values = {f.name: getattr(args, f.name) for f in dataclasses.fields(args) if f.name not in (path_field, "stream")}
     run = script.Args(**values)
     script.check_args(run)
     return run
@@ -98,6 +100,10 @@ def evaluate_pusher(args: Pusher) -> dict:
     torch.set_num_threads(run.num_threads)
     actor = isp.actor_from_checkpoint(isp.read_checkpoint(args.policy, "policy", run.env_id))
     evaluator = isp.Evaluator(run, writer=None)
+    if args.stream:
+        if args.stream < 0:
+            raise isp.InputError(f"--stream {args.stream}: must be >= 0 (0: the run's own stream)")
+        evaluator.generator.manual_seed(run.seed + 12345 + 1_000_003 * args.stream)
     metrics = evaluator("policy", actor, 0, run.eval_episodes)
     obstacle = {"obstacle/skipped": isp.obstacle_skipped(run.env_id, run.obstacle_episodes)}
     if obstacle["obstacle/skipped"] is None:

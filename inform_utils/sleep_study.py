@@ -72,6 +72,8 @@ CONFIRM_SEEDS, CONFIRM_CLOSER_DAYS = (6, 7, 8), 2
 # its five days, with the boxes closer than each control (a two-sided paired t-test over the days, p < METHOD_P), and
 # on the plain task a sampled return not below TAMER's by more than TAMER's own sampling spread
 METHODS, METHOD_P, METHOD_DAYS = ("dwbc", "oril"), 0.05, 5
+# TAMER's own sampling spread on the plain task: its sampled test again in these other streams of sampled actions
+STREAMS = (1, 2, 3, 4, 5)
 OBSTACLE, SAMPLED = "eval/obstacle/{p}_final_distance", "eval/{p}_return_sampled"
 TOLERANCE = 1e-9  # differences of means below this are rounding (0.32 - 0.30 is a little over 0.02 in floating point)
 # the smallest difference a measure can show: one episode of the random-start test, one start cell, one step. A
@@ -408,7 +410,7 @@ def table(args: Args) -> str:
             lines.append(table_row(row))
     lines += ["", verdict(rows, ran, columns, spread, ("inform", "inform_selected") if study.pusher else ("inform",))]
     lines += ["", default_rule(args, rows, ran, noise)] if study.pusher else []
-    lines += ["", method_rule(rows, [v for v in ran if v in METHODS])] if study.pusher else []
+    lines += ["", method_rule(args, rows, [v for v in ran if v in METHODS])] if study.pusher else []
     for path in unfinished:  # kept for their curves, left out of the table: say so
         with open(os.path.join(path, "summary.json")) as f:
             summary = json.load(f)
@@ -540,14 +542,42 @@ def default_rule(args: Args, rows: list[dict], variants: list[str], noise: float
     return "\n".join([*lines, "", verdict_line])
 
 
-def return_spread(rows: list[dict]) -> float:
+def tamer_streams(args: Args, day: str) -> None:
+    """The day's TAMER actor under its run's sampled test (the fixed start, --eval-episodes episodes) in each of
+    STREAMS, other streams of sampled actions than the run's own: {results_dir}/{campaign}/<day>/tamer_streams.json.
+    Every night of a day tests TAMER in the same stream, so the nights alone show no spread."""
+    dest = os.path.join(args.results_dir, args.campaign, os.path.basename(os.path.normpath(day)), "tamer_streams.json")
+    if os.path.isfile(dest):
+        return
+    with open(os.path.join(day, "summary.json")) as f:
+        run = json.load(f)
+    cmd = [sys.executable, "-m", "inform_utils.evaluate_policy", "pusher", os.path.join(day, "tamer_actor.pt")]
+    cmd += ["--env-id", run["args"]["env_id"], "--seed", str(run["seed"]), "--obstacle-episodes", "0"]
+    cmd += ["--eval-episodes", str(run["args"]["eval_episodes"])]
+    returns = {}
+    for stream in STREAMS:
+        proc = subprocess.run([*cmd, "--stream", str(stream)], capture_output=True, text=True, check=True,
+                              env=child_env())  # fmt: skip
+        returns[str(stream)] = json.loads(proc.stdout[proc.stdout.index("{") :])["eval/policy_return_sampled"]
+    os.makedirs(os.path.dirname(dest), exist_ok=True)
+    with open(dest + ".tmp", "w") as f:
+        json.dump({"eval/tamer_return_sampled": returns, "command": " ".join(cmd[1:])}, f, indent=1)
+    os.replace(dest + ".tmp", dest)
+
+
+def return_spread(args: Args, rows: list[dict]) -> float | None:
     """TAMER's own sampling spread on the plain task: the largest range, over the days, of its sampled return between
-    one day's sampling streams (every night evaluates TAMER again in its own); 0 where each day had one stream."""
-    spreads = [0.0]
-    for day in {r["day"] for r in rows}:
-        values = [r[SAMPLED.format(p="tamer")] for r in rows if r["day"] == day and SAMPLED.format(p="tamer") in r]
-        spreads += [max(values) - min(values)] if values else []
-    return max(spreads)
+    the day's streams (the run's own, which every night repeats, and tamer_streams()); None if a day has none."""
+    spreads = []
+    for day in sorted({r["day"] for r in rows}):
+        path = os.path.join(args.results_dir, args.campaign, day, "tamer_streams.json")
+        if not os.path.isfile(path):
+            return None
+        with open(path) as f:
+            values = list(json.load(f)["eval/tamer_return_sampled"].values())
+        values += [r[SAMPLED.format(p="tamer")] for r in rows if r["day"] == day and SAMPLED.format(p="tamer") in r]
+        spreads.append(max(values) - min(values))
+    return max(spreads) if spreads else None
 
 
 def versus(mine: dict, theirs: dict, days: list[str]) -> tuple[str, bool]:
@@ -563,7 +593,7 @@ def versus(mine: dict, theirs: dict, days: list[str]) -> tuple[str, bool]:
     return text, p is not None and p < METHOD_P and diff < 0
 
 
-def method_rule(rows: list[dict], methods: list[str]) -> str:
+def method_rule(args: Args, rows: list[dict], methods: list[str]) -> str:
     """The rule for a night built for the data, per task (env id) and method, on the days that hold the method and
     both controls: versus() each control with the boxes, the plain task's sampled return against TAMER's in the same
     nights with TAMER's sampling spread, and the verdict: yes, no, or open while fewer than METHOD_DAYS days ran."""
@@ -579,7 +609,7 @@ def method_rule(rows: list[dict], methods: list[str]) -> str:
     task_of = lambda r: r.get("args", {}).get("env_id", "?")  # noqa: E731
     for task in sorted({task_of(r) for r in rows}):
         on_task = [r for r in rows if task_of(r) == task]
-        spread = return_spread(on_task)
+        spread = return_spread(args, on_task)
         for method in methods:
             mine = day_means(on_task, method, OBSTACLE)
             controls = [day_means(on_task, control, OBSTACLE) for control in ("bc", "sham")]
@@ -589,9 +619,11 @@ def method_rule(rows: list[dict], methods: list[str]) -> str:
             tests = [versus(mine, theirs, days) for theirs in controls]
             ret, tamer = day_means(on_task, method, SAMPLED), day_means(on_task, method, SAMPLED, "tamer")
             gap = statistics.mean(ret[d] - tamer[d] for d in days)
-            tests.append((f"{gap:+.2f} (spread {spread:.2f})", gap >= -spread - TOLERANCE))
+            spread_text = "no tamer_streams.json" if spread is None else f"{spread:.2f}"
+            tests.append((f"{gap:+.2f} (spread {spread_text})", spread is not None and gap >= -spread - TOLERANCE))
             answer = "yes" if all(ok for _, ok in tests) else "no"
             answer = answer if len(days) >= METHOD_DAYS else f"open: {len(days)} of {METHOD_DAYS} days"
+            answer = answer if spread is not None else "open: TAMER's streams not run"
             lines.append(table_row([task, method, str(len(days)), *(text for text, _ in tests), answer]))
     return "\n".join(lines)
 
@@ -616,4 +648,6 @@ if __name__ == "__main__":
             for seed in args.sleep_seeds if variant in study.all_seeds else args.sleep_seeds[:1]:
                 for day in args.days:
                     run_night(args, day, variant, seed, extra)
+        for day in args.days if study.pusher else ():
+            tamer_streams(args, day)
     print(table(args))

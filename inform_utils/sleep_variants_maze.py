@@ -52,7 +52,7 @@ class ShamControl(StudySleep):
     """TAMER goes on learning from its memories at its own rate: H from the day's, Eq. 1 on the replay rows."""
 
     tag = "sham_loss"
-    hears = set()  # H's own rate (--tamer-h-lr), no temperature, no Eq. 2
+    hears = {"temperature"}  # H's own rate (--tamer-h-lr), no Eq. 2; the recovered reward's temperature (from H)
 
     def __init__(self, obs_dim, n_actions, device, *, h_net, h_lr, **settings):
         super().__init__(obs_dim, n_actions, device, **settings)
@@ -81,7 +81,12 @@ class Args(core.Args):
         return kind(obs_dim, n_actions, device, **self.night_settings(), **extra)
 
     def sleep_variant(self) -> str:
-        return f"control={self.sleep_control} " + super().sleep_variant()
+        """The core's line with only the settings the chosen night uses (and the sham's H rate): what ran."""
+        kind, words = NIGHTS[self.sleep_control], super().sleep_variant().split()
+        if kind.hears is not None:
+            words = [w for w in words if w.split("=")[0] not in set(self.night_settings()) - kind.hears]
+        words += [f"h_lr={self.tamer_h_lr}"] if kind is ShamControl else []
+        return f"control={self.sleep_control} " + " ".join(words)
 
 
 NIGHTS = {"none": StudySleep, "bc": CloningControl, "sham": ShamControl}  # by --sleep-control

@@ -88,7 +88,13 @@ class Args(core.Args):
         return settings | self.night_kind().fixed  # what the night fixes itself, recorded as what ran
 
     def sleep_variant(self) -> str:
-        return f"method={self.sleep_method} control={self.sleep_control} " + super().sleep_variant()
+        """The core's line with only the settings the chosen night uses (and the sham's H rate): what ran."""
+        kind, words = self.night_kind(), super().sleep_variant().split()
+        if kind.hears is not None:
+            unused = set(self.night_settings()) - kind.hears - set(kind.fixed)
+            words = [w for w in words if w.split("=")[0] not in unused]
+        words += [f"h_lr={self.tamer_h_lr}"] if kind is ShamControl else []
+        return f"method={self.sleep_method} control={self.sleep_control} " + " ".join(words)
 
     def night_kind(self) -> type:
         return CONTROLS[self.sleep_control] if self.sleep_control != "none" else METHODS[self.sleep_method]
@@ -199,7 +205,8 @@ class OfflineCriterion:
 class StudyNight(core.Night):
     """The core's night with the study's switches: the rows of Eq. 2's value and chi-squared terms, twin critics, a
     cloning term on the actor, and a hold-out whose offline criterion picks a checkpoint. Every switch at its default
-    gives the core's night, number for number; a term added to the core's `loss` or `actor_loss` runs here too."""
+    gives the core's night, number for number; a term added to the core's `loss` runs here too, and one added to its
+    `actor_loss` in every night that keeps that objective (the controls and the methods update the actor their way)."""
 
     hears = None  # the night settings this night uses (None: all); a flag for any other is refused
     fixed = {}  # settings this night sets itself (a method's published values), recorded as what ran

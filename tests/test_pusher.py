@@ -242,15 +242,22 @@ def test_smoke_oracle_path_and_determinism(tmp_path):
     # inform_utils.evaluate_policy re-runs the final evaluation of a saved policy: deterministic actions give the
     # run's numbers
     (run_dir,) = glob.glob(str(tmp_path / "a" / "runs" / "*"))
+    streams = {}
     for policy in ("tamer", "inform"):
         proc = run(tmp_path / "a", "pusher", f"{run_dir}/{policy}_actor.pt", "--eval-episodes", "2",
                    "--obstacle-episodes", "3", module="evaluate_policy")  # fmt: skip
         assert proc.returncode == 0, proc.stderr
-        metrics = json.loads(proc.stdout)
+        metrics = streams[0] = json.loads(proc.stdout)
         assert metrics["eval/policy_return"] == first[f"eval/{policy}_return"]
         assert metrics["eval/policy_final_distance"] == first[f"eval/{policy}_final_distance"]
         det = "eval/obstacle/{}_final_distance_deterministic"
         assert metrics[det.format("policy")] == first[det.format(policy)]
+    # --stream: another stream of sampled actions from the same start (the sleep study's TAMER spread)
+    proc = run(tmp_path / "a", "pusher", f"{run_dir}/inform_actor.pt", "--eval-episodes", "2", "--obstacle-episodes",
+               "0", "--stream", "1", module="evaluate_policy")  # fmt: skip
+    streams[1] = json.loads(proc.stdout)
+    assert streams[1]["eval/policy_return"] == streams[0]["eval/policy_return"]
+    assert streams[1]["eval/policy_return_sampled"] != streams[0]["eval/policy_return_sampled"]
     assert len(glob.glob(str(tmp_path / "a" / "runs" / "*"))) == 1  # evaluating writes no run
     # the obstacle statistics and Fig. 5a read the run
     stats_script = os.path.join(REPO, "inform_utils", "pusher_obstacle_stats.py")

@@ -146,3 +146,24 @@ def test_oril_night_learns_a_reward_that_tells_success_apart_and_a_critic_that_v
     gap, q_gap = (r[success].mean() - r[~success].mean()).item(), (q[success].mean() - q[~success].mean()).item()
     learned = gap > 0.3 and q_gap > 0.1 and error < 0.2
     assert learned != broken, (gap, q_gap, error)
+
+
+def test_sleep_variant_records_what_the_night_ran_with():
+    """summary.json's sleep_variant names the settings the chosen night uses, at the values it used: DWBC its own
+    learning rate and not the cloning term or the actor's states it ignores; the sham TAMER's rates; the maze's sham
+    H's rate and not Eq. 2's."""
+    from inform_utils import sleep_variants_maze as maze_variants
+
+    def words(args):
+        return dict(w.split("=", 1) for w in args.sleep_variant().split())
+
+    dwbc = words(variants.Args(sleep_method="dwbc"))
+    assert dwbc["method"] == "dwbc" and float(dwbc["policy_lr"]) == variants.DWBC["lr"]
+    assert not {"bc_coef", "actor_states"} & set(dwbc)
+    sham = words(variants.Args(sleep_control="sham"))
+    assert float(sham["policy_lr"]) == isp.TAMER_POLICY_LR and float(sham["h_lr"]) == variants.Args().tamer_h_lr
+    assert not {"bc_coef", "actor_states"} & set(sham)
+    assert words(variants.Args())["bc_coef"] == "0.0" and "h_lr" not in words(variants.Args())  # the IQ night: all
+    maze_sham = words(maze_variants.Args(sleep_control="sham"))
+    assert float(maze_sham["h_lr"]) == maze_variants.Args().tamer_h_lr and "temperature" in maze_sham
+    assert not {"q_lr", "chi2_coef", "loss_rows"} & set(maze_sham)

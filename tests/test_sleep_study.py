@@ -2,6 +2,7 @@
 the days they ran, and "helps" needs a gain over both controls above the sleep seeds' spread."""
 
 import json
+import os
 
 import numpy as np
 
@@ -333,26 +334,35 @@ def method_night(task, day, variant, seed, distance, ret, tamer_ret):
             "eval/tamer_return_sampled": tamer_ret}  # fmt: skip
 
 
-def test_the_rule_for_a_night_built_for_the_data_per_task_against_both_controls():
+def write_streams(results, day, returns):
+    os.makedirs(results / "c" / day, exist_ok=True)
+    with open(results / "c" / day / "tamer_streams.json", "w") as f:
+        json.dump({"eval/tamer_return_sampled": {str(i + 1): r for i, r in enumerate(returns)}}, f)
+
+
+def test_the_rule_for_a_night_built_for_the_data_per_task_against_both_controls(tmp_path):
     """Five Pusher-v4 days, two sleep seeds a night. bc ends at 0.20 m with the boxes, the sham at 0.19 (0.15 on day
     5). dwbc: 0.18 (0.181 on day 3), closer than bc on every day (p tiny), but closer than the sham by 0.01 on four
     days and farther by 0.03 on day 5: mean -0.0018, so no. oril: 0.17 (0.171 on day 2, 0.13 on day 5), closer than
-    both on every day, and on the plain task 0.5 below TAMER where TAMER's streams differ by up to 1.0: yes; x, as
-    oril but 1.5 below TAMER: no. On Pusher-v5, two days so far: open."""
+    both on every day, and on the plain task 0.5 below TAMER, whose own streams differ by up to 1.0 (day 4: -29 in
+    one other stream against the nights' -30): yes; x, as oril but 1.5 below TAMER: no. On Pusher-v5, two days so
+    far: open. Without TAMER's other streams the plain-task part cannot be judged: open."""
     rows = []
     for day in range(1, 6):
+        write_streams(tmp_path, f"d{day}", [-30.0, -29.0 if day == 4 else -29.8, -29.9])
         for seed in (1, 2):
-            tamer = -30.0 + (seed - 1.5) * (day == 4)  # day 4's two streams: TAMER's sampled return differs by 1.0
-            rows.append(method_night("Pusher-v4", f"d{day}", "bc", seed, 0.20, -30.0, tamer))
-            rows.append(method_night("Pusher-v4", f"d{day}", "sham", seed, 0.19 if day < 5 else 0.15, -30.0, tamer))
-            rows.append(method_night("Pusher-v4", f"d{day}", "dwbc", seed, 0.181 if day == 3 else 0.18, -30.0, tamer))
+            rows.append(method_night("Pusher-v4", f"d{day}", "bc", seed, 0.20, -30.0, -30.0))
+            rows.append(method_night("Pusher-v4", f"d{day}", "sham", seed, 0.19 if day < 5 else 0.15, -30.0, -30.0))
+            rows.append(method_night("Pusher-v4", f"d{day}", "dwbc", seed, 0.181 if day == 3 else 0.18, -30.0, -30.0))
             oril = {2: 0.171, 5: 0.13}.get(day, 0.17)
-            rows.append(method_night("Pusher-v4", f"d{day}", "oril", seed, oril, -30.5, tamer))
-            rows.append(method_night("Pusher-v4", f"d{day}", "x", seed, oril, -31.5, tamer))  # oril, 1.5 below TAMER
+            rows.append(method_night("Pusher-v4", f"d{day}", "oril", seed, oril, -30.5, -30.0))
+            rows.append(method_night("Pusher-v4", f"d{day}", "x", seed, oril, -31.5, -30.0))  # oril, 1.5 below TAMER
     for day in (1, 2):
+        write_streams(tmp_path, f"v5d{day}", [-40.0])
         for variant in ("bc", "sham", "dwbc"):
             rows.append(method_night("Pusher-v5", f"v5d{day}", variant, 1, 0.3, -40.0, -40.0))
-    text = ss.method_rule(rows, ["dwbc", "oril", "x"])
+    args = ss.Args(results_dir=str(tmp_path), campaign="c")
+    text = ss.method_rule(args, rows, ["dwbc", "oril", "x"])
     table = {tuple(c.strip() for c in line.strip("| ").split(" | ")[:2]): line.strip("| ").split(" | ")
              for line in text.splitlines() if line.startswith("| Pusher")}  # fmt: skip
     dwbc, oril, v5 = table[("Pusher-v4", "dwbc")], table[("Pusher-v4", "oril")], table[("Pusher-v5", "dwbc")]
@@ -361,4 +371,7 @@ def test_the_rule_for_a_night_built_for_the_data_per_task_against_both_controls(
     assert oril[5] == "-0.50 (spread 1.00)" and oril[6] == "yes"
     assert table[("Pusher-v4", "x")][5:] == ["-1.50 (spread 1.00)", "no"]  # as oril with the boxes; loses the task
     assert v5[2] == "2" and v5[6] == "open: 2 of 5 days"
-    assert "no night of a method" in ss.method_rule(rows, [])
+    os.remove(tmp_path / "c" / "d3" / "tamer_streams.json")
+    without = ss.method_rule(args, rows, ["oril"])
+    assert "(spread no tamer_streams.json) | open: TAMER's streams not run |" in without
+    assert "no night of a method" in ss.method_rule(args, rows, [])
