@@ -297,10 +297,11 @@ class ShamControl(StudyNight):
                           self.ent_coef_optimizer)  # fmt: skip
 
 
-# DWBC's published settings (Xu et al., ICML 2022): the weight of the expert cloning term, the class prior of the
-# positive-unlabelled discriminator, the learning rate of both networks, the policy's weight decay (the authors'
-# release), and the range d is clipped to, which keeps every expert weight positive (alpha - eta / (d (1 - d)) > 0)
-DWBC = {"alpha": 7.5, "eta": 0.5, "lr": 1e-4, "weight_decay": 5e-3, "d_range": (0.1, 0.9)}
+# DWBC's settings (Xu et al., ICML 2022) as the authors' release runs its experiments (its run script and optimisers,
+# read 2026-12-04; the paper's appendix could not be read here): the weight of the expert cloning term, the class prior
+# of the positive-unlabelled discriminator, the learning rate of both networks, the policy's weight decay, and the range
+# d is clipped to, which keeps every expert weight positive (alpha - 1 - eta / (d (1 - d)) > 0)
+DWBC = {"alpha": 10.0, "eta": 0.5, "lr": 3e-4, "weight_decay": 1e-3, "d_range": (0.1, 0.9)}
 
 
 def pu_loss(d_expert: torch.Tensor, d_other: torch.Tensor, eta: float) -> torch.Tensor:
@@ -310,34 +311,37 @@ def pu_loss(d_expert: torch.Tensor, d_other: torch.Tensor, eta: float) -> torch.
 
 
 def dwbc_policy_loss(nll_expert, nll_other, d_expert, d_other, alpha: float, eta: float) -> torch.Tensor:
-    # the cloning loss that L_d's dependence on log pi gives, d held fixed (nll = -log pi(a|s)):
-    # L_pi = alpha E_e[nll] - E_e[nll eta / (d (1 - d))] + E_o[nll / (1 - d)]
-    expert = (alpha - eta / (d_expert * (1 - d_expert))) * nll_expert
-    return expert.mean() + (nll_other / (1 - d_other)).mean()
+    # the cloning loss that L_d's dependence on log pi gives, d held fixed (nll = -log pi(a|s)), as the authors'
+    # release weighs it: L_pi = alpha E_e[nll] - E_e[nll (eta / (d (1 - d)) + 1)] + E_o[nll (1 / (1 - d) - 1)], an
+    # other row counted only where d >= 0.5 (weight d / (1 - d): how expert-like it looks), 0 elsewhere
+    expert = (alpha - 1 - eta / (d_expert * (1 - d_expert))) * nll_expert
+    other = torch.where(d_other >= 0.5, d_other / (1 - d_other), torch.zeros_like(d_other)) * nll_other
+    return expert.mean() + other.mean()
 
 
 class Discriminator(torch.nn.Module):
-    """DWBC's d(s, a, log pi(a|s)) in (0, 1): it sees how likely the policy finds the action (per action dimension,
-    clipped to [-20, 10] and scaled to [0, 1]; no gradient flows back into the policy through it)."""
+    """DWBC's d(s, a, log pi(a|s)) in (0, 1): it sees how likely the policy finds the action, per action dimension
+    (clipped to [-20, 10] and scaled to [0, 1], our guard: a day's action can lie where TAMER's actor gives it a
+    density of e^-1000; no gradient flows back into the policy through it)."""
 
     def __init__(self, obs_dim: int, act_dim: int, hidden: int = core.HIDDEN_SIZE):
         super().__init__()
         nn = torch.nn
-        self.net = nn.Sequential(nn.Linear(obs_dim + act_dim + 1, hidden), nn.ReLU(), nn.Linear(hidden, hidden),
+        self.net = nn.Sequential(nn.Linear(obs_dim + 2 * act_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden),
                                  nn.ReLU(), nn.Linear(hidden, 1))  # fmt: skip
-        self.act_dim = act_dim
 
     def forward(self, obs, actions, log_pi) -> torch.Tensor:
-        seen = ((log_pi.detach() / self.act_dim).clamp(-20, 10) + 20) / 30
-        d = torch.sigmoid(self.net(torch.cat([obs, actions, seen.unsqueeze(-1)], -1))).squeeze(-1)
+        seen = (log_pi.detach().clamp(-20, 10) + 20) / 30
+        d = torch.sigmoid(self.net(torch.cat([obs, actions, seen], -1))).squeeze(-1)
         return d.clamp(*DWBC["d_range"])
 
 
 class DWBCNight(StudyNight):
     """Discriminator-weighted behaviour cloning (Xu et al., ICML 2022) as the night: each step the discriminator
-    learns to tell the success set (expert rows) from the rest of the day (the replay rows here hold only the day's
-    other transitions), then the actor clones both, weighted by d (dwbc_policy_loss). The actor starts from TAMER's
-    (consolidation, as every night here); the soft Q sleeps as usual and only gives the recovered reward."""
+    learns, positive-unlabelled, to tell the success set (expert rows) from the whole day (the replay rows, which hold
+    successes too, as DWBC's unlabelled set does), then the actor clones the success set and the day's rows that look
+    like it, weighted by d (dwbc_policy_loss). The actor starts from TAMER's (consolidation, as every night here), on
+    raw observations (the release normalises them); the soft Q sleeps as usual and only gives the recovered reward."""
 
     # not the actor's learning rate (its own), the actor's states (it clones the rows it needs) or the bc term
     hears = {"batch_size", "q_lr", "temperature", "chi2_coef", "init_actor_from_tamer", "policy_frequency", "loss_rows",
@@ -353,18 +357,13 @@ class DWBCNight(StudyNight):
                                                 weight_decay=DWBC["weight_decay"], foreach=True)  # fmt: skip
         self.d_terms = {"dwbc_d_loss": torch.zeros((), device=device)}
 
-    def memories(self, buffer):  # the unlabelled set: the day without its success set (all of it if it all succeeded)
-        replay_idx, expert_idx, fallback_episodes = super().memories(buffer)
-        replay_idx = torch.arange(buffer.size, device=expert_idx.device) if replay_idx is None else replay_idx
-        other = replay_idx[~buffer.success[replay_idx]]
-        return (other if other.numel() else replay_idx), expert_idx, fallback_episodes
-
     def update_actor(self, batch):
         obs, actions, *_ = batch
         expert, other = self.is_expert, ~self.is_expert
-        log_pi = self.actor.log_prob(obs, actions)
+        log_pi = self.actor.log_prob(obs, actions, per_dimension=True)
         d = self.discriminator(obs, actions, log_pi)
         d_loss = pu_loss(d[expert], d[other], DWBC["eta"])
+        log_pi = log_pi.sum(-1)
         self.d_optimizer.zero_grad(set_to_none=True)
         d_loss.backward()
         self.d_optimizer.step()
