@@ -548,7 +548,10 @@ class HumanTeacher:
     def read_line(self) -> str:
         """The next line of standard input ('' at its end), waited for in short slices: a stop signal is seen within
         them even if the kernel handed it to another of our threads, which would not wake a blocking read."""
-        fd = sys.stdin.fileno()
+        try:
+            fd = sys.stdin.fileno()
+        except (AttributeError, OSError, ValueError):  # a stream with no descriptor (a test's, an embedding app's)
+            return sys.stdin.readline()
         while b"\n" not in self.unread:
             StopSignals.check()
             if select.select([fd], [], [], 0.25)[0]:

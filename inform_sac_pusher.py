@@ -1359,9 +1359,9 @@ def actor_from_checkpoint(ckpt: dict) -> Actor:  # a saved actor, or an oracle's
 def load_oracle(args: Args) -> dict | None:
     """The oracle checkpoint to use (--oracle-path, else the shipped one), or None to train one here."""
     path, name = args.oracle_path, os.path.join("oracles", f"{args.env_id}__sac_oracle.pt")
-    if path is None and not args.train_oracle:  # the repository's oracles/: beside the script, or above it, or cwd's
-        above = [d for start in (REPO_DIR, os.getcwd()) for d in directories_up(start)]
-        places = list(dict.fromkeys(os.path.join(d, name) for d in above))
+    if path is None and not args.train_oracle:  # oracles/ beside the script, in the cwd, then above either
+        script_up, cwd_up = directories_up(REPO_DIR), directories_up(os.getcwd())
+        places = list(dict.fromkeys(os.path.join(d, name) for d in [script_up[0], cwd_up[0], *script_up, *cwd_up]))
         path = next((p for p in places if os.path.isfile(p)), None)
         if path is None:  # a copied script far from the repository: say so before an hour of training starts
             hint = "pass --oracle-path PATH (a checkpoint of oracle_train.py, as in oracles/), or --train-oracle"

@@ -303,6 +303,23 @@ def test_a_copied_script_finds_the_teacher_or_says_where_it_looked(tmp_path):
         assert json.load(f)["oracle_path"] == str(tmp_path / "b" / "oracles" / "Pusher-v5__sac_oracle.pt")
 
 
+@pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")
+def test_the_working_directorys_teacher_comes_before_one_above_the_script(tmp_path, monkeypatch):
+    import shutil
+
+    for where in ("home/oracles", "home/project/oracles", "cwd/oracles"):
+        (tmp_path / where).mkdir(parents=True)
+    shutil.copy(SHIPPED, tmp_path / "home" / "oracles")  # a stray teacher above the script's directory
+    shutil.copy(SHIPPED, tmp_path / "cwd" / "oracles")
+    monkeypatch.setattr(isp, "REPO_DIR", str(tmp_path / "home" / "project"))
+    monkeypatch.chdir(tmp_path / "cwd")
+    assert isp.load_oracle(isp.Args())["path"] == str(tmp_path / "cwd" / "oracles" / "Pusher-v5__sac_oracle.pt")
+    shutil.copy(SHIPPED, tmp_path / "home" / "project" / "oracles")  # beside the script comes first
+    assert isp.load_oracle(isp.Args())["path"] == str(
+        tmp_path / "home" / "project" / "oracles" / "Pusher-v5__sac_oracle.pt"
+    )
+
+
 def test_save_load_same_actions(tmp_path):
     torch.manual_seed(0)
     actor = isp.Actor(23, 7, 32, action_low=-2 * np.ones(7), action_high=2 * np.ones(7))

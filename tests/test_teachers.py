@@ -393,3 +393,13 @@ def test_the_traced_delayed_run_turns_back():
     even = delay_trace.label_stats(*delay_trace.traced_run(2, 1, seed=1, total=10000)[:5])
     assert odd["on_reverse"] > 0.5 and odd["on_good"] < 0.5, odd
     assert even["on_reverse"] < 0.2 and even["on_good"] > 0.5, even
+
+
+def test_the_human_teacher_reads_answers_from_a_stream_with_no_descriptor(monkeypatch, capsys):
+    """Standard input replaced by a stream of text (a test's, an app embedding the script): its answers are read in
+    order, then its end."""
+    import io
+
+    monkeypatch.setattr(sys, "stdin", io.StringIO("y\n\nq\n"))
+    teacher = inform.HumanTeacher("plain", 30, inform.QNetwork(30, 4), torch.device("cpu"))
+    assert [teacher.read_line() for _ in range(4)] == ["y\n", "\n", "q\n", ""]
