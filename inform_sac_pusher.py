@@ -512,7 +512,7 @@ class ReplayBuffer:
 
 
 # ---------------------------------------------------------------------------------------------------------------------
-# ALGO LOGIC: the phases of Algorithm 1, then main
+# ALGO LOGIC: the phases of Algorithm 1
 
 
 def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer, evaluator, writer, device, teacher=None):
@@ -742,114 +742,8 @@ def check_finite(tags: dict, last: dict, what: str, when: str, flag: str) -> dic
     return {f"losses/{tag}": value for tag, value in zip(tags, values, strict=True)}
 
 
-def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, make_teacher=None) -> dict:
-    """oracle -> day (the forward phase) -> night (`args.night`, the study's Args give theirs) -> Eq. 3 and the tests.
-    `make_teacher(args, env, run_dir)`: the day's teacher in place of the simulated one (a person at a web page)."""
-    recipe = sleep_recipe(args)  # the preset's values that ran go into the summary's args
-    args = dataclasses.replace(args, **{k: v for k, v in recipe.items() if hasattr(args, k)})
-    run_start, run_dir, writer, env, evaluator = time.time(), None, None, None, None
-    oracle_ckpt = day["oracle"] if day is not None else oracle_ckpt  # --sleep-from: the saved day's teacher
-    summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
-    summary["oracle_path"] = oracle_ckpt["path"] if oracle_ckpt is not None else None
-    summary["sleep_from"] = os.path.abspath(args.sleep_from) if day is not None else None
-    summary["sleep_variant"] = args.sleep_variant()
-    status, failure, phase = "completed", None, "startup"
-    try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
-        run_dir = make_run_dir(f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}")
-        print(f"run directory: {run_dir}", flush=True)  # only now: bad input was refused, nothing half-written is left
-        mujoco_log_in(run_dir)
-        StopSignals.check()  # a stop while starting ends here, with a summary in the run directory
-        random.seed(args.seed)
-        np.random.seed(args.seed)
-        torch.manual_seed(args.seed)
-        torch.backends.cudnn.deterministic = True
-        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # CUDA matmuls refuse determinism without it
-        torch.use_deterministic_algorithms(True)
-        torch.set_num_threads(args.num_threads)
-        device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
-        if args.track:  # Weights & Biases mirrors the TensorBoard events (CleanRL's --track); before the writer
-            import wandb
-
-            wandb.init(project=os.environ.get("WANDB_PROJECT", "inform"), sync_tensorboard=True, config=vars(args),
-                       name=os.path.basename(run_dir), dir=run_dir, save_code=True)  # fmt: skip
-        writer = SummaryWriter(run_dir)
-        table = "\n".join(f"|{k}|{v}|" for k, v in vars(args).items())
-        writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + table)
-        env, evaluator = make_env(args.env_id, args.seed), Evaluator(args, writer)
-        obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
-
-        # ---- oracle: the simulated teacher (docs/protocol.md, "Oracles and the expert bar")
-        phase, t0 = "oracle", time.time()
-        if oracle_ckpt is not None:
-            oracle_actor, oracle_qf = oracle_from_checkpoint(oracle_ckpt, device)
-            print(f"[oracle] loaded {oracle_ckpt['path']} ({oracle_ckpt.get('training_steps', '?')} SAC steps)")
-        else:
-            print(f"[oracle] training SAC on the env reward for {args.oracle_total_timesteps} steps", flush=True)
-            outcome = Outcome.from_args(args)
-            oracle_actor, oracle_qf, summary["sps/oracle"] = train_oracle(
-                args.env_id, args.seed, args.oracle_total_timesteps, outcome, writer, device
-            )
-            save_atomic(oracle_checkpoint(args, oracle_actor, oracle_qf), f"{run_dir}/oracle.pt")
-        oracle_actor.requires_grad_(False)
-        oracle_qf.requires_grad_(False)
-        summary["time/oracle_s"] = time.time() - t0
-        evaluator("oracle", oracle_actor, 0, PERIODIC_EVAL_EPISODES)
-
-        # ---- forward phase ("day"): TAMER with simulated feedback, every transition remembered
-        phase, t0 = "tamer", time.time() - evaluator.seconds  # the phase's clock stops during its evaluations
-        buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, act_dim, device)
-        if day is None:
-            teacher = make_teacher(args, env, run_dir) if make_teacher is not None else None
-            h_net, tamer_actor, stats = forward_phase(args, env, oracle_actor, oracle_qf, buffer, evaluator, writer,
-                                                      device, teacher)  # fmt: skip
-        else:  # --sleep-from: the saved day's memories and TAMER, and the random streams where the day left them
-            h_net, tamer_actor, stats = restore_day(day, buffer, evaluator, device)
-        summary["time/tamer_s"] = time.time() - evaluator.seconds - t0
-        summary["sps/tamer"] = stats["feedback/steps"] / max(summary["time/tamer_s"], 1e-9)
-        summary.update(stats)  # a saved day's stats bring the day's own time
-        save_actor(f"{run_dir}/tamer_actor.pt", tamer_actor, env_id=args.env_id)
-        save_critic(f"{run_dir}/tamer_h.pt", h_net, obs_dim, act_dim, env_id=args.env_id)
-        if args.save_buffer:
-            day_stats = {**stats, "time/tamer_s": summary["time/tamer_s"], "sps/tamer": summary["sps/tamer"]}
-            ckpt = oracle_ckpt or oracle_checkpoint(args, oracle_actor, oracle_qf)
-            save_day(f"{run_dir}/day.pt", args, buffer, ckpt, h_net, tamer_actor, day_stats, evaluator.generator)
-
-        # ---- sleep phase ("night"): offline IQ-Learn on the buffer, no environment steps
-        phase, t0 = "sleep", time.time() - evaluator.seconds
-        if args.sleep_seed is not None:  # another night on the same day
-            torch.manual_seed(args.sleep_seed)
-        night = args.night(tamer_actor, device, tamer={"h_net": h_net, "ent_coef": stats["losses/tamer_entropy_coef"]})
-        summary.update(sleep_phase(night, buffer, args.sleep_gradient_steps, args.sleep_batch_size, evaluator, writer,
-                                   device))  # fmt: skip
-        q_net, inform_actor, selected = night.q_net, night.actor, night.selected
-        summary["time/sleep_s"] = time.time() - evaluator.seconds - t0
-        summary["sps/sleep"] = args.sleep_gradient_steps / max(summary["time/sleep_s"], 1e-9)
-        save_actor(f"{run_dir}/inform_actor.pt", inform_actor, env_id=args.env_id)
-        extra = {"env_id": args.env_id, "gamma": SLEEP_GAMMA, "temperature": args.sleep_temperature}
-        save_critic(f"{run_dir}/inform_critic.pt", q_net, obs_dim, act_dim, **extra)
-        policies = {"oracle": oracle_actor, "tamer": tamer_actor, "inform": inform_actor}
-        if selected is not None:  # the checkpoint picked offline, beside the last one
-            save_actor(f"{run_dir}/inform_selected_actor.pt", selected["actor"], env_id=args.env_id)
-            policies["inform_selected"] = selected["actor"]
-
-        # ---- the recovered reward (Eq. 3), then the final evaluation and the obstacle robustness test
-        phase = "eval"
-        summary.update(final_evaluation(args, buffer, q_net, policies, evaluator, writer, run_dir))
-    except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
-        status, stop.broken_pipe = "interrupted", isinstance(e, BrokenPipeError)
-    except Diverged as e:
-        status, summary["error"] = "diverged", str(e)
-    except Exception as e:  # the summary records it; a bug then gets its traceback, a full disk its one line
-        status, summary["error"] = "failed", f"{type(e).__name__}: {(str(e).strip() or '-').splitlines()[0]}"
-        failure = None if isinstance(e, OSError) else e
-    summary = end_run(args, summary, status, phase, run_dir, run_start, evaluator, (env, writer), stop)
-    if failure is not None:
-        raise failure
-    return summary
-
-
 # ---------------------------------------------------------------------------------------------------------------------
-# ALGO LOGIC, below main: the evaluation protocol (deterministic and sampled actions, the authors' test, the obstacle
+# ALGO LOGIC: the evaluation protocol (deterministic and sampled actions, the authors' test, the obstacle
 # test), the oracle's own SAC, the recovered reward (Eq. 3) as an object and a Gymnasium wrapper
 
 
@@ -1175,6 +1069,116 @@ def pusher_with_boxes(env_id: str, obstacles, **render) -> gym.Env:
 
 
 _OBSTACLE_DIR: list[str] = []
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# ALGO LOGIC: main, Algorithm 1 in the order it runs: the oracle, the day, the night, Eq. 3 and the tests
+
+
+def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, make_teacher=None) -> dict:
+    """oracle -> day (the forward phase) -> night (`args.night`, the study's Args give theirs) -> Eq. 3 and the tests.
+    `make_teacher(args, env, run_dir)`: the day's teacher in place of the simulated one (a person at a web page)."""
+    recipe = sleep_recipe(args)  # the preset's values that ran go into the summary's args
+    args = dataclasses.replace(args, **{k: v for k, v in recipe.items() if hasattr(args, k)})
+    run_start, run_dir, writer, env, evaluator = time.time(), None, None, None, None
+    oracle_ckpt = day["oracle"] if day is not None else oracle_ckpt  # --sleep-from: the saved day's teacher
+    summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
+    summary["oracle_path"] = oracle_ckpt["path"] if oracle_ckpt is not None else None
+    summary["sleep_from"] = os.path.abspath(args.sleep_from) if day is not None else None
+    summary["sleep_variant"] = args.sleep_variant()
+    status, failure, phase = "completed", None, "startup"
+    try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
+        run_dir = make_run_dir(f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}")
+        print(f"run directory: {run_dir}", flush=True)  # only now: bad input was refused, nothing half-written is left
+        mujoco_log_in(run_dir)
+        StopSignals.check()  # a stop while starting ends here, with a summary in the run directory
+        random.seed(args.seed)
+        np.random.seed(args.seed)
+        torch.manual_seed(args.seed)
+        torch.backends.cudnn.deterministic = True
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # CUDA matmuls refuse determinism without it
+        torch.use_deterministic_algorithms(True)
+        torch.set_num_threads(args.num_threads)
+        device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
+        if args.track:  # Weights & Biases mirrors the TensorBoard events (CleanRL's --track); before the writer
+            import wandb
+
+            wandb.init(project=os.environ.get("WANDB_PROJECT", "inform"), sync_tensorboard=True, config=vars(args),
+                       name=os.path.basename(run_dir), dir=run_dir, save_code=True)  # fmt: skip
+        writer = SummaryWriter(run_dir)
+        table = "\n".join(f"|{k}|{v}|" for k, v in vars(args).items())
+        writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + table)
+        env, evaluator = make_env(args.env_id, args.seed), Evaluator(args, writer)
+        obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
+
+        # ---- oracle: the simulated teacher (docs/protocol.md, "Oracles and the expert bar")
+        phase, t0 = "oracle", time.time()
+        if oracle_ckpt is not None:
+            oracle_actor, oracle_qf = oracle_from_checkpoint(oracle_ckpt, device)
+            print(f"[oracle] loaded {oracle_ckpt['path']} ({oracle_ckpt.get('training_steps', '?')} SAC steps)")
+        else:
+            print(f"[oracle] training SAC on the env reward for {args.oracle_total_timesteps} steps", flush=True)
+            outcome = Outcome.from_args(args)
+            oracle_actor, oracle_qf, summary["sps/oracle"] = train_oracle(
+                args.env_id, args.seed, args.oracle_total_timesteps, outcome, writer, device
+            )
+            save_atomic(oracle_checkpoint(args, oracle_actor, oracle_qf), f"{run_dir}/oracle.pt")
+        oracle_actor.requires_grad_(False)
+        oracle_qf.requires_grad_(False)
+        summary["time/oracle_s"] = time.time() - t0
+        evaluator("oracle", oracle_actor, 0, PERIODIC_EVAL_EPISODES)
+
+        # ---- forward phase ("day"): TAMER with simulated feedback, every transition remembered
+        phase, t0 = "tamer", time.time() - evaluator.seconds  # the phase's clock stops during its evaluations
+        buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, act_dim, device)
+        if day is None:
+            teacher = make_teacher(args, env, run_dir) if make_teacher is not None else None
+            h_net, tamer_actor, stats = forward_phase(args, env, oracle_actor, oracle_qf, buffer, evaluator, writer,
+                                                      device, teacher)  # fmt: skip
+        else:  # --sleep-from: the saved day's memories and TAMER, and the random streams where the day left them
+            h_net, tamer_actor, stats = restore_day(day, buffer, evaluator, device)
+        summary["time/tamer_s"] = time.time() - evaluator.seconds - t0
+        summary["sps/tamer"] = stats["feedback/steps"] / max(summary["time/tamer_s"], 1e-9)
+        summary.update(stats)  # a saved day's stats bring the day's own time
+        save_actor(f"{run_dir}/tamer_actor.pt", tamer_actor, env_id=args.env_id)
+        save_critic(f"{run_dir}/tamer_h.pt", h_net, obs_dim, act_dim, env_id=args.env_id)
+        if args.save_buffer:
+            day_stats = {**stats, "time/tamer_s": summary["time/tamer_s"], "sps/tamer": summary["sps/tamer"]}
+            ckpt = oracle_ckpt or oracle_checkpoint(args, oracle_actor, oracle_qf)
+            save_day(f"{run_dir}/day.pt", args, buffer, ckpt, h_net, tamer_actor, day_stats, evaluator.generator)
+
+        # ---- sleep phase ("night"): offline IQ-Learn on the buffer, no environment steps
+        phase, t0 = "sleep", time.time() - evaluator.seconds
+        if args.sleep_seed is not None:  # another night on the same day
+            torch.manual_seed(args.sleep_seed)
+        night = args.night(tamer_actor, device, tamer={"h_net": h_net, "ent_coef": stats["losses/tamer_entropy_coef"]})
+        summary.update(sleep_phase(night, buffer, args.sleep_gradient_steps, args.sleep_batch_size, evaluator, writer,
+                                   device))  # fmt: skip
+        q_net, inform_actor, selected = night.q_net, night.actor, night.selected
+        summary["time/sleep_s"] = time.time() - evaluator.seconds - t0
+        summary["sps/sleep"] = args.sleep_gradient_steps / max(summary["time/sleep_s"], 1e-9)
+        save_actor(f"{run_dir}/inform_actor.pt", inform_actor, env_id=args.env_id)
+        extra = {"env_id": args.env_id, "gamma": SLEEP_GAMMA, "temperature": args.sleep_temperature}
+        save_critic(f"{run_dir}/inform_critic.pt", q_net, obs_dim, act_dim, **extra)
+        policies = {"oracle": oracle_actor, "tamer": tamer_actor, "inform": inform_actor}
+        if selected is not None:  # the checkpoint picked offline, beside the last one
+            save_actor(f"{run_dir}/inform_selected_actor.pt", selected["actor"], env_id=args.env_id)
+            policies["inform_selected"] = selected["actor"]
+
+        # ---- the recovered reward (Eq. 3), then the final evaluation and the obstacle robustness test
+        phase = "eval"
+        summary.update(final_evaluation(args, buffer, q_net, policies, evaluator, writer, run_dir))
+    except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
+        status, stop.broken_pipe = "interrupted", isinstance(e, BrokenPipeError)
+    except Diverged as e:
+        status, summary["error"] = "diverged", str(e)
+    except Exception as e:  # the summary records it; a bug then gets its traceback, a full disk its one line
+        status, summary["error"] = "failed", f"{type(e).__name__}: {(str(e).strip() or '-').splitlines()[0]}"
+        failure = None if isinstance(e, OSError) else e
+    summary = end_run(args, summary, status, phase, run_dir, run_start, evaluator, (env, writer), stop)
+    if failure is not None:
+        raise failure
+    return summary
 
 
 # ---------------------------------------------------------------------------------------------------------------------
