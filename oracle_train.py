@@ -272,13 +272,15 @@ class Actor(nn.Module):
         mean_action = torch.tanh(mean) * self.action_scale + self.action_bias
         return y_t * self.action_scale + self.action_bias, log_prob.sum(-1), mean_action
 
-    def log_prob(self, obs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
-        """log pi(a|s) of given actions [B] (the offline criterion's expert log-likelihood)."""
+    def log_prob(self, obs: torch.Tensor, action: torch.Tensor, per_dimension: bool = False) -> torch.Tensor:
+        """log pi(a|s) of given actions [B] (the offline criterion's expert log-likelihood); [B, act_dim] per
+        action dimension."""
         mean, log_std = self(obs)
         y = ((action - self.action_bias) / self.action_scale).clamp(-1 + 1e-6, 1 - 1e-6)
         z = (torch.atanh(y) - mean) / log_std.exp()
         log_prob = -0.5 * z.pow(2) - log_std - 0.5 * math.log(2 * math.pi)
-        return (log_prob - torch.log(self.action_scale * (1 - y.pow(2)) + 1e-6)).sum(-1)
+        log_prob = log_prob - torch.log(self.action_scale * (1 - y.pow(2)) + 1e-6)
+        return log_prob if per_dimension else log_prob.sum(-1)
 
 
 def soft_update(target: nn.Module, source: nn.Module, tau: float) -> None:

@@ -17,7 +17,7 @@ from conftest import REPO, Child, default_signals
 MAZE = os.path.join(REPO, "inform_dqn_gridworld.py")
 PUSHER = os.path.join(REPO, "inform_sac_pusher.py")
 # phases long enough that a signal sent on their first progress line lands in them (see test_inform_gridworld.py)
-MAZE_TAMER = [MAZE, "--tamer-total-timesteps", "40000"]
+MAZE_TAMER = [MAZE, "--tamer-total-timesteps", "400000"]  # long enough that no stop can come after its end
 MAZE_SLEEP = [MAZE, "--tamer-total-timesteps", "2000", "--tamer-learning-starts", "500", "--sleep-gradient-steps",
               "20000"]  # fmt: skip
 PUSHER_TINY = ["--tamer-total-timesteps", "600", "--tamer-learning-starts", "300", "--tamer-batch-size", "64",
