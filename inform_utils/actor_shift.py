@@ -40,10 +40,12 @@ class Args:
     """also write the numbers here as JSON"""
 
 
-def episode(actor, env, seed: int, outcome) -> dict:
-    """One deterministic episode from the fixed start (the env and the actor are deterministic: one is all)."""
+def episode(actor, env, seed: int, outcome, keep_states: bool = False) -> dict:
+    """One deterministic episode from the fixed start (the env and the actor are deterministic: one is all); with
+    `keep_states`, its observations too."""
     res = isp.evaluate(actor, env, 1, lambda ep: seed, True, None, outcome)
-    return {"return": res["return"], "final_distance": res["final_distance"], "success": bool(res["success_rate"])}
+    out = {"return": res["return"], "final_distance": res["final_distance"], "success": bool(res["success_rate"])}
+    return {**out, "states": torch.as_tensor(res["trajectories"][0], dtype=torch.float32)} if keep_states else out
 
 
 def mean_action(actor, states: torch.Tensor) -> torch.Tensor:
@@ -86,8 +88,8 @@ def shift(run_dir: str, perturbations: int, generator: torch.Generator) -> dict:
     env = isp.make_env(run["env_id"], summary["seed"])
     outcome = isp.Outcome(run.get("success_info_key", "reward_dist"), run["success_distance"],
                           run.get("success_return"))  # fmt: skip
-    res = isp.evaluate(tamer, env, 1, lambda ep: summary["seed"], True, None, outcome)
-    states = torch.as_tensor(res["trajectories"][0], dtype=torch.float32)
+    tamer_episode = episode(tamer, env, summary["seed"], outcome, keep_states=True)
+    states = tamer_episode.pop("states")
     pairs = zip(tamer.named_parameters(), inform.named_parameters(), strict=True)
     delta = {name: p_i.detach() - p_t.detach() for (name, p_t), (_, p_i) in pairs}
     size = float(torch.sqrt(sum((d**2).sum() for d in delta.values())))
@@ -103,6 +105,7 @@ def shift(run_dir: str, perturbations: int, generator: torch.Generator) -> dict:
         factor = scale_to(tamer, direction, states, target)
         same_actions = episode(moved(tamer, direction, factor), env, summary["seed"], outcome)
         random_moves.append({"same_weights": same_weights, "same_actions": same_actions, "factor": factor})
+    inform_episode = episode(inform, env, summary["seed"], outcome)
     env.close()
     return {
         "run": run_dir,
@@ -110,8 +113,8 @@ def shift(run_dir: str, perturbations: int, generator: torch.Generator) -> dict:
         "seed": summary["seed"],
         "relative_weight_change": size / norm,
         "mean_action_change": target,
-        "tamer": episode(tamer, isp.make_env(run["env_id"], summary["seed"]), summary["seed"], outcome),
-        "inform": episode(inform, isp.make_env(run["env_id"], summary["seed"]), summary["seed"], outcome),
+        "tamer": tamer_episode,
+        "inform": inform_episode,
         "random_moves": random_moves,
     }
 

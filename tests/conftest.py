@@ -157,3 +157,14 @@ def pytest_sessionfinish(session, exitstatus):
         )
         print(f"\nINFORM_NO_SKIPS: {passed} passed, {skipped} skipped {reasons}: this step must run its tests")
         session.exitstatus = 1
+
+
+@pytest.fixture
+def one_thread():
+    """One torch thread, as the scripts run: two threads beside a busy machine's other jobs spin and crawl."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)

@@ -12,13 +12,7 @@ from inform_utils import sleep_variants_pusher as variants
 ALPHA, ETA = variants.DWBC["alpha"], variants.DWBC["eta"]
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """One torch thread, as the scripts run: two threads beside a busy machine's other jobs spin and crawl."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_thread")  # conftest.py
 
 
 def test_pu_loss_by_hand():
