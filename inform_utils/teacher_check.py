@@ -58,7 +58,8 @@ def read_teacher(path: str) -> dict:
     """The SAC teacher at `path`, checked as --oracle-path checks it (its CRCs, weights only, its keys, its env's
     shapes); isp.InputError, one line, otherwise."""
     if not os.path.isfile(path):
-        raise isp.InputError(f"{path}: no such file (a teacher of oracle_train.py: oracles/Pusher-v5__sac_oracle.pt)")
+        what = "a directory, not a file" if os.path.isdir(path) else "no such file"
+        raise isp.InputError(f"{path}: {what} (a teacher of oracle_train.py: oracles/Pusher-v5__sac_oracle.pt)")
     isp.check_crc(path, path)
     try:
         with warnings.catch_warnings():

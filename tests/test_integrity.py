@@ -87,7 +87,7 @@ def test_teacher_check_refuses_a_flipped_teacher_and_bad_input_in_one_line(tmp_p
     cases = {
         bad: "damaged since it was saved",
         "missing.pt": "no such file",
-        str(tmp_path): "no such file",
+        str(tmp_path): "a directory, not a file",
         str(tmp_path / "maze.pt"): "not a SAC teacher",
         str(tmp_path / "notes.txt"): "not a complete torch checkpoint",
         f"{V5_TEACHER} --episodes 0": "--episodes must be >= 1",
