@@ -179,6 +179,12 @@ class Args:
     """greedy episodes of each evaluation on a toy-text env, on fixed reset seeds (the maze's tests are one episode
     from each of their start cells)"""
 
+    def fill_teacher_defaults(self) -> "Args":
+        """The flags left at None take the default of --teacher (the simulated teacher's are the paper's)."""
+        for name, value in TEACHER_DEFAULTS[self.teacher].items():
+            setattr(self, name, value if getattr(self, name) is None else getattr(self, name))
+        return self
+
     def night_settings(self) -> dict:
         """What the night's learner runs with (setting x from flag sleep_x)."""
         return {"q_lr": self.sleep_q_lr, "temperature": self.sleep_temperature, "chi2_coef": self.sleep_chi2_coef}
@@ -393,27 +399,29 @@ class ReplayBuffer:
 # ALGO LOGIC: the day (forward phase) and the person at the terminal
 
 
-def forward_phase(args: Args, env, q_star: np.ndarray, buffer: ReplayBuffer, evaluator, writer, device, page=None):
+def forward_phase(env, q_star: np.ndarray, teacher, buffer: ReplayBuffer, evaluator, writer, device, page=None, *,
+                  who: str, seed: int, total_timesteps: int, learning_starts: int, batch_size: int, h_lr: float,
+                  start_e: float, end_e: float, alpha_start: float, alpha_end: float, success_max_steps: int,
+                  budget_ends: bool):  # fmt: skip
     """The day: TAMER (Eq. 1, gamma = 0) acts on H and fits it to the teacher's yes/no feedback (Eq. 4 through the
-    Teacher, or a person at the terminal or the web page); every transition is remembered, every episode tagged."""
+    Teacher, or, by `who` (--teacher), a person at the terminal or the web page); every transition is remembered,
+    every episode tagged. `budget_ends`: the day ends when the teacher's budget is spent."""
     h_net = QNetwork(buffer.obs.shape[1], int(env.action_space.n)).to(device)
-    h_optimizer = torch.optim.Adam(h_net.parameters(), lr=args.tamer_h_lr, fused=True)
-    teacher = Teacher(args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window,
-                      args.feedback_budget, seed=args.seed + 7919)  # fmt: skip
+    h_optimizer = torch.optim.Adam(h_net.parameters(), lr=h_lr, fused=True)
     human = None
-    if args.teacher in ("human", "browser"):  # you, at the terminal or at the web page
-        human = HumanTeacher(env.unwrapped.variant, args.success_max_steps, h_net, device, page)
-    n, log_every = args.tamer_total_timesteps, LOG_FREQUENCY[args.teacher]
+    if who in ("human", "browser"):  # you, at the terminal or at the web page
+        human = HumanTeacher(env.unwrapped.variant, success_max_steps, h_net, device, page)
+    n, log_every = total_timesteps, LOG_FREQUENCY[who]
     progress = Progress("tamer", n, evaluator)
     h_loss = torch.zeros((), device=device)
     optimum_at = None  # (step, +1 signals) at the first evaluation where TAMER's greedy path is the shortest
     evaluated_at = ep_start = ep_length = successes = 0
     ep_return = 0.0
     goal_reward = top_reward(env)
-    obs, _ = env.reset(seed=args.seed)
+    obs, _ = env.reset(seed=seed)
     for step in range(n):
         StopSignals.check()  # a stop signal ends the run here, between two steps
-        epsilon = linear_schedule(args.start_e, args.end_e, int(EXPLORATION_FRACTION * n), step)
+        epsilon = linear_schedule(start_e, end_e, int(EXPLORATION_FRACTION * n), step)
         explore = random.random() < epsilon
         cell = int(obs.argmax())
         if explore:
@@ -425,7 +433,7 @@ def forward_phase(args: Args, env, q_star: np.ndarray, buffer: ReplayBuffer, eva
 
         # the teacher watches (s, a): the perfect answer (Eq. 4), then the person's (Teacher), or yours
         taught = not teacher.gone  # after the budget is spent, TAMER has nothing to learn from
-        feedback_alpha = linear_schedule(args.feedback_alpha_start, args.feedback_alpha_end, n - 1, step)
+        feedback_alpha = linear_schedule(alpha_start, alpha_end, n - 1, step)
         h_star = oracle_feedback(q_star[cell, action], q_star[cell].max(), feedback_alpha) if taught else 0.0
         if human and taught:
             h_star = human(cell, action, explore, step + 1, teacher.positives, h_star, successes)
@@ -440,7 +448,7 @@ def forward_phase(args: Args, env, q_star: np.ndarray, buffer: ReplayBuffer, eva
         ep_return += float(reward)
         obs = next_obs
         if terminated or truncated:  # an episode cut off by the end of the phase stays untagged: a failure
-            successes += buffer.tag_episode(ep_start, is_success(terminated, reward, ep_length, args.success_max_steps,
+            successes += buffer.tag_episode(ep_start, is_success(terminated, reward, ep_length, success_max_steps,
                                                                  goal_reward))  # fmt: skip
             writer.add_scalar("charts/episodic_return", ep_return, step + 1)
             writer.add_scalar("charts/episodic_length", ep_length, step + 1)
@@ -448,10 +456,10 @@ def forward_phase(args: Args, env, q_star: np.ndarray, buffer: ReplayBuffer, eva
             obs, _ = env.reset()
 
         # TAMER's update: H regresses on the feedback (Eq. 1); a person's answer gets several
-        if taught and human and step + 1 >= args.tamer_learning_starts:
-            h_loss = human.learn(h_optimizer, buffer, HUMAN_UPDATES_PER_ANSWER, args.tamer_batch_size)
-        elif taught and step >= args.tamer_learning_starts:
-            idx = torch.randint(0, buffer.size, (args.tamer_batch_size,), device=device)
+        if taught and human and step + 1 >= learning_starts:
+            h_loss = human.learn(h_optimizer, buffer, HUMAN_UPDATES_PER_ANSWER, batch_size)
+        elif taught and step >= learning_starts:
+            idx = torch.randint(0, buffer.size, (batch_size,), device=device)
             obs_b, actions_b, _, feedback_b, _ = buffer.batch(idx)
             h_loss = tamer_loss(h_net, obs_b, actions_b, feedback_b)
             h_optimizer.zero_grad()
@@ -459,11 +467,11 @@ def forward_phase(args: Args, env, q_star: np.ndarray, buffer: ReplayBuffer, eva
             h_optimizer.step()
 
         # TRY NOT TO MODIFY: logging, the divergence check and periodic evaluation
-        last_step = step == n - 1 or (teacher.gone and args.budget_ends_forward_phase)
+        last_step = step == n - 1 or (teacher.gone and budget_ends)
         if (step + 1) % log_every == 0 or last_step:
             if not math.isfinite(h_loss.item()):
                 raise Diverged(f"TAMER's H diverged (its loss is NaN or inf) by env step {step + 1}; "
-                               f"try a lower --tamer-h-lr (it is {args.tamer_h_lr:g})")  # fmt: skip
+                               f"try a lower --tamer-h-lr (it is {h_lr:g})")  # fmt: skip
             for tag, value in (("losses/tamer_loss", h_loss.item()), ("feedback/positive", teacher.positives),
                                ("feedback/positive_rate", teacher.positives / (step + 1)),
                                ("feedback/alpha", feedback_alpha), ("charts/epsilon", epsilon),
@@ -781,7 +789,7 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
         torch.use_deterministic_algorithms(True)
         torch.set_num_threads(1)  # one thread is fastest for networks this small
         device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
-        writer = make_writer(run_dir, args)
+        writer = make_writer(run_dir, vars(args), args.track)
         env = make_env(args.env_id)
         env.action_space.seed(args.seed)
         evaluator = Evaluator(args.env_id, args.success_max_steps, args.eval_episodes, args.seed, writer)
@@ -797,13 +805,22 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
             # ---- forward phase ("day"): TAMER with the teacher's feedback, every transition remembered and tagged
             phase, t0 = "tamer", time.time() - evaluator.seconds  # the phase's clock stops during its evaluations
             buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, device)
-            page = open_page(args, run_dir) if args.teacher == "browser" else None
-            h_net, stats = forward_phase(args, env, q_star, buffer, evaluator, writer, device, page)
+            page = open_page(run_dir, args.host, args.participant) if args.teacher == "browser" else None
+            teacher = Teacher(args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window,
+                              args.feedback_budget, seed=args.seed + 7919)  # fmt: skip
+            h_net, stats = forward_phase(
+                env, q_star, teacher, buffer, evaluator, writer, device, page, who=args.teacher, seed=args.seed,
+                total_timesteps=args.tamer_total_timesteps, learning_starts=args.tamer_learning_starts,
+                batch_size=args.tamer_batch_size, h_lr=args.tamer_h_lr, start_e=args.start_e, end_e=args.end_e,
+                alpha_start=args.feedback_alpha_start, alpha_end=args.feedback_alpha_end,
+                success_max_steps=args.success_max_steps, budget_ends=args.budget_ends_forward_phase,
+            )  # fmt: skip
             summary.update(stats)
             summary["time/tamer_s"] = time.time() - evaluator.seconds - t0
             if args.save_buffer:  # the day as it ended, for later nights (--sleep-from)
                 day_stats = {**stats, "time/tamer_s": summary["time/tamer_s"]}
-                save_day(f"{run_dir}/day.pt", args, buffer, h_net, q_star, day_stats)
+                day_args = {name: getattr(args, name) for name in DAY_ARGS}
+                save_day(f"{run_dir}/day.pt", day_args, buffer, h_net, q_star, day_stats)
         else:  # --sleep-from: a saved day's oracle, memories and H, its random streams where that day left them
             q_star, buffer, h_net = restore_day(day, device)
             summary.update(day["day_stats"])
@@ -866,7 +883,8 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
         status = "failed"
         summary["error"] = f"{type(e).__name__}: {(str(e).strip() or '-').splitlines()[0]}"
         failure = None if isinstance(e, OSError) else e
-    summary = end_run(args, summary, status, phase, run_dir, run_start, evaluator, (env, writer, page), stop)
+    summary = end_run(summary, status, phase, run_dir, run_start, evaluator, (env, writer, page), stop, args.seed,
+                      vars(args))  # fmt: skip
     if failure is not None:
         raise failure
     return summary
@@ -881,7 +899,17 @@ def cli(args: Args) -> int:
         check_args(args)
         oracle_q = day = None
         if args.sleep_from:  # a saved day: no oracle, no forward phase; its day flags replace these
-            day = load_day(args.sleep_from, args)
+            day = load_day(args.sleep_from)
+            for name in DAY_ARGS:
+                setattr(args, name, day["day_args"][name])
+            try:
+                check_args(args)
+            except (InputError, TypeError) as e:  # TypeError: a flag of the wrong type
+                raise InputError(f"{args.sleep_from}/day.pt: its day flags are not valid: {e}") from None
+            say(
+                f"[day] sleeping on {args.sleep_from}'s day ({args.env_id}, seed {args.seed}, {day['obs'].shape[0]} "
+                "steps); its day flags replace these"
+            )
         elif args.oracle_path:
             oracle_q = load_oracle(args.oracle_path, args.env_id)
         check_writable("runs")
@@ -904,16 +932,17 @@ def seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
 
 
-def make_writer(run_dir: str, args: Args) -> SummaryWriter:
-    """TensorBoard's writer; with --track, Weights & Biases mirrors its events (CleanRL's --track), set up first."""
-    if args.track:
+def make_writer(run_dir: str, flags: dict, track: bool) -> SummaryWriter:
+    """TensorBoard's writer with the run's flags; with --track, Weights & Biases mirrors its events (CleanRL's
+    --track), set up first."""
+    if track:
         import wandb
 
         project = os.environ.get("WANDB_PROJECT", "inform")
-        wandb.init(project=project, sync_tensorboard=True, config=vars(args), name=os.path.basename(run_dir),
+        wandb.init(project=project, sync_tensorboard=True, config=flags, name=os.path.basename(run_dir),
                    dir=run_dir, save_code=True)  # fmt: skip
     writer = SummaryWriter(run_dir)
-    table = "\n".join(f"|{key}|{value}|" for key, value in vars(args).items())
+    table = "\n".join(f"|{key}|{value}|" for key, value in flags.items())
     writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + table)
     return writer
 
@@ -1055,13 +1084,16 @@ def save_network(path: str, net: QNetwork, **extra) -> None:
 
 # Saved days (--save-buffer, --sleep-from): one forward phase, many nights
 DAY_FORMAT = "inform-day-1"
-NOT_OF_THE_DAY = ("exp_name", "capture_video", "cuda", "track", "save_buffer")  # and the sleep's flags
-DAY_ARGS = tuple(f.name for f in fields(Args) if not f.name.startswith("sleep_") and f.name not in NOT_OF_THE_DAY)
+# the flags that shape a day: a saved day records them, and a night on it (--sleep-from) takes them for its own
+DAY_ARGS = ("seed", "env_id", "oracle_path", "tamer_total_timesteps", "tamer_learning_starts", "tamer_batch_size",
+            "tamer_h_lr", "start_e", "end_e", "feedback_alpha_start", "feedback_alpha_end", "success_max_steps",
+            "teacher", "participant", "host", "teacher_noise", "teacher_sparsity", "teacher_delay", "credit_window",
+            "feedback_budget", "budget_ends_forward_phase", "eval_episodes")  # fmt: skip
 DAY_TENSORS = ("obs", "actions", "next_obs", "feedback", "terminated", "success")  # the buffer, one row a transition
 EPISODE_TABLE = ("episode_start", "episode_end", "episode_length", "episode_success", "episode_ended")
 
 
-def save_day(path: str, args: Args, buffer: ReplayBuffer, h_net: QNetwork, q_star: np.ndarray, day_stats: dict):
+def save_day(path: str, day_args: dict, buffer: ReplayBuffer, h_net: QNetwork, q_star: np.ndarray, day_stats: dict):
     """The day as it ended: the buffer cut to its size, the episode table (buffer[start:end], one row an episode; the
     last row, ended False, is the episode cut off by the end of the phase), the oracle's Q table, TAMER's H, the
     day's stats and flags, and the random states that the sleep goes on from."""
@@ -1072,8 +1104,8 @@ def save_day(path: str, args: Args, buffer: ReplayBuffer, h_net: QNetwork, q_sta
     start, end, ended = (torch.tensor(column, dtype=torch.int64) for column in columns)
     np_state, (version, internal, gauss) = np.random.get_state(), random.getstate()
     save_atomic({
-        "format": DAY_FORMAT, "script": os.path.basename(__file__), "env_id": args.env_id, "seed": args.seed,
-        "day_args": {name: getattr(args, name) for name in DAY_ARGS},
+        "format": DAY_FORMAT, "script": os.path.basename(__file__), "env_id": day_args["env_id"],
+        "seed": day_args["seed"], "day_args": day_args,
         **{name: getattr(buffer, name)[:n].to("cpu", copy=True) for name in DAY_TENSORS},  # a copy: not the capacity
         "episode_start": start, "episode_end": end, "episode_length": end - start,
         "episode_success": buffer.success[:n].cpu()[start], "episode_ended": ended.bool(),
@@ -1096,9 +1128,9 @@ def set_rng_state(rng: dict) -> None:
     random.setstate((version, tuple(internal), gauss))
 
 
-def load_day(run_dir: str, args: Args) -> dict:
-    """RUN_DIR/day.pt, checked (keys, shapes, index and value ranges); its day flags replace those of `args` (one
-    line says so). Raises InputError before anything is written."""
+def load_day(run_dir: str) -> dict:
+    """RUN_DIR/day.pt, checked (keys, shapes, index and value ranges; its flags are checked as this run's when they
+    replace them). Raises InputError before anything is written."""
     path = os.path.join(run_dir, "day.pt")
     if not os.path.isdir(run_dir):
         raise InputError(f"--sleep-from {run_dir}: no such directory")
@@ -1147,13 +1179,6 @@ def load_day(run_dir: str, args: Args) -> dict:
         set_rng_state(day["rng"])  # tried here; main seeds, then restore_day sets them again
     except Exception as e:  # a damaged network or random state: KeyError, TypeError, ValueError, RuntimeError
         raise InputError(f"{path}: a damaged saved day: {(str(e) or type(e).__name__).splitlines()[0][:160]}") from None
-    for name in DAY_ARGS:
-        setattr(args, name, day["day_args"][name])
-    try:
-        check_args(args)
-    except (InputError, TypeError) as e:  # TypeError: a flag of the wrong type
-        raise InputError(f"{path}: its day flags are not valid: {e}") from None
-    say(f"[day] sleeping on {run_dir}'s day ({args.env_id}, seed {args.seed}, {n} steps); its day flags replace these")
     return day
 
 
@@ -1172,18 +1197,11 @@ def restore_day(day: dict, device: torch.device) -> tuple[np.ndarray, ReplayBuff
     return day["q_star"].double().numpy(), buffer, h_net
 
 
-def fill_teacher_defaults(args: Args) -> Args:
-    """The flags left at None take the default of --teacher (the simulated teacher's are the paper's)."""
-    for name, value in TEACHER_DEFAULTS[args.teacher].items():
-        setattr(args, name, value if getattr(args, name) is None else getattr(args, name))
-    return args
-
-
 def check_args(args: Args) -> None:
     """Every flag against the range declared beside it, then what a range cannot say. Raises InputError."""
     if args.track and importlib.util.find_spec("wandb") is None:
         raise InputError("--track needs Weights & Biases: `pip install wandb`, or run without --track")
-    fill_teacher_defaults(args)
+    args.fill_teacher_defaults()
     hints = typing.get_type_hints(type(args), include_extras=True)
     for f in fields(args):
         value, interval = getattr(args, f.name), next(iter(getattr(hints[f.name], "__metadata__", ())), None)
@@ -1233,12 +1251,13 @@ def check_args(args: Args) -> None:
                          "run it in a terminal, or pipe the answers in")  # fmt: skip
 
 
-def open_page(args: Args, run_dir: str):
-    """--teacher browser: the web page the person teaches at (browser_teacher.py, imported only here)."""
+def open_page(run_dir: str, address: str, participant: str | None):
+    """--teacher browser: the web page the person teaches at, served at --host `address` (browser_teacher.py,
+    imported only here)."""
     import browser_teacher
 
-    host, port = browser_teacher.host_and_port(args.host)
-    return browser_teacher.BrowserTeacher(run_dir, "maze", host, port, participant=args.participant)
+    host, port = browser_teacher.host_and_port(address)
+    return browser_teacher.BrowserTeacher(run_dir, "maze", host, port, participant=participant)
 
 
 def check_writable(directory: str) -> None:
@@ -1389,12 +1408,13 @@ def write_json_atomic(path: str, data: dict) -> None:
         json.dump(strict_json(data), f, indent=2, allow_nan=False)
 
 
-def end_run(args, summary, status, phase, run_dir, run_start, evaluator, closing, stop) -> dict:
-    """The summary first, then the messages: no signal cuts this short (StopSignals only notes the later ones)."""
+def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop, seed: int, flags: dict) -> dict:
+    """The summary (with the run's `flags`) first, then the messages: no signal cuts this short (StopSignals only notes
+    the later ones)."""
     stop.finished = True
     if run_dir is not None:
         final = {"time/eval_s": evaluator.seconds if evaluator else 0.0, "wall_time_s": time.time() - run_start}
-        final.update(seed=args.seed, script=os.path.basename(__file__), status=status, args=vars(args))
+        final.update(seed=seed, script=os.path.basename(__file__), status=status, args=flags)
         summary = {**(evaluator.final if evaluator else {}), **summary, **final}
         summary.update({"phase": phase} if status != "completed" else {})
         summary.update({"signal": stop.reason()} if status == "interrupted" else {})

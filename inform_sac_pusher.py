@@ -206,15 +206,21 @@ class Args:
     authors_test_episodes: Annotated[int, In(0)] = 100
     """episodes of the authors' test: sampled actions from the run's initial state (eval/authors_test/...)"""
 
+    def sleep_recipe(self) -> dict:
+        """The night's settings that --sleep-protocol presets: the protocol's, under whatever the command set (a field
+        that is not None; the study module's Args has more of them)."""
+        recipe = SLEEP_PROTOCOLS[self.sleep_protocol]
+        return {k: v if getattr(self, k, None) is None else getattr(self, k) for k, v in recipe.items()}
+
     def night_settings(self) -> dict:
         """What the night runs with: these flags and the --sleep-protocol preset (setting x from flag sleep_x)."""
-        recipe = {k.removeprefix("sleep_"): v for k, v in sleep_recipe(self).items() if k != "sleep_gradient_steps"}
+        recipe = {k.removeprefix("sleep_"): v for k, v in self.sleep_recipe().items() if k != "sleep_gradient_steps"}
         return {"batch_size": self.sleep_batch_size, "q_lr": self.sleep_q_lr, "policy_lr": self.sleep_policy_lr,
                 "temperature": self.sleep_temperature, "chi2_coef": self.sleep_chi2_coef, **recipe}  # fmt: skip
 
     def sleep_variant(self) -> str:
         """The night in a line, for summary.json: what it runs with."""
-        settings = {"protocol": self.sleep_protocol, "gradient_steps": sleep_recipe(self)["sleep_gradient_steps"],
+        settings = {"protocol": self.sleep_protocol, "gradient_steps": self.sleep_recipe()["sleep_gradient_steps"],
                     **self.night_settings(), "seed": self.sleep_seed}  # fmt: skip
         return " ".join(f"{k}={v}" for k, v in settings.items())
 
@@ -246,10 +252,6 @@ class Outcome:
     info_key: str = "reward_dist"
     distance: float = 0.08
     min_return: float | None = None
-
-    @classmethod
-    def from_args(cls, args: Args) -> "Outcome":
-        return cls(args.success_info_key, args.success_distance, args.success_return)
 
     def __call__(self, info: dict, ep_return: float) -> tuple[float, bool, float]:
         """(final distance, success, shortfall) of an episode that ended with `info` after earning `ep_return`."""
@@ -515,31 +517,30 @@ class ReplayBuffer:
 # ALGO LOGIC: the phases of Algorithm 1
 
 
-def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer, evaluator, writer, device, teacher=None):
+def forward_phase(env, oracle_actor, oracle_qf, teacher, outcome, buffer, evaluator, writer, device, *, seed: int,
+                  random_starts: bool, total_timesteps: int, learning_starts: int, batch_size: int, h_lr: float,
+                  alpha_start: float, alpha_end: float, budget_ends: bool):  # fmt: skip
     """The day: SAC-style TAMER (Eq. 1, gamma = 0) on the teacher's yes/no feedback (Eq. 4), all remembered. The
-    teacher: the simulated person of the flags, or one with its interface (a person at a web page)."""
-    obs_dim, act_dim, n = buffer.obs.shape[1], buffer.actions.shape[1], args.tamer_total_timesteps
+    teacher: the simulated person (Teacher), or one with its interface (a person at a web page); `budget_ends`: the
+    day ends when the teacher's budget is spent."""
+    obs_dim, act_dim, n = buffer.obs.shape[1], buffer.actions.shape[1], total_timesteps
     h_net = QEnsemble(obs_dim, act_dim, HIDDEN_SIZE, n=2).to(device)
     tamer_actor = Actor(obs_dim, act_dim, HIDDEN_SIZE, env.action_space.low, env.action_space.high).to(device)
-    h_optimizer = torch.optim.Adam(h_net.parameters(), lr=args.tamer_h_lr, foreach=True)
+    h_optimizer = torch.optim.Adam(h_net.parameters(), lr=h_lr, foreach=True)
     actor_optimizer = torch.optim.Adam(tamer_actor.parameters(), lr=TAMER_POLICY_LR, foreach=True)
     log_ent_coef = torch.zeros(1, device=device, requires_grad=True)  # the actor's entropy coefficient, autotuned
-    ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=args.tamer_h_lr, foreach=True)
-    if teacher is None:
-        teacher = Teacher(args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window,
-                          args.feedback_budget, seed=args.seed + 7919)  # fmt: skip
-    outcome = Outcome.from_args(args)
-    print(f"[tamer] {n} env steps, feedback alpha {args.feedback_alpha_start} -> {args.feedback_alpha_end}", flush=True)
-    progress = Progress("tamer", n, warmup=args.tamer_learning_starts, evaluator=evaluator)
-    obs, _ = env.reset(seed=args.seed)
+    ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=h_lr, foreach=True)
+    print(f"[tamer] {n} env steps, feedback alpha {alpha_start} -> {alpha_end}", flush=True)
+    progress = Progress("tamer", n, warmup=learning_starts, evaluator=evaluator)
+    obs, _ = env.reset(seed=seed)
     obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
     h_loss = torch.zeros((), device=device)
     ep_start, ep_length, ep_return, last_return = 0, 0, 0.0, float("nan")
     for step in range(n):
         StopSignals.check()  # a stop signal ends the run here, between two steps
         # the teacher gets stricter: alpha rises linearly over the phase
-        feedback_alpha = linear_schedule(args.feedback_alpha_start, args.feedback_alpha_end, n - 1, step)
-        if step < args.tamer_learning_starts:
+        feedback_alpha = linear_schedule(alpha_start, alpha_end, n - 1, step)
+        if step < learning_starts:
             action_t = torch.as_tensor(env.action_space.sample(), device=device)
         else:
             with torch.no_grad():
@@ -558,7 +559,7 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer, evaluator, w
         buffer.add(obs_t, action_t, next_t, terminated)
         ep_return += float(reward)
         ep_length += 1
-        last_step = step == n - 1 or (teacher.gone and args.budget_ends_forward_phase)
+        last_step = step == n - 1 or (teacher.gone and budget_ends)
         if terminated or truncated or last_step:  # tag the trajectory; a cut-off last one by where it stands
             distance, success, shortfall = outcome(info, ep_return)
             buffer.tag_episode(ep_start, shortfall, success)
@@ -566,13 +567,13 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer, evaluator, w
             for tag, value in {**charts, **({} if math.isnan(distance) else {"final_distance": distance})}.items():
                 writer.add_scalar(f"charts/{tag}", value, step + 1)
             ep_start, ep_length, ep_return, last_return = step + 1, 0, 0.0, ep_return
-            next_obs, _ = env.reset(seed=None if args.random_starts else args.seed)
+            next_obs, _ = env.reset(seed=None if random_starts else seed)
             next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
         obs_t = next_t
 
         # ALGO LOGIC: TAMER's update: H regresses on the feedback (Eq. 1), the actor maximises H, SAC-style
-        if step >= args.tamer_learning_starts and taught:
-            idx = torch.randint(0, step + 1, (args.tamer_batch_size,), device=device)
+        if step >= learning_starts and taught:
+            idx = torch.randint(0, step + 1, (batch_size,), device=device)
             obs_b = buffer.obs[idx]
             h_loss = tamer_loss(h_net, obs_b, buffer.actions[idx], buffer.feedback[idx])
             h_optimizer.zero_grad(set_to_none=True)
@@ -606,13 +607,6 @@ def forward_phase(args: Args, env, oracle_actor, oracle_qf, buffer, evaluator, w
     stats.update({"feedback/steps": buffer.size, "feedback/positive_rate": positives / buffer.size})
     stats.update({"sleep/success_episodes": int(successes), "sleep/episodes": len(buffer.episodes)})
     return h_net, tamer_actor, {**stats, "losses/tamer_entropy_coef": log_ent_coef.exp().item()}
-
-
-def sleep_recipe(args) -> dict:
-    """The night's settings that --sleep-protocol presets: the protocol's, under whatever the command set (a field of
-    `args` that is not None; the study module's Args has more of them)."""
-    recipe = SLEEP_PROTOCOLS[args.sleep_protocol]
-    return {k: v if getattr(args, k, None) is None else getattr(args, k) for k, v in recipe.items()}
 
 
 def sleep_batch(buffer: ReplayBuffer, batch_size: int, expert_idx: torch.Tensor, replay_idx=None):
@@ -777,11 +771,10 @@ class Evaluator:
     """Evaluates a policy on the plain env with deterministic and sampled actions; logs and keeps eval/{name}_*.
     Episodes start from the run's seed (fixed start) or from fresh seeds (`--random-starts`), the same each time."""
 
-    def __init__(self, args: Args, writer: SummaryWriter | None):
-        self.env, self.writer = make_env(args.env_id, args.seed), writer
-        self.seed, self.random_starts = args.seed, args.random_starts
-        self.generator = torch.Generator().manual_seed(args.seed + 12345)  # sampled actions, off the training RNG
-        self.outcome = Outcome.from_args(args)
+    def __init__(self, env_id: str, seed: int, random_starts: bool, outcome: Outcome, writer: SummaryWriter | None):
+        self.env, self.writer, self.seed, self.random_starts = make_env(env_id, seed), writer, seed, random_starts
+        self.generator = torch.Generator().manual_seed(seed + 12345)  # sampled actions, off the training RNG
+        self.outcome = outcome
         self.seconds = 0.0  # spent evaluating
         self.final = {}  # the latest value of each tag
 
@@ -803,29 +796,30 @@ class Evaluator:
         self.env.close()
 
 
-def final_evaluation(args: Args, buffer, q_net, policies: dict, evaluator, writer, run_dir: str) -> dict:
-    """After the sleep: Eq. 3 on the buffer, each policy's final evaluation, the obstacle test (Pusher only) and the
-    authors' test (all logged at the run's last step), the obstacle files and, with --capture-video, the videos."""
-    results = recovered_reward_stats(buffer, q_net, policies["inform"], args.sleep_temperature)
-    end_step, outcome, boxes = args.tamer_total_timesteps + args.sleep_gradient_steps, Outcome.from_args(args), None
+def final_evaluation(buffer, q_net, policies: dict, evaluator, writer, run_dir: str, *, env_id: str, end_step: int,
+                     temperature: float, eval_episodes: int, obstacle_layout: str, obstacle_episodes: int,
+                     authors_test_episodes: int, capture_video: bool) -> dict:  # fmt: skip
+    """After the sleep: Eq. 3 on the buffer (at the night's `temperature`), each policy's final evaluation, the
+    obstacle test (Pusher only) and the authors' test (all logged at `end_step`), the obstacle files and the videos."""
+    results = recovered_reward_stats(buffer, q_net, policies["inform"], temperature)
+    seed, outcome, boxes = evaluator.seed, evaluator.outcome, None
     print("[eval] final evaluation", flush=True)
     for name, actor in policies.items():
-        evaluator(name, actor, end_step, args.eval_episodes)
+        evaluator(name, actor, end_step, eval_episodes)
     t = time.time()
-    if obstacle_skipped(args.env_id, args.obstacle_episodes):
-        results["obstacle/skipped"] = obstacle_skipped(args.env_id, args.obstacle_episodes)
+    if obstacle_skipped(env_id, obstacle_episodes):
+        results["obstacle/skipped"] = obstacle_skipped(env_id, obstacle_episodes)
     else:
-        test = (args.env_id, args.seed, args.obstacle_layout, args.obstacle_episodes, outcome)
+        test = (env_id, seed, obstacle_layout, obstacle_episodes, outcome)
         obstacle, distances, paths = obstacle_test(*test, policies, evaluator.generator)
         results.update(obstacle)
         np.savez(f"{run_dir}/obstacle_distances.npz", **distances)
         np.savez(f"{run_dir}/obstacle_paths.npz", **paths)
         boxes = paths["boxes"]
-    if args.authors_test_episodes > 0:  # the authors' test: sampled actions, every episode from the run's start
-        env = make_env(args.env_id, args.seed)
+    if authors_test_episodes > 0:  # the authors' test: sampled actions, every episode from the run's start
+        env = make_env(env_id, seed)
         for name, actor in policies.items():
-            res = evaluate(actor, env, args.authors_test_episodes, lambda ep: args.seed, False, evaluator.generator,
-                           outcome)  # fmt: skip
+            res = evaluate(actor, env, authors_test_episodes, lambda ep: seed, False, evaluator.generator, outcome)
             results.update(
                 {f"eval/authors_test/{name}_{k}": res[k] for k in ("return", "final_distance", "success_rate")}
             )
@@ -834,8 +828,8 @@ def final_evaluation(args: Args, buffer, q_net, policies: dict, evaluator, write
         if tag.startswith(("eval/obstacle/", "eval/authors_test/", "obstacle/min")):
             writer.add_scalar(tag, value, end_step)
     evaluator.seconds += time.time() - t
-    if args.capture_video:  # after every number is in: filming changes none of them
-        record_videos(args.env_id, args.seed, outcome, policies, boxes, evaluator.reset_seed(0), run_dir)
+    if capture_video:  # after every number is in: filming changes none of them
+        record_videos(env_id, seed, outcome, policies, boxes, evaluator.reset_seed(0), run_dir)
     return results
 
 
@@ -1078,7 +1072,7 @@ _OBSTACLE_DIR: list[str] = []
 def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, make_teacher=None) -> dict:
     """oracle -> day (the forward phase) -> night (`args.night`, the study's Args give theirs) -> Eq. 3 and the tests.
     `make_teacher(args, env, run_dir)`: the day's teacher in place of the simulated one (a person at a web page)."""
-    recipe = sleep_recipe(args)  # the preset's values that ran go into the summary's args
+    recipe = args.sleep_recipe()  # the preset's values that ran go into the summary's args
     args = dataclasses.replace(args, **{k: v for k, v in recipe.items() if hasattr(args, k)})
     run_start, run_dir, writer, env, evaluator = time.time(), None, None, None, None
     oracle_ckpt = day["oracle"] if day is not None else oracle_ckpt  # --sleep-from: the saved day's teacher
@@ -1108,7 +1102,9 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, make_teacher=No
         writer = SummaryWriter(run_dir)
         table = "\n".join(f"|{k}|{v}|" for k, v in vars(args).items())
         writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + table)
-        env, evaluator = make_env(args.env_id, args.seed), Evaluator(args, writer)
+        outcome = Outcome(args.success_info_key, args.success_distance, args.success_return)  # how episodes are judged
+        env = make_env(args.env_id, args.seed)
+        evaluator = Evaluator(args.env_id, args.seed, args.random_starts, outcome, writer)
         obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
 
         # ---- oracle: the simulated teacher (docs/protocol.md, "Oracles and the expert bar")
@@ -1118,11 +1114,11 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, make_teacher=No
             print(f"[oracle] loaded {oracle_ckpt['path']} ({oracle_ckpt.get('training_steps', '?')} SAC steps)")
         else:
             print(f"[oracle] training SAC on the env reward for {args.oracle_total_timesteps} steps", flush=True)
-            outcome = Outcome.from_args(args)
             oracle_actor, oracle_qf, summary["sps/oracle"] = train_oracle(
                 args.env_id, args.seed, args.oracle_total_timesteps, outcome, writer, device
             )
-            save_atomic(oracle_checkpoint(args, oracle_actor, oracle_qf), f"{run_dir}/oracle.pt")
+            ckpt = oracle_checkpoint(oracle_actor, oracle_qf, args.env_id, args.oracle_total_timesteps, args.seed)
+            save_atomic(ckpt, f"{run_dir}/oracle.pt")
         oracle_actor.requires_grad_(False)
         oracle_qf.requires_grad_(False)
         summary["time/oracle_s"] = time.time() - t0
@@ -1132,9 +1128,18 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, make_teacher=No
         phase, t0 = "tamer", time.time() - evaluator.seconds  # the phase's clock stops during its evaluations
         buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, act_dim, device)
         if day is None:
-            teacher = make_teacher(args, env, run_dir) if make_teacher is not None else None
-            h_net, tamer_actor, stats = forward_phase(args, env, oracle_actor, oracle_qf, buffer, evaluator, writer,
-                                                      device, teacher)  # fmt: skip
+            if make_teacher is not None:  # a person
+                teacher = make_teacher(args, env, run_dir)
+            else:  # the simulated person: Eq. 4's answers, made noisy, sparse, late or limited by the flags
+                teacher = Teacher(args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window,
+                                  args.feedback_budget, seed=args.seed + 7919)  # fmt: skip
+            h_net, tamer_actor, stats = forward_phase(
+                env, oracle_actor, oracle_qf, teacher, outcome, buffer, evaluator, writer, device, seed=args.seed,
+                random_starts=args.random_starts, total_timesteps=args.tamer_total_timesteps,
+                learning_starts=args.tamer_learning_starts, batch_size=args.tamer_batch_size, h_lr=args.tamer_h_lr,
+                alpha_start=args.feedback_alpha_start, alpha_end=args.feedback_alpha_end,
+                budget_ends=args.budget_ends_forward_phase,
+            )  # fmt: skip
         else:  # --sleep-from: the saved day's memories and TAMER, and the random streams where the day left them
             h_net, tamer_actor, stats = restore_day(day, buffer, evaluator, device)
         summary["time/tamer_s"] = time.time() - evaluator.seconds - t0
@@ -1144,8 +1149,10 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, make_teacher=No
         save_critic(f"{run_dir}/tamer_h.pt", h_net, obs_dim, act_dim, env_id=args.env_id)
         if args.save_buffer:
             day_stats = {**stats, "time/tamer_s": summary["time/tamer_s"], "sps/tamer": summary["sps/tamer"]}
-            ckpt = oracle_ckpt or oracle_checkpoint(args, oracle_actor, oracle_qf)
-            save_day(f"{run_dir}/day.pt", args, buffer, ckpt, h_net, tamer_actor, day_stats, evaluator.generator)
+            ckpt = oracle_ckpt or oracle_checkpoint(oracle_actor, oracle_qf, args.env_id, args.oracle_total_timesteps,
+                                                    args.seed)  # fmt: skip
+            day_args = {k: getattr(args, k) for k in DAY_ARGS}
+            save_day(f"{run_dir}/day.pt", day_args, buffer, ckpt, h_net, tamer_actor, day_stats, evaluator.generator)
 
         # ---- sleep phase ("night"): offline IQ-Learn on the buffer, no environment steps
         phase, t0 = "sleep", time.time() - evaluator.seconds
@@ -1167,7 +1174,13 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, make_teacher=No
 
         # ---- the recovered reward (Eq. 3), then the final evaluation and the obstacle robustness test
         phase = "eval"
-        summary.update(final_evaluation(args, buffer, q_net, policies, evaluator, writer, run_dir))
+        summary.update(final_evaluation(
+            buffer, q_net, policies, evaluator, writer, run_dir, env_id=args.env_id,
+            end_step=args.tamer_total_timesteps + args.sleep_gradient_steps, temperature=args.sleep_temperature,
+            eval_episodes=args.eval_episodes, obstacle_layout=args.obstacle_layout,
+            obstacle_episodes=args.obstacle_episodes, authors_test_episodes=args.authors_test_episodes,
+            capture_video=args.capture_video,
+        ))  # fmt: skip
     except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
         status, stop.broken_pipe = "interrupted", isinstance(e, BrokenPipeError)
     except Diverged as e:
@@ -1175,7 +1188,7 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, make_teacher=No
     except Exception as e:  # the summary records it; a bug then gets its traceback, a full disk its one line
         status, summary["error"] = "failed", f"{type(e).__name__}: {(str(e).strip() or '-').splitlines()[0]}"
         failure = None if isinstance(e, OSError) else e
-    summary = end_run(args, summary, status, phase, run_dir, run_start, evaluator, (env, writer), stop)
+    summary = end_run(summary, status, phase, run_dir, run_start, evaluator, (env, writer), stop, args.seed, vars(args))
     if failure is not None:
         raise failure
     return summary
@@ -1360,10 +1373,11 @@ def actor_from_checkpoint(ckpt: dict) -> Actor:  # a saved actor, or an oracle's
     return actor
 
 
-def load_oracle(args: Args) -> dict | None:
-    """The oracle checkpoint to use (--oracle-path, else the shipped one), or None to train one here."""
-    path, name = args.oracle_path, os.path.join("oracles", f"{args.env_id}__sac_oracle.pt")
-    if path is None and not args.train_oracle:  # oracles/ beside the script, in the cwd, then above either
+def load_oracle(env_id: str, path: str | None, train: bool, train_steps: int) -> dict | None:
+    """The oracle checkpoint to use (--oracle-path, else the shipped one), or None to train one here (--train-oracle,
+    or no shipped one found: then for `train_steps`)."""
+    name = os.path.join("oracles", f"{env_id}__sac_oracle.pt")
+    if path is None and not train:  # oracles/ beside the script, in the cwd, then above either
         script_up, cwd_up = directories_up(REPO_DIR), directories_up(os.getcwd())
         places = list(dict.fromkeys(os.path.join(d, name) for d in [script_up[0], cwd_up[0], *script_up, *cwd_up]))
         path = next((p for p in places if os.path.isfile(p)), None)
@@ -1371,9 +1385,9 @@ def load_oracle(args: Args) -> dict | None:
             hint = "pass --oracle-path PATH (a checkpoint of oracle_train.py, as in oracles/), or --train-oracle"
             say(f"[oracle] no shipped teacher found (looked for {name} beside the script, in the working directory and "
                 f"in every directory above them: {', '.join(places)}); training one here for "
-                f"{args.oracle_total_timesteps} env steps (~100 steps/s on one core). To skip this, {hint}",
+                f"{train_steps} env steps (~100 steps/s on one core). To skip this, {hint}",
                 sys.stderr)  # fmt: skip
-    return None if path is None else {**read_checkpoint(path, "--oracle-path", args.env_id), "path": path}
+    return None if path is None else {**read_checkpoint(path, "--oracle-path", env_id), "path": path}
 
 
 def directories_up(path: str) -> list[str]:  # the directory and each one above it, to the root
@@ -1398,41 +1412,37 @@ def save_critic(path: str, q_net: QEnsemble, obs_dim: int, act_dim: int, **extra
     save_atomic({"state_dict": state_dict_cpu(q_net), "kwargs": kwargs, **extra}, path)
 
 
-def oracle_checkpoint(args: Args, actor: Actor, qf: QEnsemble) -> dict:  # oracle_train.py's format
+def oracle_checkpoint(actor: Actor, qf: QEnsemble, env_id: str, steps: int, seed: int) -> dict:  # oracle_train's
     obs_dim, act_dim = actor.fc1.in_features, actor.fc_mean.out_features
-    ckpt = {"algorithm": "sac", "env_id": args.env_id, "obs_shape": [obs_dim], "act_shape": [act_dim]}
+    ckpt = {"algorithm": "sac", "env_id": env_id, "obs_shape": [obs_dim], "act_shape": [act_dim]}
     ckpt["kwargs"] = {"obs_dim": obs_dim, "act_dim": act_dim, "hidden": HIDDEN_SIZE}
     ckpt["action_low"] = (actor.action_bias - actor.action_scale).cpu()
     ckpt["action_high"] = (actor.action_bias + actor.action_scale).cpu()
     ckpt.update(actor_state_dict=state_dict_cpu(actor), qf_state_dict=state_dict_cpu(qf), random_starts=True)
-    return {**ckpt, "training_steps": args.oracle_total_timesteps, "training_seed": args.seed}
+    return {**ckpt, "training_steps": steps, "training_seed": seed}
 
 
 # saved days (--save-buffer, --sleep-from): a day is deterministic, so it is saved once and slept on many times
 DAY_FORMAT = "inform-day-2"
-DAY_FIELDS = (
-    "env_id",
-    "seed",
-    "random_starts",
-    "train_oracle",
-    "credit_window",
-    "budget_ends_forward_phase",
-    "success_",
-)
-DAY_PREFIXES = ("oracle_", "tamer_", "feedback_", "teacher_")
+# the flags that shape a day: a saved day records them, and a night on it (--sleep-from) takes them for its own
+DAY_ARGS = ("seed", "env_id", "random_starts", "success_distance", "success_info_key", "success_return", "oracle_path",
+            "train_oracle", "oracle_total_timesteps", "tamer_total_timesteps", "tamer_learning_starts",
+            "tamer_batch_size", "tamer_h_lr", "feedback_alpha_start", "feedback_alpha_end", "teacher_noise",
+            "teacher_sparsity", "teacher_delay", "credit_window", "feedback_budget",
+            "budget_ends_forward_phase")  # fmt: skip
 DAY_TENSORS = ("obs", "actions", "next_obs", "feedback", "terminated", "success")
 # what shaped a day and is a constant now, under the flag names that days record it by
 DAY_CONSTANTS = {"hidden_size": HIDDEN_SIZE, "eval_frequency": EVAL_FREQUENCY, "tamer_policy_lr": TAMER_POLICY_LR}
 DAY_CONSTANTS["tamer_policy_frequency"] = 1
 
 
-def save_day(path, args: Args, buffer: ReplayBuffer, oracle_ckpt, h_net, tamer_actor, stats, generator) -> None:
+def save_day(path, day_args: dict, buffer: ReplayBuffer, oracle_ckpt, h_net, tamer_actor, stats, generator) -> None:
     """The day as plain tensors and values (torch.load(weights_only=True) reads it): the memories, the episode table,
-    the teacher, TAMER's H and actor, the day's stats and the random states the night goes on from."""
+    the flags that made it (DAY_ARGS), the teacher, TAMER's H and actor, the day's stats and the random states the
+    night goes on from."""
     day = {key: getattr(buffer, key)[: buffer.size].cpu().clone() for key in DAY_TENSORS}
     starts, ends, shortfalls = zip(*buffer.episodes, strict=True)
-    day_args = {f.name: getattr(args, f.name) for f in fields(Args) if f.name.startswith(DAY_PREFIXES + DAY_FIELDS)}
-    day.update(format=DAY_FORMAT, script=os.path.basename(__file__), env_id=args.env_id, seed=args.seed)
+    day.update(format=DAY_FORMAT, script=os.path.basename(__file__), env_id=day_args["env_id"], seed=day_args["seed"])
     day.update(day_args={**day_args, **DAY_CONSTANTS}, day_stats=stats, episode_success=buffer.success[list(starts)])
     day.update(episode_start=torch.tensor(starts), episode_end=torch.tensor(ends))
     day["episode_shortfall"] = torch.tensor(shortfalls, dtype=torch.float64)  # the final distance, or minus the return
@@ -1630,7 +1640,9 @@ def cli(args: Args, make_teacher=None) -> int:
         check_args(args)
         if args.capture_video:
             check_video(args.env_id)
-        oracle_ckpt = load_oracle(args) if day is None else None
+        oracle_ckpt = None  # a saved day brings its own teacher
+        if day is None:
+            oracle_ckpt = load_oracle(args.env_id, args.oracle_path, args.train_oracle, args.oracle_total_timesteps)
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -1751,12 +1763,13 @@ def write_json_atomic(path: str, data: dict) -> None:
         json.dump(strict_json(data), f, indent=2, allow_nan=False)
 
 
-def end_run(args, summary, status, phase, run_dir, run_start, evaluator, closing, stop) -> dict:
-    """The summary first, then the messages: no signal cuts this short (StopSignals only notes the later ones)."""
+def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop, seed: int, flags: dict) -> dict:
+    """The summary (with the run's `flags`) first, then the messages: no signal cuts this short (StopSignals only notes
+    the later ones)."""
     stop.finished = True
     if run_dir is not None:
         final = {"time/eval_s": evaluator.seconds if evaluator else 0.0, "wall_time_s": time.time() - run_start}
-        final.update(seed=args.seed, script=os.path.basename(__file__), status=status, args=vars(args))
+        final.update(seed=seed, script=os.path.basename(__file__), status=status, args=flags)
         summary = {**(evaluator.final if evaluator else {}), **summary, **final}
         summary.update({"phase": phase} if status != "completed" else {})
         summary.update({"signal": stop.reason()} if status == "interrupted" else {})

@@ -381,10 +381,6 @@ class Outcome:
     distance: float = 0.08
     min_return: float | None = None
 
-    @classmethod
-    def from_args(cls, args: Args) -> "Outcome":
-        return cls(args.success_info_key, args.success_distance, args.success_return)
-
     def __call__(self, info: dict, ep_return: float) -> tuple[float, bool, float]:
         """(final distance, success, shortfall) of an episode that ended with `info` after earning `ep_return`."""
         distance = abs(float(info[self.info_key])) if self.info_key in info else math.nan
@@ -487,7 +483,8 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     def save_oracle(step: int, evaluation: dict, path: str) -> None:
         atomic_save(oracle_checkpoint(sac, args, step, evaluation), path)
 
-    outcome = Outcome.from_args(args)  # on the env's own reward: info["reward_dist"] is weighted
+    # judged on the env's own reward: info["reward_dist"] is weighted
+    outcome = Outcome(args.success_info_key, args.success_distance, args.success_return)
     selection = Selection(run_dir, outcome)
     obs, _ = env.reset(seed=args.seed + start_step)  # random starts: seed once, then the env RNG runs on
     obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
@@ -556,7 +553,7 @@ def write_oracle(
     sac.actor.load_state_dict(best["actor_state_dict"])
     sac.qf.load_state_dict(best["qf_state_dict"])
     final = evaluate(sac.actor, gym.make(args.env_id), args.final_eval_episodes, FINAL_EVAL_SEED, device,
-                     Outcome.from_args(args))  # fmt: skip
+                     Outcome(args.success_info_key, args.success_distance, args.success_return))  # fmt: skip
     chosen = best["evaluation"]
     print(f"[oracle] best evaluation at step {best['training_steps']}: success rate {chosen['success_rate']:.2f}, "
           f"final distance {chosen['final_distance']:.4f} over {chosen['episodes']:.0f} episodes; held-out eval over "
@@ -1052,7 +1049,8 @@ def record_teacher(args: Args, actor: Actor, run_dir: str, device: torch.device)
     evaluation (the held-out one's on its first episodes) in videos/videos.json."""
     os.makedirs(os.path.join(run_dir, "videos"), exist_ok=True)
     env, t0 = video_env(args.env_id), time.time()
-    evaluation = evaluate(actor, env, VIDEO_EPISODES, FINAL_EVAL_SEED, device, Outcome.from_args(args))
+    outcome = Outcome(args.success_info_key, args.success_distance, args.success_return)
+    evaluation = evaluate(actor, env, VIDEO_EPISODES, FINAL_EVAL_SEED, device, outcome)
     frames = env.render()
     write_video(path := os.path.join(run_dir, "videos", "oracle.mp4"), frames, env.metadata["render_fps"])
     record = {"file": "oracle.mp4", "size": list(frames[0].shape), "frames": len(frames), "evaluation": evaluation}

@@ -37,6 +37,7 @@ import collections
 import contextlib
 import glob
 import importlib.util
+import inspect
 import io
 import json
 import math
@@ -353,6 +354,23 @@ class NullEvaluator:
         return {f"eval/{name}_return": float("nan")}
 
 
+def day(module, day_args, env, oracle_actor, oracle_qf, buffer, cpu) -> None:
+    """The script's forward phase with the flags `day_args`: called as the script takes it (since the reading-path
+    refactor, the values it uses; before it, all of Args), so that a benchmark can time an older revision too."""
+    if "args" in inspect.signature(module.forward_phase).parameters:
+        module.forward_phase(day_args, env, oracle_actor, oracle_qf, buffer, NullEvaluator(), NullWriter(), cpu)
+        return
+    a = day_args
+    teacher = module.Teacher(a.teacher_noise, a.teacher_sparsity, a.teacher_delay, a.credit_window, a.feedback_budget,
+                             seed=a.seed + 7919)  # fmt: skip
+    outcome = module.Outcome(a.success_info_key, a.success_distance, a.success_return)
+    module.forward_phase(env, oracle_actor, oracle_qf, teacher, outcome, buffer, NullEvaluator(), NullWriter(), cpu,
+                         seed=a.seed, random_starts=a.random_starts, total_timesteps=a.tamer_total_timesteps,
+                         learning_starts=a.tamer_learning_starts, batch_size=a.tamer_batch_size, h_lr=a.tamer_h_lr,
+                         alpha_start=a.feedback_alpha_start, alpha_end=a.feedback_alpha_end,
+                         budget_ends=a.budget_ends_forward_phase)  # fmt: skip
+
+
 def phase_runner(module, args: Args, phase: str, flags: dict):
     """run(steps): the script's `phase` code for `steps` steps past learning starts, output swallowed."""
     cpu = torch.device("cpu")
@@ -375,15 +393,14 @@ def phase_runner(module, args: Args, phase: str, flags: dict):
             elif phase == "tamer":
                 n = args.learning_starts + steps
                 buffer = module.ReplayBuffer(n, obs_dim, act_dim, cpu)
-                module.forward_phase(module.Args(**common, tamer_total_timesteps=n), module.make_env(args.env_id, 1),
-                                     oracle_actor, oracle_qf, buffer, NullEvaluator(), NullWriter(), cpu)  # fmt: skip
+                day(module, module.Args(**common, tamer_total_timesteps=n), module.make_env(args.env_id, 1),
+                    oracle_actor, oracle_qf, buffer, cpu)  # fmt: skip
             else:
                 if not memory:
                     n = 2000  # random actions only (learning starts = the budget - 1): cheap to make
                     memory.append(module.ReplayBuffer(n, obs_dim, act_dim, cpu))
-                    day = module.Args(**{**common, "tamer_learning_starts": n - 1}, tamer_total_timesteps=n)
-                    module.forward_phase(day, module.make_env(args.env_id, 1), oracle_actor, oracle_qf, memory[0],
-                                         NullEvaluator(), NullWriter(), cpu)  # fmt: skip
+                    random_day = module.Args(**{**common, "tamer_learning_starts": n - 1}, tamer_total_timesteps=n)
+                    day(module, random_day, module.make_env(args.env_id, 1), oracle_actor, oracle_qf, memory[0], cpu)
                     memory[0].success[:200] |= not memory[0].success.any()  # an expert set, whatever the luck
                 night_args = module.Args(**common, sleep_gradient_steps=steps)
                 night = night_args.night(oracle_actor, cpu, tamer={})

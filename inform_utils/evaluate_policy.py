@@ -99,7 +99,8 @@ def evaluate_pusher(args: Pusher) -> dict:
     torch.manual_seed(run.seed)
     torch.set_num_threads(run.num_threads)
     actor = isp.actor_from_checkpoint(isp.read_checkpoint(args.policy, "policy", run.env_id))
-    evaluator = isp.Evaluator(run, writer=None)
+    outcome = isp.Outcome(run.success_info_key, run.success_distance, run.success_return)
+    evaluator = isp.Evaluator(run.env_id, run.seed, run.random_starts, outcome, writer=None)
     if args.stream:
         if args.stream < 0:
             raise isp.InputError(f"--stream {args.stream}: must be >= 0 (0: the run's own stream)")
@@ -107,7 +108,7 @@ def evaluate_pusher(args: Pusher) -> dict:
     metrics = evaluator("policy", actor, 0, run.eval_episodes)
     obstacle = {"obstacle/skipped": isp.obstacle_skipped(run.env_id, run.obstacle_episodes)}
     if obstacle["obstacle/skipped"] is None:
-        test = (run.env_id, run.seed, run.obstacle_layout, run.obstacle_episodes, isp.Outcome.from_args(run))
+        test = (run.env_id, run.seed, run.obstacle_layout, run.obstacle_episodes, outcome)
         obstacle, _, _ = isp.obstacle_test(*test, {"policy": actor}, evaluator.generator)
     evaluator.close()
     return {**metrics, **obstacle}

@@ -192,9 +192,9 @@ fields = lambda a: {k: plain(v) for k, v in dataclasses.asdict(a).items()}
 parsed, defaults = tyro.cli(module.Args, args=tokens), tyro.cli(module.Args, args=[])
 try:  # the script's own checks, which also fill what a preset leaves to them (the maze's --teacher defaults)
     getattr(module, "check_args", lambda args: None)(parsed)
-    if hasattr(module, "sleep_recipe"):  # the Pusher's --sleep-protocol preset, which its summary records
+    if hasattr(parsed, "sleep_recipe"):  # the Pusher's --sleep-protocol preset, which its summary records
         names = {f.name for f in dataclasses.fields(parsed)}
-        parsed = dataclasses.replace(parsed, **{k: v for k, v in module.sleep_recipe(parsed).items() if k in names})
+        parsed = dataclasses.replace(parsed, **{k: v for k, v in parsed.sleep_recipe().items() if k in names})
 except Exception as e:
     sys.exit(f"error: {e}")
 print(json.dumps({"args": fields(parsed), "defaults": fields(defaults)}, default=str))

@@ -131,7 +131,11 @@ def pusher(tmp_path_factory):
         for wrapper in (tamer_loss, update_actor, iq_loss, oracle_feedback, sleep_phase, Night):
             mp.setattr(isp, wrapper.__name__, wrapper)
         mp.setattr(isp, "PERIODIC_EVAL_EPISODES", 1)  # evaluation draws from its own generator: no number moves
-        rec.summary = isp.main(args, isp.load_oracle(args), isp.StopSignals())
+        rec.summary = isp.main(
+            args,
+            isp.load_oracle(args.env_id, args.oracle_path, args.train_oracle, args.oracle_total_timesteps),
+            isp.StopSignals(),
+        )
     assert rec.summary["status"] == "completed", rec.summary.get("error")
     n = rec.buffer.size
     rec.obs, rec.actions, rec.feedback = rec.buffer.obs[:n], rec.buffer.actions[:n], rec.buffer.feedback[:n]

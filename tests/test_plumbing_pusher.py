@@ -137,7 +137,11 @@ def in_process_run(tmp_path, monkeypatch, *flags) -> dict:
     args = tyro.cli(isp.Args, args=[*TINY, *flags])
     handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
     try:
-        return isp.main(args, isp.load_oracle(args), isp.StopSignals())
+        return isp.main(
+            args,
+            isp.load_oracle(args.env_id, args.oracle_path, args.train_oracle, args.oracle_total_timesteps),
+            isp.StopSignals(),
+        )
     finally:
         for sig, handler in handlers.items():
             signal.signal(sig, handler)

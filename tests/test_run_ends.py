@@ -311,11 +311,14 @@ def test_an_error_after_the_run_directory_exists_still_leaves_a_summary(tmp_path
             flags = dict(zip(PUSHER_TINY[::2], PUSHER_TINY[1::2], strict=True))
             args = pusher.Args(**{k[2:].replace("-", "_"): int(v) for k, v in flags.items()})
             with pytest.raises(RuntimeError, match="a bug in the final evaluation"):
-                pusher.main(args, pusher.load_oracle(args), pusher.StopSignals())
+                pusher.main(
+                    args,
+                    pusher.load_oracle(args.env_id, args.oracle_path, args.train_oracle, args.oracle_total_timesteps),
+                    pusher.StopSignals(),
+                )
         else:
-            args = maze.fill_teacher_defaults(
-                maze.Args(tamer_total_timesteps=2000, tamer_learning_starts=500, sleep_gradient_steps=200)
-            )
+            args = maze.Args(tamer_total_timesteps=2000, tamer_learning_starts=500, sleep_gradient_steps=200)
+            args = args.fill_teacher_defaults()
             with pytest.raises(RuntimeError, match="a bug in the final evaluation"):
                 maze.main(args, None, maze.StopSignals())
     finally:

@@ -186,16 +186,16 @@ def test_sleep_from_refuses_what_is_not_a_day(tmp_path):
 
 
 def test_the_authors_protocol_is_one_flag_and_what_was_typed_wins():
-    authors = isp.sleep_recipe(isp.Args(sleep_protocol="authors"))
+    authors = isp.Args(sleep_protocol="authors").sleep_recipe()
     assert authors == {"sleep_gradient_steps": 100000, "sleep_init_actor_from_tamer": False,
                        "sleep_actor_states": "replay+expert", "sleep_policy_frequency": 2}  # fmt: skip
-    assert isp.sleep_recipe(isp.Args())["sleep_gradient_steps"] == 5000
-    assert isp.sleep_recipe(isp.Args(sleep_protocol="authors", sleep_gradient_steps=200))["sleep_gradient_steps"] == 200
+    assert isp.Args().sleep_recipe()["sleep_gradient_steps"] == 5000
+    assert isp.Args(sleep_protocol="authors", sleep_gradient_steps=200).sleep_recipe()["sleep_gradient_steps"] == 200
     typed = variants.untyped_to_protocol(variants.Args(sleep_protocol="authors", sleep_actor_states="expert"), [])
-    assert isp.sleep_recipe(typed)["sleep_actor_states"] == "expert"  # typed: kept
-    assert isp.sleep_recipe(typed)["sleep_init_actor_from_tamer"] is False  # untyped: the preset's
+    assert typed.sleep_recipe()["sleep_actor_states"] == "expert"  # typed: kept
+    assert typed.sleep_recipe()["sleep_init_actor_from_tamer"] is False  # untyped: the preset's
     typed = variants.untyped_to_protocol(variants.Args(sleep_protocol="authors"), ["--sleep-init-actor-from-tamer"])
-    assert isp.sleep_recipe(typed)["sleep_init_actor_from_tamer"] is True
+    assert typed.sleep_recipe()["sleep_init_actor_from_tamer"] is True
 
 
 def test_the_preset_records_what_ran(day):

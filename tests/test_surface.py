@@ -17,7 +17,7 @@ DECLARED = {
         "QEnsemble", "Actor", "HIDDEN_SIZE", "Teacher", "oracle_q", "oracle_feedback", "linear_schedule",  # the parts
         "tamer_loss", "update_actor", "iq_loss", "soft_value", "recover_reward", "soft_update", "SLEEP_GAMMA",
         "TAMER_POLICY_LR",
-        "Night", "sleep_recipe",  # the night, which the study subclasses
+        "Night",  # the night, which the study subclasses
         "Evaluator", "evaluate", "obstacle_test", "obstacle_skipped", "object_xy", "check_video", "video_env",
         "mujoco_major", "read_checkpoint", "check_crc", "oracle_from_checkpoint", "actor_from_checkpoint",
     },

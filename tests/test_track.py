@@ -23,7 +23,7 @@ def test_track_without_wandb_is_one_line(module, monkeypatch):
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "wandb" else real(name, *a))
     args = module.Args(track=True, env_id="Pusher-v5") if module is oracle_train else module.Args(track=True)
     if module is maze:
-        args = maze.fill_teacher_defaults(args)
+        args = args.fill_teacher_defaults()
     with pytest.raises(module.InputError, match="pip install wandb"):
         module.check_args(args)
 
