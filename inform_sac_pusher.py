@@ -80,6 +80,7 @@ ORACLE_SAC = {"learning_starts": 5000, "batch_size": 256, "q_lr": 1e-3, "policy_
 EVAL_FREQUENCY = 2000  # forward-phase env steps between evaluations of TAMER (curves like Fig. 3)
 SLEEP_EVAL_FREQUENCY = 1000  # sleep gradient steps between evaluations of INFORM
 PERIODIC_EVAL_EPISODES = 5  # episodes of each evaluation during the phases
+SIDE_BY_SIDE = 20  # episodes a test runs at once, on copies of its env (evaluate)
 LOG_FREQUENCY = 1000  # steps between scalar logs
 # the night's recipe, ours and the authors' (their test loads the 100k-step checkpoint); a preset fills in only what
 # the command left unset (None)
@@ -319,10 +320,11 @@ class Actor(nn.Module):
         log_std = torch.tanh(self.fc_logstd(x))
         return self.fc_mean(x), LOG_STD_MIN + 0.5 * (LOG_STD_MAX - LOG_STD_MIN) * (log_std + 1)
 
-    def get_action(self, obs: torch.Tensor, generator: torch.Generator | None = None):
-        """(sampled action, its log-prob [B], mean action); `generator` keeps evaluation off the training RNG."""
+    def get_action(self, obs: torch.Tensor, generator: torch.Generator | None = None, eps: torch.Tensor | None = None):
+        """(sampled action, its log-prob [B], mean action); `generator` keeps evaluation off the training RNG; `eps`:
+        the Gaussian noise, drawn beforehand."""
         mean, log_std = self(obs)
-        eps = torch.randn(mean.shape, generator=generator, device=mean.device)
+        eps = torch.randn(mean.shape, generator=generator, device=mean.device) if eps is None else eps
         x_t = mean + log_std.exp() * eps
         y_t = torch.tanh(x_t)
         log_prob = -0.5 * eps.pow(2) - log_std - 0.5 * math.log(2 * math.pi)
@@ -742,29 +744,92 @@ def check_finite(tags: dict, last: dict, what: str, when: str, flag: str) -> dic
 
 
 @torch.no_grad()
-def evaluate(actor: Actor, env: gym.Env, episodes: int, reset_seed, deterministic: bool, generator, outcome: Outcome):
-    """Run `episodes` episodes; reset_seed(ep) gives each episode's reset seed. Returns means and per-episode data,
-    each episode's observations included. On the CPU, as the env and `generator` are: a GPU actor is copied there."""
-    actor = on_cpu(actor)
+def evaluate(actor: Actor, env, episodes: int, reset_seed, deterministic: bool, generator, outcome: Outcome):
+    """Run `episodes` episodes; reset_seed(ep) gives each episode's reset seed. `env`: one env, or a list of copies of
+    one, which run the episodes side by side with the numbers of one env running them in turn. Returns means and
+    per-episode data, each episode's observations included. On the CPU, as the env and `generator` are: a GPU actor
+    is copied there."""
+    envs, actor = env if isinstance(env, list) else [env], on_cpu(actor)
+    rows, stream = one_row_at_a_time(actor) if len(envs) > 1 else actor, generator or torch.default_generator
     returns, distances, successes, trajectories = [], [], [], []
-    for ep in range(episodes):
-        StopSignals.check()
-        obs, _ = env.reset(seed=reset_seed(ep))
-        done, ep_return, info, trajectory = False, 0.0, {}, [obs]
-        while not done:
-            sampled, _, mean = actor.get_action(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0), generator)
-            obs, reward, terminated, truncated, info = env.step((mean if deterministic else sampled)[0].numpy())
-            ep_return, done = ep_return + float(reward), terminated or truncated
-            trajectory.append(obs)
-        distance, success, _ = outcome(info, ep_return)
-        returns.append(ep_return)
-        distances.append(distance)
-        successes.append(success)
-        trajectories.append(np.array(trajectory))
+    for first in range(0, episodes, len(envs)):
+        seeds, state = [reset_seed(ep) for ep in range(first, min(first + len(envs), episodes))], stream.get_state()
+        ran = side_by_side(rows, envs, seeds, deterministic, generator) if len(seeds) > 1 else None
+        if ran is None:  # one at a time: each episode draws its noise step by step, for as long as it runs
+            stream.set_state(state)
+            ran = [one_episode(actor, envs[0], seed, deterministic, generator) for seed in seeds]
+        for ep_return, info, trajectory in ran:
+            distance, success, _ = outcome(info, ep_return)
+            returns.append(ep_return)
+            distances.append(distance)
+            successes.append(success)
+            trajectories.append(trajectory)
     distances = np.asarray(distances)
     res = {"return": float(np.mean(returns)), "final_distance": float(distances.mean())}
     res.update({"final_distance_std": float(distances.std()), "success_rate": float(np.mean(successes))})
     return {**res, "distances": distances, "returns": np.asarray(returns), "trajectories": trajectories}
+
+
+@torch.no_grad()
+def one_episode(actor: Actor, env: gym.Env, seed: int | None, deterministic: bool, generator) -> tuple:
+    """(return, last info, observations) of one episode from env.reset(seed=seed)."""
+    StopSignals.check()
+    obs, _ = env.reset(seed=seed)
+    done, ep_return, info, trajectory = False, 0.0, {}, [obs]
+    while not done:
+        sampled, _, mean = actor.get_action(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0), generator)
+        obs, reward, terminated, truncated, info = env.step((mean if deterministic else sampled)[0].numpy())
+        ep_return, done = ep_return + float(reward), terminated or truncated
+        trajectory.append(obs)
+    return ep_return, info, np.array(trajectory)
+
+
+@torch.no_grad()
+def side_by_side(rows: Actor, envs: list, seeds: list, deterministic: bool, generator) -> list | None:
+    """one_episode's results for `seeds` at once, on copies of one env: one batched action a step from `rows`
+    (one_row_at_a_time), the noise of the sampled actions drawn beforehand in the order one env running the episodes
+    in turn draws it, so the numbers are that env's. None if an episode could end before the time limit (its draws
+    are not known beforehand)."""
+    horizon = envs[0].spec.max_episode_steps if envs[0].spec is not None else None
+    if horizon is None or None in seeds:  # no time limit, or a reset that goes on from an env's own random state
+        return None
+    envs, act_dim = envs[: len(seeds)], rows.action_scale.shape[0]
+    eps = torch.stack([torch.cat([torch.randn((1, act_dim), generator=generator) for _ in range(horizon)])
+                       for _ in seeds])  # fmt: skip
+    obs = np.stack([env.reset(seed=seed)[0] for env, seed in zip(envs, seeds, strict=True)])
+    returns, infos, observations = [0.0] * len(seeds), [], [obs]
+    for t in range(horizon):
+        StopSignals.check()
+        sampled, _, mean = rows.get_action(torch.as_tensor(obs, dtype=torch.float32), eps=eps[:, t])
+        actions = (mean if deterministic else sampled).numpy()
+        steps = [env.step(action) for env, action in zip(envs, actions, strict=True)]
+        if any(terminated or truncated != (t == horizon - 1) for _, _, terminated, truncated, _ in steps):
+            return None
+        obs, infos = np.stack([step[0] for step in steps]), [step[4] for step in steps]
+        returns = [ep_return + float(step[1]) for ep_return, step in zip(returns, steps, strict=True)]
+        observations.append(obs)
+    return list(zip(returns, infos, np.stack(observations, axis=1), strict=True))
+
+
+class OneRow(nn.Module):
+    """A Linear layer that computes each row of a batch as it computes a batch of one (a matmul per row, where one
+    matmul on the batch sums in another order): a batch of episodes then acts as each episode would alone."""
+
+    def __init__(self, linear: nn.Linear):
+        super().__init__()
+        self.linear = linear
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        n, weight, bias = x.shape[0], self.linear.weight, self.linear.bias
+        return torch.baddbmm(bias.expand(n, 1, -1), x.unsqueeze(1), weight.t().expand(n, -1, -1)).squeeze(1)
+
+
+def one_row_at_a_time(actor: Actor) -> Actor:
+    """A copy of `actor` whose layers are OneRow."""
+    rows = copy.deepcopy(actor)
+    for name, layer in list(rows.named_children()):
+        setattr(rows, name, OneRow(layer) if isinstance(layer, nn.Linear) else layer)
+    return rows
 
 
 class Evaluator:
@@ -772,7 +837,8 @@ class Evaluator:
     Episodes start from the run's seed (fixed start) or from fresh seeds (`--random-starts`), the same each time."""
 
     def __init__(self, env_id: str, seed: int, random_starts: bool, outcome: Outcome, writer: SummaryWriter | None):
-        self.env, self.writer, self.seed, self.random_starts = make_env(env_id, seed), writer, seed, random_starts
+        self.envs = [make_env(env_id, seed) for _ in range(SIDE_BY_SIDE)]
+        self.writer, self.seed, self.random_starts = writer, seed, random_starts
         self.generator = torch.Generator().manual_seed(seed + 12345)  # sampled actions, off the training RNG
         self.outcome = outcome
         self.seconds = 0.0  # spent evaluating
@@ -784,7 +850,7 @@ class Evaluator:
     def __call__(self, name: str, actor: Actor, step: int, episodes: int) -> dict:
         t, results = time.time(), {}
         for deterministic, suffix in ((True, ""), (False, "_sampled")):
-            res = evaluate(actor, self.env, episodes, self.reset_seed, deterministic, self.generator, self.outcome)
+            res = evaluate(actor, self.envs, episodes, self.reset_seed, deterministic, self.generator, self.outcome)
             results.update({f"eval/{name}_{k}{suffix}": res[k] for k in ("return", "final_distance", "success_rate")})
         for tag, value in results.items() if self.writer is not None else ():
             self.writer.add_scalar(tag, value, step)
@@ -793,7 +859,8 @@ class Evaluator:
         return results
 
     def close(self):
-        self.env.close()
+        for env in self.envs:
+            env.close()
 
 
 def final_evaluation(buffer, q_net, policies: dict, evaluator, writer, run_dir: str, *, env_id: str, end_step: int,
@@ -817,13 +884,14 @@ def final_evaluation(buffer, q_net, policies: dict, evaluator, writer, run_dir: 
         np.savez(f"{run_dir}/obstacle_paths.npz", **paths)
         boxes = paths["boxes"]
     if authors_test_episodes > 0:  # the authors' test: sampled actions, every episode from the run's start
-        env = make_env(env_id, seed)
+        envs = [make_env(env_id, seed) for _ in range(SIDE_BY_SIDE)]
         for name, actor in policies.items():
-            res = evaluate(actor, env, authors_test_episodes, lambda ep: seed, False, evaluator.generator, outcome)
+            res = evaluate(actor, envs, authors_test_episodes, lambda ep: seed, False, evaluator.generator, outcome)
             results.update(
                 {f"eval/authors_test/{name}_{k}": res[k] for k in ("return", "final_distance", "success_rate")}
             )
-        env.close()
+        for env in envs:
+            env.close()
     for tag, value in results.items():
         if tag.startswith(("eval/obstacle/", "eval/authors_test/", "obstacle/min")):
             writer.add_scalar(tag, value, end_step)
@@ -982,10 +1050,11 @@ def obstacle_test(env_id, seed, layout, episodes, outcome, policies: dict, gener
     results = {"obstacle/box_positions": boxes.round(4).tolist()}
     results["obstacle/min_box_distance_to_path"] = min(distance_to_segment(b, start, goal) for b in boxes)
     distances, paths = {}, {"boxes": boxes, "start": start, "goal": goal}
-    env, plain, at_start = make_env(env_id, seed, obstacles=boxes), make_env(env_id, seed), lambda episode: seed
+    envs = [make_env(env_id, seed, obstacles=boxes) for _ in range(SIDE_BY_SIDE)]
+    plain, at_start = make_env(env_id, seed), lambda episode: seed
     for name, actor in policies.items():
-        res = evaluate(actor, env, episodes, at_start, False, generator, outcome)
-        det = evaluate(actor, env, 1, at_start, True, generator, outcome)
+        res = evaluate(actor, envs, episodes, at_start, False, generator, outcome)
+        det = evaluate(actor, envs[0], 1, at_start, True, generator, outcome)
         det_plain = evaluate(actor, plain, 1, at_start, True, torch.Generator(), outcome)
         paths[f"{name}_obstacle"] = object_xy(det["trajectories"][0])
         paths[f"{name}_plain"] = object_xy(det_plain["trajectories"][0])
@@ -993,8 +1062,8 @@ def obstacle_test(env_id, seed, layout, episodes, outcome, policies: dict, gener
         for key in ("final_distance", "final_distance_std", "success_rate", "return"):
             results[f"eval/obstacle/{name}_{key}"] = res[key]
         results[f"eval/obstacle/{name}_final_distance_deterministic"] = det["final_distance"]
-    env.close()
-    plain.close()
+    for env in (*envs, plain):
+        env.close()
     return results, distances, paths
 
 

@@ -261,10 +261,11 @@ class Actor(nn.Module):
         log_std = torch.tanh(self.fc_logstd(x))
         return self.fc_mean(x), LOG_STD_MIN + 0.5 * (LOG_STD_MAX - LOG_STD_MIN) * (log_std + 1)
 
-    def get_action(self, obs: torch.Tensor, generator: torch.Generator | None = None):
-        """(sampled action, its log-prob [B], mean action); `generator` keeps evaluation off the training RNG."""
+    def get_action(self, obs: torch.Tensor, generator: torch.Generator | None = None, eps: torch.Tensor | None = None):
+        """(sampled action, its log-prob [B], mean action); `generator` keeps evaluation off the training RNG; `eps`:
+        the Gaussian noise, drawn beforehand."""
         mean, log_std = self(obs)
-        eps = torch.randn(mean.shape, generator=generator, device=mean.device)
+        eps = torch.randn(mean.shape, generator=generator, device=mean.device) if eps is None else eps
         x_t = mean + log_std.exp() * eps
         y_t = torch.tanh(x_t)
         log_prob = -0.5 * eps.pow(2) - log_std - 0.5 * math.log(2 * math.pi)

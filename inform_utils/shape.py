@@ -8,7 +8,9 @@ the table this prints.
 Counting: every line of the file (as `wc -l`); a section runs from a banner (a comment at column 0 that starts with
 `# ALGO LOGIC` or `# TRY NOT TO MODIFY`) to the next banner; lines before the first banner (docstring, imports, Args)
 belong to neither. A flag is a field of the script's `Args` dataclass (what `--help` lists); the longest function is
-measured from its `def` to its last line, nested functions inside it included.
+measured from its `def` to its last line, nested functions inside it included. "args enters" lists the functions
+outside `Args` that take a parameter named `args` (the flags as a whole), nested ones included; `Args`' own methods
+are the flags' and are not counted.
 """
 
 import ast
@@ -46,6 +48,15 @@ def measure(path: str) -> dict:
          if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)),
         reverse=True,
     )  # fmt: skip
+    args_class = [node for node in tree.body if isinstance(node, ast.ClassDef) and node.name == "Args"]
+    own = {id(node) for cls in args_class for node in ast.walk(cls)}
+    takes_args = sorted(
+        node.name
+        for node in ast.walk(tree)
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)
+        and id(node) not in own
+        and any(a.arg == "args" for a in node.args.posonlyargs + node.args.args + node.args.kwonlyargs)
+    )
     sections, current = [], None
     for number, line in enumerate(lines, 1):
         kind = (
@@ -63,12 +74,12 @@ def measure(path: str) -> dict:
     algo = sum(end - start + 1 for kind, start, end, _ in sections if kind == "algo")
     plumbing = sum(end - start + 1 for kind, start, end, _ in sections if kind == "plumbing")
     return {"lines": len(lines), "flags": flags, "functions": functions, "sections": sections, "algo": algo,
-            "plumbing": plumbing}  # fmt: skip
+            "plumbing": plumbing, "takes_args": takes_args}  # fmt: skip
 
 
 def main(args: Args) -> None:
-    rows = ["| file | lines | flags | ALGO LOGIC lines | plumbing lines | longest function |",
-            "| --- | --- | --- | --- | --- | --- |"]  # fmt: skip
+    rows = ["| file | lines | flags | ALGO LOGIC lines | plumbing lines | longest function | args enters |",
+            "| --- | --- | --- | --- | --- | --- | --- |"]  # fmt: skip
     details = []
     for name in args.files:
         path = os.path.join(REPO, name)
@@ -78,8 +89,9 @@ def main(args: Args) -> None:
         m = measure(path)
         length, fname, start, end = m["functions"][0] if m["functions"] else (0, "-", 0, 0)
         share = f"{m['algo']} ({100 * m['algo'] / m['lines']:.0f}%)"
+        enters = f"{len(m['takes_args'])}: " + ", ".join(f"`{f}`" for f in m["takes_args"]) if m["takes_args"] else "0"
         rows.append(f"| {name} | {m['lines']} | {m['flags']} | {share} | {m['plumbing']} | "
-                    f"`{fname}` {length} (lines {start}-{end}) |")  # fmt: skip
+                    f"`{fname}` {length} (lines {start}-{end}) | {enters} |")  # fmt: skip
         details.append(f"\n{name}:")
         details += [
             f"  {kind:8} lines {start}-{end} ({end - start + 1}): {title}" for kind, start, end, title in m["sections"]
