@@ -719,3 +719,51 @@ def test_oracle_train_signal_keeps_the_last_training_state(tmp_path, sig):
     assert len(stderr.strip().splitlines()) == 1 and "--resume" in stderr
     assert not (tmp_path / "oracle.pt").exists()
     assert torch.load(state, weights_only=True)["global_step"] >= 150
+
+
+@pytest.mark.parametrize("deterministic", [False, True], ids=["sampled", "deterministic"])
+def test_episodes_side_by_side_give_one_envs_numbers_bit_for_bit(deterministic):
+    """The final tests run episodes on copies of the env at once: every return, distance, observation and the
+    generator's state afterwards must be those of one env running the episodes in turn (7 episodes on 3 copies:
+    full batches and a short one; random starts, so each copy resets to a different state)."""
+    actor = isp.oracle_from_checkpoint(isp.read_checkpoint(SHIPPED, "test", "Pusher-v5"), torch.device("cpu"))[0]
+    runs = []
+    for envs in ([isp.make_env("Pusher-v5", 1)], [isp.make_env("Pusher-v5", 1) for _ in range(3)]):
+        generator = torch.Generator().manual_seed(3)
+        res = isp.evaluate(actor, envs if len(envs) > 1 else envs[0], 7, lambda ep: 100 + ep, deterministic,
+                           generator, isp.Outcome())  # fmt: skip
+        runs.append((res, generator.get_state()))
+    (one, after_one), (together, after_together) = runs
+    assert np.array_equal(one["returns"], together["returns"]) and np.array_equal(
+        one["distances"], together["distances"]
+    )
+    assert all(np.array_equal(a, b) for a, b in zip(one["trajectories"], together["trajectories"], strict=True))
+    assert torch.equal(after_one, after_together)
+    assert len(set(one["returns"].tolist())) == 7  # seven different episodes, not one repeated
+
+
+def test_episodes_that_end_early_run_one_at_a_time_with_the_same_numbers():
+    """An env whose episodes can end before the time limit (InvertedPendulum falls): the side-by-side run gives up and
+    the episodes run in turn, drawing the noise as one env does."""
+    env_id = "InvertedPendulum-v5"
+    env = isp.make_env(env_id, 1)
+    torch.manual_seed(0)
+    actor = isp.Actor(4, 1, 16, env.action_space.low, env.action_space.high)
+    outs = []
+    for envs in (env, [isp.make_env(env_id, 1) for _ in range(4)]):
+        generator = torch.Generator().manual_seed(5)
+        res = isp.evaluate(actor, envs, 6, lambda ep: ep, False, generator, isp.Outcome())
+        outs.append((res["returns"], generator.get_state()))
+    assert np.array_equal(outs[0][0], outs[1][0]) and torch.equal(outs[0][1], outs[1][1])
+    assert (outs[0][0] < 1000).all()  # the episodes did end early (the limit is 1,000 steps)
+
+
+def test_one_row_at_a_time_computes_each_row_as_a_batch_of_one():
+    torch.manual_seed(0)
+    actor = isp.Actor(23, 7)
+    obs, eps = torch.randn(50, 23) * 3, torch.randn(50, 7)
+    with torch.no_grad():
+        together = isp.one_row_at_a_time(actor).get_action(obs, eps=eps)
+        alone = [actor.get_action(obs[i : i + 1], eps=eps[i : i + 1]) for i in range(50)]
+    for k in (0, 2):  # the sampled and the mean action
+        assert torch.equal(together[k], torch.cat([a[k] for a in alone]))
