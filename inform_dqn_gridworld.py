@@ -1084,7 +1084,8 @@ def save_network(path: str, net: QNetwork, **extra) -> None:
 
 # Saved days (--save-buffer, --sleep-from): one forward phase, many nights
 DAY_FORMAT = "inform-day-1"
-# the flags that shape a day: a saved day records them, and a night on it (--sleep-from) takes them for its own
+# the flags that shape a day (a new one of the day's goes here): a saved day records them, and a night on it
+# (--sleep-from) takes them for its own
 DAY_ARGS = ("seed", "env_id", "oracle_path", "tamer_total_timesteps", "tamer_learning_starts", "tamer_batch_size",
             "tamer_h_lr", "start_e", "end_e", "feedback_alpha_start", "feedback_alpha_end", "success_max_steps",
             "teacher", "participant", "host", "teacher_noise", "teacher_sparsity", "teacher_delay", "credit_window",

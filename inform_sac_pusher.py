@@ -1493,7 +1493,8 @@ def oracle_checkpoint(actor: Actor, qf: QEnsemble, env_id: str, steps: int, seed
 
 # saved days (--save-buffer, --sleep-from): a day is deterministic, so it is saved once and slept on many times
 DAY_FORMAT = "inform-day-2"
-# the flags that shape a day: a saved day records them, and a night on it (--sleep-from) takes them for its own
+# the flags that shape a day (a new one of the day's goes here): a saved day records them, and a night on it
+# (--sleep-from) takes them for its own
 DAY_ARGS = ("seed", "env_id", "random_starts", "success_distance", "success_info_key", "success_return", "oracle_path",
             "train_oracle", "oracle_total_timesteps", "tamer_total_timesteps", "tamer_learning_starts",
             "tamer_batch_size", "tamer_h_lr", "feedback_alpha_start", "feedback_alpha_end", "teacher_noise",
