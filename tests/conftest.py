@@ -28,9 +28,11 @@ def run_script(tmp_path):
 
 
 def default_signals():
-    """In the child: SIGINT, SIGTERM and SIGHUP at their defaults, whatever the test runner inherited (e.g. trap ''
-    INT, or nohup)."""
-    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+    """In the child: every signal that stops a run at its default, whatever the test runner inherited (trap '' INT;
+    nohup; a shell's `&`, which ignores SIGINT and SIGQUIT, so that a suite run in the background sent its children
+    a SIGQUIT they ignored)."""
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT, signal.SIGXCPU, signal.SIGUSR1,
+                signal.SIGUSR2):  # fmt: skip
         signal.signal(sig, signal.SIG_DFL)
 
 
