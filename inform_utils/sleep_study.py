@@ -411,12 +411,32 @@ def table(args: Args) -> str:
     lines += ["", verdict(rows, ran, columns, spread, ("inform", "inform_selected") if study.pusher else ("inform",))]
     lines += ["", default_rule(args, rows, ran, noise)] if study.pusher else []
     lines += ["", method_rule(args, rows, [v for v in ran if v in METHODS])] if study.pusher else []
+    lines += ["", per_day(rows, ran)] if study.pusher else []
     for path in unfinished:  # kept for their curves, left out of the table: say so
         with open(os.path.join(path, "summary.json")) as f:
             summary = json.load(f)
         cause = summary.get("signal") or summary.get("error")
         why = f"{summary.get('status')} in its {summary.get('phase')} phase ({cause})"
         lines.append(f"\nnot in the table: {os.path.relpath(path, args.results_dir)}, {why}")
+    return "\n".join(lines)
+
+
+def per_day(rows: list[dict], variants: list[str]) -> str:
+    """Day by day (the day's seed): TAMER and each variant's last actor, over the variant's nights on the day: the mean
+    fixed-start return, the nights that end the fixed start in success, and the mean distance with the boxes."""
+    first, keys = first_nights(rows), ("eval/{p}_return", "eval/{p}_success_rate", "eval/obstacle/{p}_final_distance")
+
+    def cell(nights: list[dict], p: str) -> str:
+        if not nights:
+            return "-"
+        ret, ok, boxes = ([r[key.format(p=p)] for r in nights] for key in keys)
+        return f"{statistics.mean(ret):.2f} ({sum(v >= 1 for v in ok)}/{len(nights)}), {statistics.mean(boxes):.3f} m"
+
+    lines = ["per day: fixed-start return (nights that succeed at the fixed start), distance with the boxes"]
+    lines += table_head(["day (seed)", "tamer", *variants])
+    for day in sorted(first, key=lambda d: first[d]["seed"]):
+        cells = [cell([r for r in rows if r["day"] == day and r["variant"] == v], "inform") for v in variants]
+        lines.append(table_row([str(first[day]["seed"]), cell([first[day]], "tamer"), *cells]))
     return "\n".join(lines)
 
 

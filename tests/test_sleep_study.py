@@ -375,3 +375,18 @@ def test_the_rule_for_a_night_built_for_the_data_per_task_against_both_controls(
     without = ss.method_rule(args, rows, ["oril"])
     assert "(spread no tamer_streams.json) | open: TAMER's streams not run |" in without
     assert "no night of a method" in ss.method_rule(args, rows, [])
+
+
+def test_the_per_day_table_averages_a_variants_nights_and_counts_their_successes():
+    keys = ("eval/{p}_return", "eval/{p}_success_rate", "eval/obstacle/{p}_final_distance")
+
+    def row(day, seed, variant, values, sleep_seed=1):
+        r = {"day": day, "seed": seed, "variant": variant, "sleep_seed": sleep_seed}
+        r.update({key.format(p="inform"): value for key, value in zip(keys, values, strict=True)})
+        return {**r, **{key.format(p="tamer"): value for key, value in zip(keys, (-30.0, 0.0, 0.2), strict=True)}}
+
+    rows = [row("d7", 7, "default", (-40.0, 0.0, 0.3)), row("d7", 7, "bc", (-26.0, 1.0, 0.1)),
+            row("d7", 7, "bc", (-28.0, 0.0, 0.2), 2), row("d2", 2, "default", (-20.0, 1.0, 0.05))]  # fmt: skip
+    lines = ss.per_day(rows, ["default", "bc"]).splitlines()
+    assert lines[3] == "| 2 | -30.00 (0/1), 0.200 m | -20.00 (1/1), 0.050 m | - |"  # days by seed; no bc on day 2
+    assert lines[4] == "| 7 | -30.00 (0/1), 0.200 m | -40.00 (0/1), 0.300 m | -27.00 (1/2), 0.150 m |"
