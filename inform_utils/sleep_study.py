@@ -629,7 +629,6 @@ def method_rule(args: Args, rows: list[dict], methods: list[str]) -> str:
     task_of = lambda r: r.get("args", {}).get("env_id", "?")  # noqa: E731
     for task in sorted({task_of(r) for r in rows}):
         on_task = [r for r in rows if task_of(r) == task]
-        spread = return_spread(args, on_task)
         for method in methods:
             mine = day_means(on_task, method, OBSTACLE)
             controls = [day_means(on_task, control, OBSTACLE) for control in ("bc", "sham")]
@@ -637,6 +636,7 @@ def method_rule(args: Args, rows: list[dict], methods: list[str]) -> str:
             if not days:
                 continue
             tests = [versus(mine, theirs, days) for theirs in controls]
+            spread = return_spread(args, [r for r in on_task if r["day"] in days])  # over the rule's days only
             ret, tamer = day_means(on_task, method, SAMPLED), day_means(on_task, method, SAMPLED, "tamer")
             gap = statistics.mean(ret[d] - tamer[d] for d in days)
             spread_text = "no tamer_streams.json" if spread is None else f"{spread:.2f}"

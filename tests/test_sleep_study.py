@@ -361,6 +361,8 @@ def test_the_rule_for_a_night_built_for_the_data_per_task_against_both_controls(
         write_streams(tmp_path, f"v5d{day}", [-40.0])
         for variant in ("bc", "sham", "dwbc"):
             rows.append(method_night("Pusher-v5", f"v5d{day}", variant, 1, 0.3, -40.0, -40.0))
+    for variant in ("bc", "sham"):  # a day of the controls alone, without TAMER's streams: not one of the rule's days
+        rows.append(method_night("Pusher-v4", "d9", variant, 1, 0.5, -50.0, -30.0))
     args = ss.Args(results_dir=str(tmp_path), campaign="c")
     text = ss.method_rule(args, rows, ["dwbc", "oril", "x"])
     table = {tuple(c.strip() for c in line.strip("| ").split(" | ")[:2]): line.strip("| ").split(" | ")
