@@ -207,6 +207,10 @@ class Args:
     authors_test_episodes: Annotated[int, In(0)] = 100
     """episodes of the authors' test: sampled actions from the run's initial state (eval/authors_test/...)"""
 
+    def outcome(self) -> "Outcome":
+        """How this run judges an episode (--success-info-key, --success-distance, --success-return)."""
+        return Outcome(self.success_info_key, self.success_distance, self.success_return)
+
     def sleep_recipe(self) -> dict:
         """The night's settings that --sleep-protocol presets: the protocol's, under whatever the command set (a field
         that is not None; the study module's Args has more of them)."""
@@ -1171,7 +1175,7 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, make_teacher=No
         writer = SummaryWriter(run_dir)
         table = "\n".join(f"|{k}|{v}|" for k, v in vars(args).items())
         writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + table)
-        outcome = Outcome(args.success_info_key, args.success_distance, args.success_return)  # how episodes are judged
+        outcome = args.outcome()
         env = make_env(args.env_id, args.seed)
         evaluator = Evaluator(args.env_id, args.seed, args.random_starts, outcome, writer)
         obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))

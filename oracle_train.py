@@ -196,6 +196,10 @@ class Args:
     maze_dqn_exploration_fraction: Annotated[float, POSITIVE] = 0.5
     """fraction of --maze-dqn-timesteps over which epsilon decays from start to end"""
 
+    def outcome(self) -> "Outcome":
+        """How this run judges an episode (--success-info-key, --success-distance, --success-return)."""
+        return Outcome(self.success_info_key, self.success_distance, self.success_return)
+
 
 def make_env(env_id: str, seed: int, reward_dist_weight: float | None = None) -> gym.Env:
     env = gym.make(env_id, **env_kwargs(reward_dist_weight))
@@ -484,8 +488,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     def save_oracle(step: int, evaluation: dict, path: str) -> None:
         atomic_save(oracle_checkpoint(sac, args, step, evaluation), path)
 
-    # judged on the env's own reward: info["reward_dist"] is weighted
-    outcome = Outcome(args.success_info_key, args.success_distance, args.success_return)
+    outcome = args.outcome()  # judged on the env's own reward: info["reward_dist"] is weighted
     selection = Selection(run_dir, outcome)
     obs, _ = env.reset(seed=args.seed + start_step)  # random starts: seed once, then the env RNG runs on
     obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
@@ -554,7 +557,7 @@ def write_oracle(
     sac.actor.load_state_dict(best["actor_state_dict"])
     sac.qf.load_state_dict(best["qf_state_dict"])
     final = evaluate(sac.actor, gym.make(args.env_id), args.final_eval_episodes, FINAL_EVAL_SEED, device,
-                     Outcome(args.success_info_key, args.success_distance, args.success_return))  # fmt: skip
+                     args.outcome())  # fmt: skip
     chosen = best["evaluation"]
     print(f"[oracle] best evaluation at step {best['training_steps']}: success rate {chosen['success_rate']:.2f}, "
           f"final distance {chosen['final_distance']:.4f} over {chosen['episodes']:.0f} episodes; held-out eval over "
@@ -1050,8 +1053,7 @@ def record_teacher(args: Args, actor: Actor, run_dir: str, device: torch.device)
     evaluation (the held-out one's on its first episodes) in videos/videos.json."""
     os.makedirs(os.path.join(run_dir, "videos"), exist_ok=True)
     env, t0 = video_env(args.env_id), time.time()
-    outcome = Outcome(args.success_info_key, args.success_distance, args.success_return)
-    evaluation = evaluate(actor, env, VIDEO_EPISODES, FINAL_EVAL_SEED, device, outcome)
+    evaluation = evaluate(actor, env, VIDEO_EPISODES, FINAL_EVAL_SEED, device, args.outcome())
     frames = env.render()
     write_video(path := os.path.join(run_dir, "videos", "oracle.mp4"), frames, env.metadata["render_fps"])
     record = {"file": "oracle.mp4", "size": list(frames[0].shape), "frames": len(frames), "evaluation": evaluation}

@@ -155,8 +155,7 @@ def outcome(run_dir: str, args: Args, summary: dict) -> tuple[str, list]:
     for p in ("tamer", "inform"):
         actor = isp.actor_from_checkpoint(torch.load(f"{run_dir}/{p}_actor.pt", weights_only=True))
         env = gym.wrappers.RenderCollection(camera_env(args.env_id, OUTCOME_SIZE))
-        outcome = isp.Outcome(args.success_info_key, args.success_distance, args.success_return)
-        isp.evaluate(actor, env, 1, lambda ep: args.seed, True, torch.Generator(), outcome)
+        isp.evaluate(actor, env, 1, lambda ep: args.seed, True, torch.Generator(), args.outcome())
         films.append(env.render()[::2])  # every second frame: 10 a second at 20 steps a second
         env.close()
     n = min(map(len, films))

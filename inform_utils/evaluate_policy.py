@@ -99,7 +99,7 @@ def evaluate_pusher(args: Pusher) -> dict:
     torch.manual_seed(run.seed)
     torch.set_num_threads(run.num_threads)
     actor = isp.actor_from_checkpoint(isp.read_checkpoint(args.policy, "policy", run.env_id))
-    outcome = isp.Outcome(run.success_info_key, run.success_distance, run.success_return)
+    outcome = run.outcome()
     evaluator = isp.Evaluator(run.env_id, run.seed, run.random_starts, outcome, writer=None)
     if args.stream:
         if args.stream < 0:
