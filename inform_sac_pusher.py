@@ -754,7 +754,8 @@ def evaluate(actor: Actor, env, episodes: int, reset_seed, deterministic: bool, 
     per-episode data, each episode's observations included. On the CPU, as the env and `generator` are: a GPU actor
     is copied there."""
     envs, actor = env if isinstance(env, list) else [env], on_cpu(actor)
-    rows, stream = one_row_at_a_time(actor) if len(envs) > 1 else actor, generator or torch.default_generator
+    rows = one_row_at_a_time(actor) if min(len(envs), episodes) > 1 else actor  # a batch of episodes will run
+    stream = generator or torch.default_generator
     returns, distances, successes, trajectories = [], [], [], []
     for first in range(0, episodes, len(envs)):
         seeds, state = [reset_seed(ep) for ep in range(first, min(first + len(envs), episodes))], stream.get_state()
@@ -774,7 +775,6 @@ def evaluate(actor: Actor, env, episodes: int, reset_seed, deterministic: bool, 
     return {**res, "distances": distances, "returns": np.asarray(returns), "trajectories": trajectories}
 
 
-@torch.no_grad()
 def one_episode(actor: Actor, env: gym.Env, seed: int | None, deterministic: bool, generator) -> tuple:
     """(return, last info, observations) of one episode from env.reset(seed=seed)."""
     StopSignals.check()
@@ -788,7 +788,6 @@ def one_episode(actor: Actor, env: gym.Env, seed: int | None, deterministic: boo
     return ep_return, info, np.array(trajectory)
 
 
-@torch.no_grad()
 def side_by_side(rows: Actor, envs: list, seeds: list, deterministic: bool, generator) -> list | None:
     """one_episode's results for `seeds` at once, on copies of one env: one batched action a step from `rows`
     (one_row_at_a_time), the noise of the sampled actions drawn beforehand in the order one env running the episodes
@@ -828,6 +827,11 @@ class OneRow(nn.Module):
         return torch.baddbmm(bias.expand(n, 1, -1), x.unsqueeze(1), weight.t().expand(n, -1, -1)).squeeze(1)
 
 
+def env_copies(env_id: str, seed: int, episodes: int, obstacles=None) -> list[gym.Env]:
+    """Copies of one env, as many as `episodes` can use at once (evaluate runs them side by side)."""
+    return [make_env(env_id, seed, obstacles) for _ in range(max(1, min(episodes, SIDE_BY_SIDE)))]
+
+
 def one_row_at_a_time(actor: Actor) -> Actor:
     """A copy of `actor` whose layers are OneRow."""
     rows = copy.deepcopy(actor)
@@ -841,7 +845,7 @@ class Evaluator:
     Episodes start from the run's seed (fixed start) or from fresh seeds (`--random-starts`), the same each time."""
 
     def __init__(self, env_id: str, seed: int, random_starts: bool, outcome: Outcome, writer: SummaryWriter | None):
-        self.envs = [make_env(env_id, seed) for _ in range(SIDE_BY_SIDE)]
+        self.envs = env_copies(env_id, seed, SIDE_BY_SIDE)
         self.writer, self.seed, self.random_starts = writer, seed, random_starts
         self.generator = torch.Generator().manual_seed(seed + 12345)  # sampled actions, off the training RNG
         self.outcome = outcome
@@ -888,7 +892,7 @@ def final_evaluation(buffer, q_net, policies: dict, evaluator, writer, run_dir: 
         np.savez(f"{run_dir}/obstacle_paths.npz", **paths)
         boxes = paths["boxes"]
     if authors_test_episodes > 0:  # the authors' test: sampled actions, every episode from the run's start
-        envs = [make_env(env_id, seed) for _ in range(SIDE_BY_SIDE)]
+        envs = env_copies(env_id, seed, authors_test_episodes)
         for name, actor in policies.items():
             res = evaluate(actor, envs, authors_test_episodes, lambda ep: seed, False, evaluator.generator, outcome)
             results.update(
@@ -1054,7 +1058,7 @@ def obstacle_test(env_id, seed, layout, episodes, outcome, policies: dict, gener
     results = {"obstacle/box_positions": boxes.round(4).tolist()}
     results["obstacle/min_box_distance_to_path"] = min(distance_to_segment(b, start, goal) for b in boxes)
     distances, paths = {}, {"boxes": boxes, "start": start, "goal": goal}
-    envs = [make_env(env_id, seed, obstacles=boxes) for _ in range(SIDE_BY_SIDE)]
+    envs = env_copies(env_id, seed, episodes, obstacles=boxes)
     plain, at_start = make_env(env_id, seed), lambda episode: seed
     for name, actor in policies.items():
         res = evaluate(actor, envs, episodes, at_start, False, generator, outcome)
@@ -1175,8 +1179,7 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, make_teacher=No
         writer = SummaryWriter(run_dir)
         table = "\n".join(f"|{k}|{v}|" for k, v in vars(args).items())
         writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + table)
-        outcome = args.outcome()
-        env = make_env(args.env_id, args.seed)
+        env, outcome = make_env(args.env_id, args.seed), args.outcome()  # how episodes are judged
         evaluator = Evaluator(args.env_id, args.seed, args.random_starts, outcome, writer)
         obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
 
@@ -1190,8 +1193,9 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, make_teacher=No
             oracle_actor, oracle_qf, summary["sps/oracle"] = train_oracle(
                 args.env_id, args.seed, args.oracle_total_timesteps, outcome, writer, device
             )
-            ckpt = oracle_checkpoint(oracle_actor, oracle_qf, args.env_id, args.oracle_total_timesteps, args.seed)
-            save_atomic(ckpt, f"{run_dir}/oracle.pt")
+            oracle_ckpt = oracle_checkpoint(oracle_actor, oracle_qf, args.env_id, args.oracle_total_timesteps,
+                                            args.seed)  # fmt: skip
+            save_atomic(oracle_ckpt, f"{run_dir}/oracle.pt")  # and the saved day's teacher
         oracle_actor.requires_grad_(False)
         oracle_qf.requires_grad_(False)
         summary["time/oracle_s"] = time.time() - t0
@@ -1201,11 +1205,9 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, make_teacher=No
         phase, t0 = "tamer", time.time() - evaluator.seconds  # the phase's clock stops during its evaluations
         buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, act_dim, device)
         if day is None:
-            if make_teacher is not None:  # a person
-                teacher = make_teacher(args, env, run_dir)
-            else:  # the simulated person: Eq. 4's answers, made noisy, sparse, late or limited by the flags
-                teacher = Teacher(args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window,
-                                  args.feedback_budget, seed=args.seed + 7919)  # fmt: skip
+            teacher = make_teacher(args, env, run_dir) if make_teacher is not None else Teacher(  # a person, or Eq. 4
+                args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window, args.feedback_budget,
+                seed=args.seed + 7919)  # fmt: skip
             h_net, tamer_actor, stats = forward_phase(
                 env, oracle_actor, oracle_qf, teacher, outcome, buffer, evaluator, writer, device, seed=args.seed,
                 random_starts=args.random_starts, total_timesteps=args.tamer_total_timesteps,
@@ -1222,10 +1224,9 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, make_teacher=No
         save_critic(f"{run_dir}/tamer_h.pt", h_net, obs_dim, act_dim, env_id=args.env_id)
         if args.save_buffer:
             day_stats = {**stats, "time/tamer_s": summary["time/tamer_s"], "sps/tamer": summary["sps/tamer"]}
-            ckpt = oracle_ckpt or oracle_checkpoint(oracle_actor, oracle_qf, args.env_id, args.oracle_total_timesteps,
-                                                    args.seed)  # fmt: skip
             day_args = {k: getattr(args, k) for k in DAY_ARGS}
-            save_day(f"{run_dir}/day.pt", day_args, buffer, ckpt, h_net, tamer_actor, day_stats, evaluator.generator)
+            save_day(f"{run_dir}/day.pt", day_args, buffer, oracle_ckpt, h_net, tamer_actor, day_stats,
+                     evaluator.generator)  # fmt: skip
 
         # ---- sleep phase ("night"): offline IQ-Learn on the buffer, no environment steps
         phase, t0 = "sleep", time.time() - evaluator.seconds
