@@ -144,7 +144,8 @@ class Args:
     variants: list[str] | None = None
     """the variants to run, in this order (names of the script's variants; None: all)"""
     sleep_seeds: list[int] = field(default_factory=lambda: [1, 2])
-    """the sleep seeds of the default, the controls (and the authors' protocol); the other variants use the first"""
+    """the sleep seeds of the default and the controls (on the Pusher also of the methods, dwbc and oril, and of the
+    authors' protocol); the other variants use the first"""
     random_start_episodes: int = 50
     """episodes of the random-start test of each night's policies"""
     table: bool = False
