@@ -628,6 +628,7 @@ def method_rule(args: Args, rows: list[dict], methods: list[str]) -> str:
     head = ["task", "method", "days", "with the boxes vs bc", "vs sham", "plain task vs TAMER", "consolidates?"]
     lines += table_head(head)
     task_of = lambda r: r.get("args", {}).get("env_id", "?")  # noqa: E731
+    rule_days = {}  # task: the days every method shares with both controls
     for task in sorted({task_of(r) for r in rows}):
         on_task = [r for r in rows if task_of(r) == task]
         for method in methods:
@@ -646,7 +647,34 @@ def method_rule(args: Args, rows: list[dict], methods: list[str]) -> str:
             answer = answer if len(days) >= METHOD_DAYS else f"open: {len(days)} of {METHOD_DAYS} days"
             answer = answer if spread is not None else "open: TAMER's streams not run"
             lines.append(table_row([task, method, str(len(days)), *(text for text, _ in tests), answer]))
+            rule_days[task] = rule_days.get(task, set(days)) & set(days)
+    for task, days in sorted(rule_days.items()):
+        on_days = [r for r in rows if task_of(r) == task and r["day"] in days]
+        lines += ["", f"{task}, the means over the {len(days)} days the methods and both controls share:", ""]
+        lines += rule_means(on_days, [*methods, "bc", "sham", "default"])
     return "\n".join(lines)
+
+
+def rule_means(rows: list[dict], variants: list[str]) -> list[str]:
+    """One row a policy on these rows' days: the mean over the days of its day means (day_means()) on the fixed start,
+    with the boxes and in the plain task's sampled test, and how many of its nights (TAMER: of the days) end the
+    fixed start in success. A variant that did not run on every day is left out."""
+    days, measures = {r["day"] for r in rows}, ("eval/{p}_return", OBSTACLE, SAMPLED)
+    lines = table_head(["policy", "fixed-start return", "fixed-start successes", "with the boxes", "sampled return"])
+    for variant in ("tamer", *variants):
+        if variant == "tamer":
+            nights, p = list(first_nights(rows).values()), "tamer"
+        else:
+            nights, p = [r for r in rows if r["variant"] == variant], "inform"
+        means = [day_means(rows, variant, key) for key in measures]
+        if {r["day"] for r in nights} != days or any(set(m) != days for m in means):
+            continue
+        ret, boxes, sampled = (statistics.mean(m.values()) for m in means)
+        ok = sum(r[f"eval/{p}_success_rate"] >= 1 for r in nights)
+        what = "days" if variant == "tamer" else "nights"
+        cells = [f"{ret:.2f}", f"{ok} of {len(nights)} {what}", f"{boxes:.3f} m", f"{sampled:.2f}"]
+        lines.append(table_row([variant, *cells]))
+    return lines
 
 
 if __name__ == "__main__":

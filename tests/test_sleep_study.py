@@ -373,10 +373,32 @@ def test_the_rule_for_a_night_built_for_the_data_per_task_against_both_controls(
     assert oril[5] == "-0.50 (spread 1.00)" and oril[6] == "yes"
     assert table[("Pusher-v4", "x")][5:] == ["-1.50 (spread 1.00)", "no"]  # as oril with the boxes; loses the task
     assert v5[2] == "2" and v5[6] == "open: 2 of 5 days"
+    assert "Pusher-v4, the means over the 5 days" in text and "Pusher-v5, the means over the 2 days" in text
     os.remove(tmp_path / "c" / "d3" / "tamer_streams.json")
     without = ss.method_rule(args, rows, ["oril"])
     assert "(spread no tamer_streams.json) | open: TAMER's streams not run |" in without
     assert "no night of a method" in ss.method_rule(args, rows, [])
+
+
+def test_the_rules_means_average_the_day_means_and_count_the_nights_that_succeed():
+    """TAMER on d1: -30, a success, 0.20 m, -31 sampled; on d2: -40, no success, 0.30 m, -41. dwbc's nights on d1:
+    (-20, success, 0.10 m, -21) and (-22, none, 0.12 m, -23); on d2 one night: (-24, success, 0.14 m, -25). Day means
+    -21 and -24, so -22.50 (the nights' mean would be -22.00); 0.11 and 0.14, so 0.125 m; -22 and -25, so -23.50; 2
+    of 3 nights. bc ran on d1 alone: left out."""
+    keys = ("eval/{p}_return", "eval/{p}_success_rate", "eval/obstacle/{p}_final_distance", "eval/{p}_return_sampled")
+    tamer = {"d1": (-30.0, 1.0, 0.20, -31.0), "d2": (-40.0, 0.0, 0.30, -41.0)}
+
+    def row(day, variant, seed, values):
+        r = {"day": day, "variant": variant, "sleep_seed": seed}
+        r.update({key.format(p="tamer"): value for key, value in zip(keys, tamer[day], strict=True)})
+        return {**r, **{key.format(p="inform"): value for key, value in zip(keys, values, strict=True)}}
+
+    rows = [row("d1", "dwbc", 1, (-20.0, 1.0, 0.10, -21.0)), row("d1", "dwbc", 2, (-22.0, 0.0, 0.12, -23.0)),
+            row("d2", "dwbc", 1, (-24.0, 1.0, 0.14, -25.0)),
+            row("d1", "bc", 1, (-10.0, 1.0, 0.05, -11.0))]  # fmt: skip
+    lines = ss.rule_means(rows, ["dwbc", "bc"])
+    assert lines[2:] == ["| tamer | -35.00 | 1 of 2 days | 0.250 m | -36.00 |",
+                         "| dwbc | -22.50 | 2 of 3 nights | 0.125 m | -23.50 |"]  # fmt: skip
 
 
 def test_the_per_day_table_averages_a_variants_nights_and_counts_their_successes():
