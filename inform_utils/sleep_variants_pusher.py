@@ -73,8 +73,9 @@ class Args(core.Args):
     sleep_twin_critics: bool = False
     """two soft Q networks, each trained on Eq. 2, their minimum in V(s) and in the actor's objective"""
     sleep_bc_coef: Annotated[float, core.In(0)] = 0.0
-    """a behaviour-cloning term on the INFORM actor, TD3+BC style: the Q objective divided by mean |Q|, plus this
-    weight times the squared error of the mean action on the expert rows; 0 turns it off"""
+    """a behaviour-cloning term on the INFORM actor, TD3+BC style: the Q objective divided by mean |Q| at the batch's
+    own actions (TD3+BC takes it at the policy's), plus this weight times the squared error of the mean action on the
+    expert rows; 0 turns it off"""
     sleep_holdout_fraction: Annotated[float, core.In(0, 1)] = 0.0
     """hold this fraction of the day's episodes out of the sleep (split by episode, fixed by the seed) and log the
     offline criterion on them every 1,000 steps; the checkpoint it picks is kept and tested as `inform_selected`"""
