@@ -109,13 +109,14 @@ class In:
 
 
 COUNT, SEED, UNIT, RATE, WEIGHT = In(1), In(0, 2**32), In(0, 1, "[]"), In(0, ends="()"), In(0)
+DAY = "day"  # in a flag's Annotated type: the flag shapes the day (Args.day_settings: a saved day keeps it)
 
 
 @dataclass
 class Args:
     exp_name: str = os.path.basename(__file__)[: -len(".py")]
     """the name of this experiment (one plain directory name: runs/{env_id}__{exp_name}__{seed}__{time})"""
-    seed: Annotated[int, SEED] = 1
+    seed: Annotated[int, SEED, DAY] = 1
     """seed of the experiment (also the reset seed of every episode under the fixed-start protocol)"""
     num_threads: Annotated[int, COUNT] = 1
     """torch CPU threads (these small networks are fastest on one)"""
@@ -125,51 +126,51 @@ class Args:
     """film the final deterministic episodes, plain and with the boxes, into runs/{run}/videos/ (headless MUJOCO_GL)"""
     track: bool = False
     """mirror the TensorBoard events to Weights & Biases (`pip install wandb`; WANDB_PROJECT, WANDB_MODE=offline)"""
-    env_id: str = "Pusher-v5"
+    env_id: Annotated[str, DAY] = "Pusher-v5"
     """Pusher-v5 (current MuJoCo), Pusher-v4 (the paper's; needs mujoco<3), or any continuous-action Gymnasium env"""
-    random_starts: bool = False
+    random_starts: Annotated[bool, DAY] = False
     """random initial states (the standard task) instead of the paper's fixed start (reset with the run's seed)"""
-    success_distance: Annotated[float, RATE] = 0.08
+    success_distance: Annotated[float, RATE, DAY] = 0.08
     """an episode is a success if its final distance |info[success_info_key]| (Pusher: object to goal) is below this"""
-    success_info_key: str = "reward_dist"
+    success_info_key: Annotated[str, DAY] = "reward_dist"
     """the `info` entry whose absolute value at an episode's end is its final distance (else --success-return)"""
-    success_return: Annotated[float | None, In(-math.inf, math.inf, "()")] = None
+    success_return: Annotated[float | None, In(-math.inf, math.inf, "()"), DAY] = None
     """if set, an episode is a success if its return is at least this (the final distance is then only reported)"""
 
     # Oracle (the simulated teacher): a SAC agent trained on the environment reward
-    oracle_path: str | None = None
+    oracle_path: Annotated[str | None, DAY] = None
     """oracle checkpoint from oracle_train.py; default: the shipped oracles/{env_id}__sac_oracle.pt if present"""
-    train_oracle: bool = False
+    train_oracle: Annotated[bool, DAY] = False
     """train the SAC oracle here on the environment reward (also what happens when no checkpoint is found)"""
-    oracle_total_timesteps: Annotated[int, In(ORACLE_SAC["learning_starts"] + 1)] = 200000
+    oracle_total_timesteps: Annotated[int, In(ORACLE_SAC["learning_starts"] + 1), DAY] = 200000
     """environment steps of the in-script SAC oracle (from random starts; the first 5,000 random actions)"""
 
     # Forward phase: TAMER (Eq. 1) with simulated feedback (Eq. 4)
-    tamer_total_timesteps: Annotated[int, COUNT] = 200000
+    tamer_total_timesteps: Annotated[int, COUNT, DAY] = 200000
     """environment steps of the forward phase (each gets one feedback signal); 200k is the authors' budget"""
-    tamer_learning_starts: Annotated[int, COUNT] = 5000
+    tamer_learning_starts: Annotated[int, COUNT, DAY] = 5000
     """random-action steps before H and the actor are trained"""
-    tamer_batch_size: Annotated[int, COUNT] = 256
+    tamer_batch_size: Annotated[int, COUNT, DAY] = 256
     """batch size of the H regression and the actor update"""
-    tamer_h_lr: Annotated[float, RATE] = 1e-3
+    tamer_h_lr: Annotated[float, RATE, DAY] = 1e-3
     """learning rate of the twin feedback models H (and of TAMER's entropy coefficient)"""
-    feedback_alpha_start: Annotated[float, UNIT] = 0.99
+    feedback_alpha_start: Annotated[float, UNIT, DAY] = 0.99
     """alpha of Eq. 4 at the start of the forward phase (1 = only the oracle's action earns +1)"""
-    feedback_alpha_end: Annotated[float, UNIT] = 0.992
+    feedback_alpha_end: Annotated[float, UNIT, DAY] = 0.992
     """alpha of Eq. 4 at the end of the forward phase (alpha rises linearly: the teacher gets stricter)"""
 
     # The teacher as a person (docs/protocol.md); the defaults are the paper's perfect, instant, tireless teacher
-    teacher_noise: Annotated[float, UNIT] = 0.0
+    teacher_noise: Annotated[float, UNIT, DAY] = 0.0
     """probability that the teacher's judgement is flipped (+1 <-> no feedback)"""
-    teacher_sparsity: Annotated[float, UNIT] = 1.0
+    teacher_sparsity: Annotated[float, UNIT, DAY] = 1.0
     """probability that a +1 judgement is actually given (otherwise no feedback)"""
-    teacher_delay: Annotated[int, In(0)] = 0
+    teacher_delay: Annotated[int, In(0), DAY] = 0
     """env steps between a transition and the arrival of its signal (which labels the later transition)"""
-    credit_window: Annotated[int, COUNT] = 1
+    credit_window: Annotated[int, COUNT, DAY] = 1
     """each arriving signal labels this many most recent transitions (teacher_delay + 1 covers the right one)"""
-    feedback_budget: Annotated[int | None, COUNT] = None
+    feedback_budget: Annotated[int | None, COUNT, DAY] = None
     """the teacher leaves after this many +1 signals (None: never); then TAMER stops learning"""
-    budget_ends_forward_phase: bool = False
+    budget_ends_forward_phase: Annotated[bool, DAY] = False
     """when the budget is spent, end the forward phase and sleep (otherwise keep acting, without feedback)"""
 
     # Sleep phase: offline IQ-Learn (Eq. 2), no environment steps
@@ -210,6 +211,12 @@ class Args:
     def outcome(self) -> "Outcome":
         """How this run judges an episode (--success-info-key, --success-distance, --success-return)."""
         return Outcome(self.success_info_key, self.success_distance, self.success_return)
+
+    def day_settings(self) -> dict:
+        """What the day runs with: every flag marked DAY (a subclass's too), kept whole by a saved day."""
+        hints = typing.get_type_hints(type(self), include_extras=True)
+        marked = [f.name for f in fields(self) if DAY in getattr(hints[f.name], "__metadata__", ())]
+        return {name: getattr(self, name) for name in marked}
 
     def sleep_recipe(self) -> dict:
         """The night's settings that --sleep-protocol presets: the protocol's, under whatever the command set (a field
@@ -384,11 +391,13 @@ def oracle_q(oracle_actor: Actor, oracle_qf: QEnsemble, obs: torch.Tensor, actio
 class Teacher:
     """A simulated person between Eq. 4 and the learner: noisy, sparse, late and limited (paper Sec. VII's future work).
 
-    Each call hands over the perfect answer h* (0 or 1) about the transition at buffer index `step` and returns the
-    labels that arrive now, {buffer index: h}. The judgement is flipped with probability `noise`; a +1 is clicked only
-    with probability `sparsity`; a click about step t arrives at step t + `delay` and labels that transition and the
-    `credit_window` - 1 before it (Deep TAMER's remedy). The teacher leaves after `budget` +1 signals (None: never).
-    Its own generator: the defaults (0, 1, 0, 1, None) are the perfect teacher and leave every other stream untouched.
+    Each call hands over the perfect answer h* about the transition at buffer index `step` (Eq. 4's 0 or 1, or any
+    value of another teacher) and returns the labels that arrive now, {buffer index: h}, each the answer as given (0:
+    no feedback, no label). The judgement is flipped with probability `noise` (1 - h for Eq. 4's 0 and 1, -h for any
+    other answer); an answer is clicked only with probability `sparsity`; a click about step t arrives at step t +
+    `delay` and labels that transition and the `credit_window` - 1 before it (Deep TAMER's remedy). The teacher leaves
+    after `budget` positive signals (None: never). Its own generator: the defaults (0, 1, 0, 1, None) are the perfect
+    teacher and leave every other stream untouched.
     """
 
     def __init__(self, noise=0.0, sparsity=1.0, delay=0, credit_window=1, budget=None, seed=0):
@@ -405,16 +414,16 @@ class Teacher:
     def __call__(self, step: int, h_star: float, action=None) -> dict[int, float]:  # the action: for a person's eyes
         self.perfect_positives += int(h_star > 0)
         flip, click = self.rng.random(2)  # always two draws: the stream does not depend on the answers
-        h = 1.0 - h_star if flip < self.noise else h_star
+        h = (1.0 - h_star if h_star in (0, 1) else -h_star) if flip < self.noise else h_star
         h = h if click < self.sparsity else 0.0
         self.in_flight.append(h)
         if len(self.in_flight) <= self.delay:
             return {}
         h = self.in_flight.popleft()
-        if h <= 0 or self.gone:
+        if h == 0 or self.gone:
             return {}
-        self.positives += 1
-        return dict.fromkeys(range(max(0, step - self.credit_window + 1), step + 1), 1.0)
+        self.positives += int(h > 0)
+        return dict.fromkeys(range(max(0, step - self.credit_window + 1), step + 1), h)
 
 
 def tamer_loss(h_net: QEnsemble, obs: torch.Tensor, actions: torch.Tensor, feedback: torch.Tensor) -> torch.Tensor:
@@ -523,40 +532,91 @@ class ReplayBuffer:
 # ALGO LOGIC: the phases of Algorithm 1
 
 
-def forward_phase(env, oracle_actor, oracle_qf, teacher, outcome, buffer, evaluator, writer, device, *, seed: int,
-                  random_starts: bool, total_timesteps: int, learning_starts: int, batch_size: int, h_lr: float,
-                  alpha_start: float, alpha_end: float, budget_ends: bool):  # fmt: skip
-    """The day: SAC-style TAMER (Eq. 1, gamma = 0) on the teacher's yes/no feedback (Eq. 4), all remembered. The
-    teacher: the simulated person (Teacher), or one with its interface (a person at a web page); `budget_ends`: the
-    day ends when the teacher's budget is spent."""
-    obs_dim, act_dim, n = buffer.obs.shape[1], buffer.actions.shape[1], total_timesteps
-    h_net = QEnsemble(obs_dim, act_dim, HIDDEN_SIZE, n=2).to(device)
-    tamer_actor = Actor(obs_dim, act_dim, HIDDEN_SIZE, env.action_space.low, env.action_space.high).to(device)
-    h_optimizer = torch.optim.Adam(h_net.parameters(), lr=h_lr, foreach=True)
-    actor_optimizer = torch.optim.Adam(tamer_actor.parameters(), lr=TAMER_POLICY_LR, foreach=True)
-    log_ent_coef = torch.zeros(1, device=device, requires_grad=True)  # the actor's entropy coefficient, autotuned
-    ent_coef_optimizer = torch.optim.Adam([log_ent_coef], lr=h_lr, foreach=True)
-    print(f"[tamer] {n} env steps, feedback alpha {alpha_start} -> {alpha_end}", flush=True)
-    progress = Progress("tamer", n, warmup=learning_starts, evaluator=evaluator)
-    obs, _ = env.reset(seed=seed)
+class Day:
+    """The day's learner and what made it, as `Night` is the night's: TAMER's twin feedback models H (Eq. 1, gamma =
+    0), its actor trained SAC-style on H, their optimisers, and `settings`: every flag marked DAY in Args, which a
+    saved day keeps whole (a night on the day records them, and takes those this script knows for its own flags).
+    Where a change to the day goes:
+    - a new day flag: a field of Args marked DAY, read here from `settings`;
+    - `answer`: the perfect teacher's h* about (s, a), Eq. 4's 0 or 1; the teacher passes any sign and size to H;
+    - `h_kwargs`, `actor_kwargs`: what H and the actor are built from; a saved day keeps them and is rebuilt from them;
+    - `update`: TAMER's update (Eq. 1, then the actor on H); `teacher`: the simulated person (Teacher)."""
+
+    def __init__(self, settings: dict, device, space: gym.spaces.Box | None = None, obs_dim=0, saved=None):
+        """A new day for actions in `space` and `obs_dim`-d observations, or a saved day's learner (`saved`: the
+        day's tamer_h and tamer_actor, each its constructor arguments and state_dict)."""
+        self.settings, s = settings, settings
+        if saved is None:
+            shapes = {"obs_dim": obs_dim, "act_dim": space.shape[0], "hidden": HIDDEN_SIZE}
+            bounds = {"action_low": torch.as_tensor(space.low), "action_high": torch.as_tensor(space.high)}
+            self.h_kwargs, self.actor_kwargs = {**shapes, "n": 2}, {**shapes, **bounds}
+        else:  # as that day built them
+            self.h_kwargs, self.actor_kwargs = saved["tamer_h"]["kwargs"], saved["tamer_actor"]["kwargs"]
+        self.h_net = QEnsemble(**self.h_kwargs).to(device)
+        self.actor = Actor(**self.actor_kwargs).to(device)
+        if saved is not None:
+            self.h_net.load_state_dict(saved["tamer_h"]["state_dict"])
+            self.actor.load_state_dict(saved["tamer_actor"]["state_dict"])
+        self.h_optimizer = torch.optim.Adam(self.h_net.parameters(), lr=s["tamer_h_lr"], foreach=True)
+        self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=TAMER_POLICY_LR, foreach=True)
+        self.log_ent_coef = torch.zeros(1, device=device, requires_grad=True)  # the actor's entropy coefficient
+        self.ent_coef_optimizer = torch.optim.Adam([self.log_ent_coef], lr=s["tamer_h_lr"], foreach=True)
+
+    def teacher(self) -> Teacher:  # the simulated person, on a random stream of its own
+        s = self.settings
+        return Teacher(s["teacher_noise"], s["teacher_sparsity"], s["teacher_delay"], s["credit_window"],
+                       s["feedback_budget"], seed=s["seed"] + 7919)  # fmt: skip
+
+    def alpha(self, step: int) -> float:  # Eq. 4's alpha rises linearly over the day: the teacher gets stricter
+        s = self.settings
+        return linear_schedule(s["feedback_alpha_start"], s["feedback_alpha_end"], s["tamer_total_timesteps"] - 1, step)
+
+    def answer(self, q_star_sa: torch.Tensor, q_star_best: torch.Tensor, alpha: float) -> float:
+        """The perfect teacher's answer h* about (s, a): Eq. 4, 1 or 0."""
+        return oracle_feedback(q_star_sa, q_star_best, alpha).item()
+
+    def update(self, buffer: ReplayBuffer, step: int) -> torch.Tensor:
+        """TAMER's update: H regresses on the feedback (Eq. 1), then the actor maximises H, SAC-style; H's loss."""
+        idx = torch.randint(0, step + 1, (self.settings["tamer_batch_size"],), device=buffer.obs.device)
+        obs_b = buffer.obs[idx]
+        h_loss = tamer_loss(self.h_net, obs_b, buffer.actions[idx], buffer.feedback[idx])
+        self.h_optimizer.zero_grad(set_to_none=True)
+        h_loss.backward()
+        self.h_optimizer.step()
+        update_actor(self.h_net, self.actor, obs_b, self.log_ent_coef, self.actor_optimizer, self.ent_coef_optimizer)
+        return h_loss
+
+    def saved(self) -> dict:  # what a saved day keeps of its learner: the settings whole, the networks rebuildable
+        nets = {"tamer_h": (self.h_net, self.h_kwargs), "tamer_actor": (self.actor, self.actor_kwargs)}
+        saved = {k: {"kwargs": kwargs, "state_dict": state_dict_cpu(net)} for k, (net, kwargs) in nets.items()}
+        return {"day_args": {**self.settings, **DAY_CONSTANTS}, **saved}
+
+
+def forward_phase(day: Day, env, oracle_actor, oracle_qf, teacher, outcome, buffer: ReplayBuffer, evaluator, writer):
+    """The day: SAC-style TAMER (`day`, Eq. 1, gamma = 0) on the teacher's feedback (Eq. 4), all remembered. The
+    teacher: the simulated person (Teacher), or one with its interface (a person at a web page); with
+    --budget-ends-forward-phase the day ends when the teacher's budget is spent."""
+    s, n, device = day.settings, day.settings["tamer_total_timesteps"], buffer.obs.device
+    print(f"[tamer] {n} env steps, feedback alpha {s['feedback_alpha_start']} -> {s['feedback_alpha_end']}", flush=True)
+    progress = Progress("tamer", n, warmup=s["tamer_learning_starts"], evaluator=evaluator)
+    obs, _ = env.reset(seed=s["seed"])
     obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device)
     h_loss = torch.zeros((), device=device)
     ep_start, ep_length, ep_return, last_return = 0, 0, 0.0, float("nan")
     for step in range(n):
         StopSignals.check()  # a stop signal ends the run here, between two steps
-        # the teacher gets stricter: alpha rises linearly over the phase
-        feedback_alpha = linear_schedule(alpha_start, alpha_end, n - 1, step)
-        if step < learning_starts:
+        feedback_alpha = day.alpha(step)
+        if step < s["tamer_learning_starts"]:
             action_t = torch.as_tensor(env.action_space.sample(), device=device)
         else:
             with torch.no_grad():
-                action_t = tamer_actor.get_action(obs_t.unsqueeze(0))[0][0]
+                action_t = day.actor.get_action(obs_t.unsqueeze(0))[0][0]
 
         # ALGO LOGIC: the teacher watches (s, a): the perfect answer (Eq. 4), then the person's (Teacher)
         taught = not teacher.gone  # after the budget is spent, TAMER has nothing to learn from
         with torch.no_grad():
             q_star_sa, q_star_best = oracle_q(oracle_actor, oracle_qf, obs_t, action_t)
-        h_star = oracle_feedback(q_star_sa, q_star_best, feedback_alpha).item() if taught else 0.0
+        h_star = day.answer(q_star_sa, q_star_best, feedback_alpha) if taught else 0.0
         labels = teacher(step, h_star, action_t)  # {transition: h} that this step's arriving signal labels
         buffer.feedback[list(labels)] = torch.tensor(list(labels.values()), device=device)
 
@@ -565,7 +625,7 @@ def forward_phase(env, oracle_actor, oracle_qf, teacher, outcome, buffer, evalua
         buffer.add(obs_t, action_t, next_t, terminated)
         ep_return += float(reward)
         ep_length += 1
-        last_step = step == n - 1 or (teacher.gone and budget_ends)
+        last_step = step == n - 1 or (teacher.gone and s["budget_ends_forward_phase"])
         if terminated or truncated or last_step:  # tag the trajectory; a cut-off last one by where it stands
             distance, success, shortfall = outcome(info, ep_return)
             buffer.tag_episode(ep_start, shortfall, success)
@@ -573,25 +633,19 @@ def forward_phase(env, oracle_actor, oracle_qf, teacher, outcome, buffer, evalua
             for tag, value in {**charts, **({} if math.isnan(distance) else {"final_distance": distance})}.items():
                 writer.add_scalar(f"charts/{tag}", value, step + 1)
             ep_start, ep_length, ep_return, last_return = step + 1, 0, 0.0, ep_return
-            next_obs, _ = env.reset(seed=None if random_starts else seed)
+            next_obs, _ = env.reset(seed=None if s["random_starts"] else s["seed"])
             next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
         obs_t = next_t
 
         # ALGO LOGIC: TAMER's update: H regresses on the feedback (Eq. 1), the actor maximises H, SAC-style
-        if step >= learning_starts and taught:
-            idx = torch.randint(0, step + 1, (batch_size,), device=device)
-            obs_b = buffer.obs[idx]
-            h_loss = tamer_loss(h_net, obs_b, buffer.actions[idx], buffer.feedback[idx])
-            h_optimizer.zero_grad(set_to_none=True)
-            h_loss.backward()
-            h_optimizer.step()
-            update_actor(h_net, tamer_actor, obs_b, log_ent_coef, actor_optimizer, ent_coef_optimizer)
+        if step >= s["tamer_learning_starts"] and taught:
+            h_loss = day.update(buffer, step)
 
         # TRY NOT TO MODIFY: the divergence check, logging and periodic evaluation
         if (step + 1) % 100 == 0 or last_step:
             check_finite({"tamer_loss": h_loss}, {}, "TAMER's feedback model H", f"env step {step + 1}", "--tamer-h-lr")
         if (step + 1) % LOG_FREQUENCY == 0 or last_step:
-            logs = {"losses/tamer_loss": h_loss.item(), "losses/tamer_entropy_coef": log_ent_coef.exp().item()}
+            logs = {"losses/tamer_loss": h_loss.item(), "losses/tamer_entropy_coef": day.log_ent_coef.exp().item()}
             logs.update(
                 {"feedback/positive": teacher.positives, "feedback/positive_rate": teacher.positives / (step + 1)}
             )
@@ -600,7 +654,7 @@ def forward_phase(env, oracle_actor, oracle_qf, teacher, outcome, buffer, evalua
                 writer.add_scalar(tag, value, step + 1)
         report = {"return": last_return}
         if (step + 1) % EVAL_FREQUENCY == 0 or last_step:
-            metrics = evaluator("tamer", tamer_actor, step + 1, PERIODIC_EVAL_EPISODES)
+            metrics = evaluator("tamer", day.actor, step + 1, PERIODIC_EVAL_EPISODES)
             report["eval return"] = metrics["eval/tamer_return"]
         progress(step + 1, **report)
         if last_step:
@@ -612,7 +666,7 @@ def forward_phase(env, oracle_actor, oracle_qf, teacher, outcome, buffer, evalua
     stats = {"feedback/positive": positives, "feedback/perfect_positive": teacher.perfect_positives}
     stats.update({"feedback/steps": buffer.size, "feedback/positive_rate": positives / buffer.size})
     stats.update({"sleep/success_episodes": int(successes), "sleep/episodes": len(buffer.episodes)})
-    return h_net, tamer_actor, {**stats, "losses/tamer_entropy_coef": log_ent_coef.exp().item()}
+    return {**stats, "losses/tamer_entropy_coef": day.log_ent_coef.exp().item()}
 
 
 def sleep_batch(buffer: ReplayBuffer, batch_size: int, expert_idx: torch.Tensor, replay_idx=None):
@@ -1146,16 +1200,16 @@ _OBSTACLE_DIR: list[str] = []
 # ALGO LOGIC: main, Algorithm 1 in the order it runs: the oracle, the day, the night, Eq. 3 and the tests
 
 
-def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, make_teacher=None) -> dict:
+def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=None) -> dict:
     """oracle -> day (the forward phase) -> night (`args.night`, the study's Args give theirs) -> Eq. 3 and the tests.
     `make_teacher(args, env, run_dir)`: the day's teacher in place of the simulated one (a person at a web page)."""
     recipe = args.sleep_recipe()  # the preset's values that ran go into the summary's args
     args = dataclasses.replace(args, **{k: v for k, v in recipe.items() if hasattr(args, k)})
     run_start, run_dir, writer, env, evaluator = time.time(), None, None, None, None
-    oracle_ckpt = day["oracle"] if day is not None else oracle_ckpt  # --sleep-from: the saved day's teacher
+    oracle_ckpt = saved["oracle"] if saved is not None else oracle_ckpt  # --sleep-from: the saved day's teacher
     summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
     summary["oracle_path"] = oracle_ckpt["path"] if oracle_ckpt is not None else None
-    summary["sleep_from"] = os.path.abspath(args.sleep_from) if day is not None else None
+    summary["sleep_from"] = os.path.abspath(args.sleep_from) if saved is not None else None
     summary["sleep_variant"] = args.sleep_variant()
     status, failure, phase = "completed", None, "startup"
     try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
@@ -1204,19 +1258,14 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, make_teacher=No
         # ---- forward phase ("day"): TAMER with simulated feedback, every transition remembered
         phase, t0 = "tamer", time.time() - evaluator.seconds  # the phase's clock stops during its evaluations
         buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, act_dim, device)
-        if day is None:
-            teacher = make_teacher(args, env, run_dir) if make_teacher is not None else Teacher(  # a person, or Eq. 4
-                args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window, args.feedback_budget,
-                seed=args.seed + 7919)  # fmt: skip
-            h_net, tamer_actor, stats = forward_phase(
-                env, oracle_actor, oracle_qf, teacher, outcome, buffer, evaluator, writer, device, seed=args.seed,
-                random_starts=args.random_starts, total_timesteps=args.tamer_total_timesteps,
-                learning_starts=args.tamer_learning_starts, batch_size=args.tamer_batch_size, h_lr=args.tamer_h_lr,
-                alpha_start=args.feedback_alpha_start, alpha_end=args.feedback_alpha_end,
-                budget_ends=args.budget_ends_forward_phase,
-            )  # fmt: skip
+        if saved is None:  # the day's learner (Day), taught by a person (make_teacher) or by Eq. 4 through Teacher
+            day = Day(args.day_settings(), device, env.action_space, obs_dim)
+            teacher = make_teacher(args, env, run_dir) if make_teacher is not None else day.teacher()
+            stats = forward_phase(day, env, oracle_actor, oracle_qf, teacher, outcome, buffer, evaluator, writer)
         else:  # --sleep-from: the saved day's memories and TAMER, and the random streams where the day left them
-            h_net, tamer_actor, stats = restore_day(day, buffer, evaluator, device)
+            day, stats = restore_day(saved, buffer, evaluator, device)
+            summary["day_settings"] = saved["day_args"]  # whole, as the day recorded them (known here or not)
+        h_net, tamer_actor = day.h_net, day.actor
         summary["time/tamer_s"] = time.time() - evaluator.seconds - t0
         summary["sps/tamer"] = stats["feedback/steps"] / max(summary["time/tamer_s"], 1e-9)
         summary.update(stats)  # a saved day's stats bring the day's own time
@@ -1224,9 +1273,7 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", day=None, make_teacher=No
         save_critic(f"{run_dir}/tamer_h.pt", h_net, obs_dim, act_dim, env_id=args.env_id)
         if args.save_buffer:
             day_stats = {**stats, "time/tamer_s": summary["time/tamer_s"], "sps/tamer": summary["sps/tamer"]}
-            day_args = {k: getattr(args, k) for k in DAY_ARGS}
-            save_day(f"{run_dir}/day.pt", day_args, buffer, oracle_ckpt, h_net, tamer_actor, day_stats,
-                     evaluator.generator)  # fmt: skip
+            save_day(f"{run_dir}/day.pt", day, buffer, oracle_ckpt, day_stats, evaluator.generator)
 
         # ---- sleep phase ("night"): offline IQ-Learn on the buffer, no environment steps
         phase, t0 = "sleep", time.time() - evaluator.seconds
@@ -1498,38 +1545,32 @@ def oracle_checkpoint(actor: Actor, qf: QEnsemble, env_id: str, steps: int, seed
 
 # saved days (--save-buffer, --sleep-from): a day is deterministic, so it is saved once and slept on many times
 DAY_FORMAT = "inform-day-2"
-# the flags that shape a day (a new one of the day's goes here): a saved day records them, and a night on it
-# (--sleep-from) takes them for its own
-DAY_ARGS = ("seed", "env_id", "random_starts", "success_distance", "success_info_key", "success_return", "oracle_path",
-            "train_oracle", "oracle_total_timesteps", "tamer_total_timesteps", "tamer_learning_starts",
-            "tamer_batch_size", "tamer_h_lr", "feedback_alpha_start", "feedback_alpha_end", "teacher_noise",
-            "teacher_sparsity", "teacher_delay", "credit_window", "feedback_budget",
-            "budget_ends_forward_phase")  # fmt: skip
+DAY_ARGS = tuple(Args().day_settings())  # the flags that shape a day (marked DAY): a saved day records them
 DAY_TENSORS = ("obs", "actions", "next_obs", "feedback", "terminated", "success")
 # what shaped a day and is a constant now, under the flag names that days record it by
 DAY_CONSTANTS = {"hidden_size": HIDDEN_SIZE, "eval_frequency": EVAL_FREQUENCY, "tamer_policy_lr": TAMER_POLICY_LR}
 DAY_CONSTANTS["tamer_policy_frequency"] = 1
 
 
-def save_day(path, day_args: dict, buffer: ReplayBuffer, oracle_ckpt, h_net, tamer_actor, stats, generator) -> None:
+def save_day(path, day: Day, buffer: ReplayBuffer, oracle_ckpt, stats, generator) -> None:
     """The day as plain tensors and values (torch.load(weights_only=True) reads it): the memories, the episode table,
-    the flags that made it (DAY_ARGS), the teacher, TAMER's H and actor, the day's stats and the random states the
-    night goes on from."""
-    day = {key: getattr(buffer, key)[: buffer.size].cpu().clone() for key in DAY_TENSORS}
+    the day's learner (Day.saved: its settings whole, H and the actor with their constructor arguments), the
+    teacher, the day's stats and the random states the night goes on from."""
+    record = {key: getattr(buffer, key)[: buffer.size].cpu().clone() for key in DAY_TENSORS}
     starts, ends, shortfalls = zip(*buffer.episodes, strict=True)
-    day.update(format=DAY_FORMAT, script=os.path.basename(__file__), env_id=day_args["env_id"], seed=day_args["seed"])
-    day.update(day_args={**day_args, **DAY_CONSTANTS}, day_stats=stats, episode_success=buffer.success[list(starts)])
-    day.update(episode_start=torch.tensor(starts), episode_end=torch.tensor(ends))
-    day["episode_shortfall"] = torch.tensor(shortfalls, dtype=torch.float64)  # the final distance, or minus the return
-    day.update(oracle={k: v for k, v in oracle_ckpt.items() if k != "path"}, oracle_path=oracle_ckpt.get("path"))
-    day.update(tamer_h={"state_dict": state_dict_cpu(h_net), "n": h_net.n})
-    day.update(tamer_actor={"state_dict": state_dict_cpu(tamer_actor)}, torch_rng=torch.get_rng_state())
-    cuda_rng = torch.cuda.get_rng_state() if buffer.obs.is_cuda else None
-    save_atomic({**day, "cuda_rng": cuda_rng, "evaluator_rng": generator.get_state()}, path)
+    record.update(day.saved(), format=DAY_FORMAT, script=os.path.basename(__file__), env_id=day.settings["env_id"])
+    record.update(seed=day.settings["seed"], day_stats=stats, episode_success=buffer.success[list(starts)])
+    record.update(episode_start=torch.tensor(starts), episode_end=torch.tensor(ends))
+    record["episode_shortfall"] = torch.tensor(shortfalls, dtype=torch.float64)  # the distance, or minus the return
+    record.update(oracle={k: v for k, v in oracle_ckpt.items() if k != "path"}, oracle_path=oracle_ckpt.get("path"))
+    record.update(torch_rng=torch.get_rng_state(), cuda_rng=torch.cuda.get_rng_state() if buffer.obs.is_cuda else None)
+    save_atomic({**record, "evaluator_rng": generator.get_state()}, path)
 
 
 def load_day(run_dir: str) -> dict:
-    """--sleep-from: RUN_DIR/day.pt, read with weights_only=True and checked (check_day); InputError otherwise."""
+    """--sleep-from: RUN_DIR/day.pt, read with weights_only=True and checked: its memories (check_day), and its
+    learner rebuilt from what the day saved (Day, as "learner"), with finite networks; InputError otherwise. The
+    day's settings stay whole in "day_args", known to this script or not."""
     path = os.path.join(run_dir, "day.pt")
     if not os.path.isfile(path):
         raise InputError(f"--sleep-from {run_dir}: no day.pt there (make one with --save-buffer)")
@@ -1552,8 +1593,19 @@ def load_day(run_dir: str) -> dict:
         raise InputError(f"--sleep-from {path}: the day ran with {ran}, this script has {DAY_CONSTANTS}")
     check_day(day, path)
     day["oracle"]["path"] = day["oracle_path"] or f"the oracle saved in {path}"
-    names = {f.name for f in fields(Args)}  # the day's flags that are constants now, or gone with the oracle it holds
-    day["day_args"] = {k: v for k, v in day["day_args"].items() if k in names}
+    if "kwargs" not in day["tamer_h"]:  # saved before days kept their networks' arguments: today's (checked above)
+        shapes = {"obs_dim": day["obs"].shape[1], "act_dim": day["actions"].shape[1], "hidden": HIDDEN_SIZE}
+        day["tamer_h"]["kwargs"] = {**shapes, "n": day["tamer_h"].pop("n")}
+        bounds = {"action_low": day["oracle"]["action_low"], "action_high": day["oracle"]["action_high"]}
+        day["tamer_actor"]["kwargs"] = {**shapes, **bounds}
+    try:
+        learner = day["learner"] = Day(day["day_args"], torch.device("cpu"), saved=day)
+    except (TypeError, RuntimeError, KeyError) as e:  # networks built, or settings kept, by another script
+        why = " ".join(str(e).split())[:200]
+        raise InputError(f"--sleep-from {path}: this script cannot rebuild the day's TAMER ({type(e).__name__}: "
+                         f"{why}); sleep on it with the script that made it") from None  # fmt: skip
+    if not all(torch.isfinite(p).all() for net in (learner.h_net, learner.actor) for p in net.parameters()):
+        raise InputError(f"--sleep-from {path}: the day's TAMER networks hold NaN or inf")
     return day
 
 
@@ -1577,24 +1629,21 @@ def check_day(day: dict, path: str) -> None:
         raise InputError(f"--sleep-from {path}: the day's {bad[0]} are not what --save-buffer writes")
 
 
-def restore_day(day: dict, buffer: ReplayBuffer, evaluator, device) -> tuple:
-    """The saved day back in place of the forward phase: the buffer, TAMER's H and actor, the day's stats, and last
-    the random states (building networks draws from them)."""
-    n, obs_dim, act_dim = day["obs"].shape[0], buffer.obs.shape[1], buffer.actions.shape[1]
+def restore_day(saved: dict, buffer: ReplayBuffer, evaluator, device) -> tuple["Day", dict]:
+    """The saved day back in place of the forward phase: the buffer, the day's learner (load_day rebuilt it), the
+    day's stats, and the random states where the day left them."""
+    n, day = saved["obs"].shape[0], saved["learner"]
     for key in DAY_TENSORS:
-        getattr(buffer, key)[:n] = day[key].to(device)
-    table = (day["episode_start"].tolist(), day["episode_end"].tolist(), day["episode_shortfall"].tolist())
+        getattr(buffer, key)[:n] = saved[key].to(device)
+    table = (saved["episode_start"].tolist(), saved["episode_end"].tolist(), saved["episode_shortfall"].tolist())
     buffer.size, buffer.episodes = n, list(zip(*table, strict=True))
-    h_net = QEnsemble(obs_dim, act_dim, HIDDEN_SIZE, day["tamer_h"]["n"])
-    h_net.load_state_dict(day["tamer_h"]["state_dict"])
-    tamer_actor = Actor(obs_dim, act_dim, HIDDEN_SIZE, day["oracle"]["action_low"], day["oracle"]["action_high"])
-    tamer_actor.load_state_dict(day["tamer_actor"]["state_dict"])
-    torch.set_rng_state(day["torch_rng"])
-    if day.get("cuda_rng") is not None and device.type == "cuda":
-        torch.cuda.set_rng_state(day["cuda_rng"])
-    evaluator.generator.set_state(day["evaluator_rng"])
+    day.h_net.to(device), day.actor.to(device)
+    torch.set_rng_state(saved["torch_rng"])
+    if saved.get("cuda_rng") is not None and device.type == "cuda":
+        torch.cuda.set_rng_state(saved["cuda_rng"])
+    evaluator.generator.set_state(saved["evaluator_rng"])
     print(f"[day] {n} transitions, {len(buffer.episodes)} episodes from the saved day", flush=True)
-    return h_net.to(device), tamer_actor.to(device), dict(day["day_stats"])
+    return day, dict(saved["day_stats"])
 
 
 def check_args(args: Args) -> None:
@@ -1705,24 +1754,29 @@ def cli(args: Args, make_teacher=None) -> int:
     """The command line after tyro: a saved day, the checks, then the run; returns the exit code. The study
     module (inform_utils/sleep_variants_pusher.py) runs it with its own Args (and their night), the web page
     (inform_utils/browser_pusher.py) with its own Args and `make_teacher`."""
-    day = None
+    saved = None
     try:
         if args.sleep_from is not None:  # the day's flags replace this run's: its numbers are the day's
-            day = load_day(args.sleep_from)
-            args = dataclasses.replace(args, **day["day_args"])
+            saved = load_day(args.sleep_from)
+            flags = {f.name for f in fields(args)}
+            args = dataclasses.replace(args, **{k: v for k, v in saved["day_args"].items() if k in flags})
             print(f"[day] sleeping on the day saved in {args.sleep_from} ({args.env_id}, seed {args.seed}, "
-                  f"{day['obs'].shape[0]} steps); its day flags replace this run's", flush=True)  # fmt: skip
+                  f"{saved['obs'].shape[0]} steps); its day flags replace this run's", flush=True)  # fmt: skip
+            unknown = {k: v for k, v in saved["day_args"].items() if k not in flags and k not in DAY_CONSTANTS}
+            if unknown:  # a copy's day: its settings are recorded, never dropped
+                print(f"[day] the day's settings that are not this script's flags, recorded in summary.json "
+                      f"(day_settings): {unknown}", flush=True)  # fmt: skip
         check_args(args)
         if args.capture_video:
             check_video(args.env_id)
         oracle_ckpt = None  # a saved day brings its own teacher
-        if day is None:
+        if saved is None:
             oracle_ckpt = load_oracle(args.env_id, args.oracle_path, args.train_oracle, args.oracle_total_timesteps)
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     stop = StopSignals()
-    summary = main(args, oracle_ckpt, stop, day, make_teacher)
+    summary = main(args, oracle_ckpt, stop, saved, make_teacher)
     gc.freeze()  # the interpreter's last collections over torch's objects take seconds on a busy machine; skip them
     return stop.exit_code(summary["status"])
 
