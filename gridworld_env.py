@@ -129,6 +129,17 @@ def greedy_episode_length(policy: np.ndarray, variant: str = "plain", start: int
     return max_steps
 
 
+def draw_greedy_path(policy: np.ndarray, variant: str) -> str:
+    """A greedy table policy's path from S drawn on the maze, and where it ends."""
+    next_cell = transition_table(variant)
+    cell, arrows = START, {}
+    while cell != GOAL and cell not in arrows:  # a deterministic path either ends in G or loops
+        arrows[cell] = int(policy[cell])
+        cell = int(next_cell[cell, policy[cell]])
+    ending = f"reaches G in {len(arrows)} steps" if cell == GOAL else "never reaches G: it loops"
+    return draw_maze(variant, agent=START, arrows=arrows) + ending
+
+
 class KnoxStoneMazeEnv(gym.Env):
     """The maze. `variant` is "plain" or "wall"; `start_cells` lists the cells a reset may start from."""
 

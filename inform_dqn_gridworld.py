@@ -93,11 +93,14 @@ class Range(str):
     """A flag's range beside the flag, as "[1, inf)" or "(0, 1]" (check_args reads it; NaN is in none)."""
 
 
+DAY = "day"  # in a flag's Annotated type: the flag shapes the day (Args.day_settings: a saved day keeps it)
+
+
 @dataclass
 class Args:
     exp_name: str = os.path.basename(__file__)[: -len(".py")]
     """the name of this experiment (one name: runs/{env_id}__{exp_name}__{seed}__{time})"""
-    seed: Annotated[int, Range(SEED_RANGE)] = 1
+    seed: Annotated[int, Range(SEED_RANGE), DAY] = 1
     """seed of the experiment"""
     capture_video: bool = False
     """draw TAMER's and INFORM's final greedy episodes (plain maze, wall maze, a few start cells) as GIFs into
@@ -107,51 +110,51 @@ class Args:
     track: bool = False
     """mirror the TensorBoard events to Weights & Biases (CleanRL's --track; `pip install wandb`; WANDB_PROJECT,
     default inform, and WANDB_ENTITY choose where; WANDB_MODE=offline keeps the run on this machine)"""
-    env_id: str = "KnoxStoneMaze-v0"
+    env_id: Annotated[str, DAY] = "KnoxStoneMaze-v0"
     """the maze (one of the ids gridworld_env registers), or a Gymnasium toy-text env with a model (FrozenLake-v1,
     CliffWalking-v1, Taxi-v4, ...)"""
-    oracle_path: str | None = None
+    oracle_path: Annotated[str | None, DAY] = None
     """a maze teacher saved by oracle_train.py (e.g. a half-trained Q-learner) instead of exact Q*"""
 
     # Forward phase: TAMER (Eq. 1) with simulated feedback (Eq. 4)
-    tamer_total_timesteps: Annotated[int, Range("[1, inf)")] = 10000
+    tamer_total_timesteps: Annotated[int, Range("[1, inf)"), DAY] = 10000
     """environment steps of the forward phase"""
-    tamer_learning_starts: Annotated[int | None, Range("[1, inf)")] = None
+    tamer_learning_starts: Annotated[int | None, Range("[1, inf)"), DAY] = None
     """environment steps before H is trained (None: 1000; with --teacher human 1, H learns from your first answer)"""
-    tamer_batch_size: Annotated[int, Range("[1, inf)")] = 32
+    tamer_batch_size: Annotated[int, Range("[1, inf)"), DAY] = 32
     """batch size of the H regression"""
-    tamer_h_lr: Annotated[float, Range("(0, inf)")] = 1e-3
+    tamer_h_lr: Annotated[float, Range("(0, inf)"), DAY] = 1e-3
     """Adam learning rate of the feedback model H"""
-    start_e: Annotated[float | None, Range("[0, 1]")] = None
+    start_e: Annotated[float | None, Range("[0, 1]"), DAY] = None
     """starting epsilon of the exploration (None: 1; with --teacher human 0, no random moves)"""
-    end_e: Annotated[float | None, Range("[0, 1]")] = None
+    end_e: Annotated[float | None, Range("[0, 1]"), DAY] = None
     """final epsilon, reached after a fifth of the phase (None: 0.05; with --teacher human 0)"""
-    feedback_alpha_start: Annotated[float, Range("[0, 1]")] = 0.999
+    feedback_alpha_start: Annotated[float, Range("[0, 1]"), DAY] = 0.999
     """alpha of Eq. 4 at the start of the forward phase (1 = only the oracle's best action earns +1)"""
-    feedback_alpha_end: Annotated[float, Range("[0, 1]")] = 0.999
+    feedback_alpha_end: Annotated[float, Range("[0, 1]"), DAY] = 0.999
     """alpha of Eq. 4 at the end of the forward phase (alpha moves linearly: the teacher gets stricter)"""
-    success_max_steps: Annotated[int, Range("[1, inf)")] = 30
+    success_max_steps: Annotated[int, Range("[1, inf)"), DAY] = 30
     """an episode is tagged success if it reaches the goal (the terminal with the task's top reward) in fewer steps"""
 
     # The teacher as a person (docs/protocol.md); the defaults are the paper's perfect, instant, tireless teacher
-    teacher: Literal["oracle", "human", "browser"] = "oracle"
+    teacher: Annotated[Literal["oracle", "human", "browser"], DAY] = "oracle"
     """who answers: "oracle" (Eq. 4, distorted by the flags below), "human" (you, in the terminal: y, Enter, q) or
     "browser" (a person at the web page whose address the run prints: Yes, No, End the day)"""
-    participant: str | None = None
+    participant: Annotated[str | None, DAY] = None
     """--teacher browser: the person's ID, written with each answer into runs/{run}/answers.jsonl"""
-    host: str = "127.0.0.1"
+    host: Annotated[str, DAY] = "127.0.0.1"
     """--teacher browser: where the page listens, HOST or HOST:PORT (0.0.0.0: other machines too; no port: any)"""
-    teacher_noise: Annotated[float, Range("[0, 1]")] = 0.0
+    teacher_noise: Annotated[float, Range("[0, 1]"), DAY] = 0.0
     """probability that the teacher's judgement is flipped (+1 <-> no feedback)"""
-    teacher_sparsity: Annotated[float, Range("[0, 1]")] = 1.0
+    teacher_sparsity: Annotated[float, Range("[0, 1]"), DAY] = 1.0
     """probability that a +1 judgement is actually given (otherwise no feedback)"""
-    teacher_delay: Annotated[int, Range("[0, inf)")] = 0
+    teacher_delay: Annotated[int, Range("[0, inf)"), DAY] = 0
     """env steps between a transition and the arrival of its signal (which labels the later transition)"""
-    credit_window: Annotated[int, Range("[1, inf)")] = 1
+    credit_window: Annotated[int, Range("[1, inf)"), DAY] = 1
     """each arriving signal labels this many most recent transitions (teacher_delay + 1 covers the right one)"""
-    feedback_budget: Annotated[int | None, Range("[1, inf)")] = None
+    feedback_budget: Annotated[int | None, Range("[1, inf)"), DAY] = None
     """the teacher leaves after this many +1 signals (None: never); then TAMER stops learning"""
-    budget_ends_forward_phase: bool = False
+    budget_ends_forward_phase: Annotated[bool, DAY] = False
     """when the budget is spent, end the forward phase and sleep (otherwise keep acting, without feedback)"""
 
     # Sleep phase: offline IQ-Learn (Eq. 2), no environment steps
@@ -175,7 +178,7 @@ class Args:
     sleep_from: str | None = None
     """run only the night and the final tests on the day saved in this run directory (by --save-buffer); the day's
     flags (env, seed, teacher, TAMER) replace this run's"""
-    eval_episodes: Annotated[int, Range("[1, inf)")] = 20
+    eval_episodes: Annotated[int, Range("[1, inf)"), DAY] = 20
     """greedy episodes of each evaluation on a toy-text env, on fixed reset seeds (the maze's tests are one episode
     from each of their start cells)"""
 
@@ -184,6 +187,12 @@ class Args:
         for name, value in TEACHER_DEFAULTS[self.teacher].items():
             setattr(self, name, value if getattr(self, name) is None else getattr(self, name))
         return self
+
+    def day_settings(self) -> dict:
+        """What the day runs with: every flag marked DAY (a subclass's too), kept whole by a saved day."""
+        hints = typing.get_type_hints(type(self), include_extras=True)
+        marked = [f.name for f in fields(self) if DAY in getattr(hints[f.name], "__metadata__", ())]
+        return {name: getattr(self, name) for name in marked}
 
     def night_settings(self) -> dict:
         """What the night's learner runs with (setting x from flag sleep_x)."""
@@ -285,10 +294,12 @@ def oracle_feedback(q_star_sa, q_star_best, alpha):
 
 class Teacher:
     """A simulated person between Eq. 4 and the learner: noisy, sparse, late and limited (paper Sec. VII's future work).
-    A call hands over the perfect answer h* about buffer index `step` and returns the labels arriving now, {index: h}.
-    The judgement is flipped with probability `noise`; a +1 is clicked with probability `sparsity`; a click about
-    step t arrives at t + `delay` and labels that transition and the `credit_window` - 1 before it (Deep TAMER). The
-    teacher leaves after `budget` +1 signals. Its own generator: the defaults are the perfect teacher exactly."""
+    A call hands over the perfect answer h* about buffer index `step` (Eq. 4's 0 or 1, or any value of another
+    teacher) and returns the labels arriving now, {index: h}, each the answer as given (0: no feedback, no label).
+    The judgement is flipped with probability `noise` (1 - h for 0 and 1, -h for any other answer); an answer is
+    clicked with probability `sparsity`; a click about step t arrives at t + `delay` and labels that transition and
+    the `credit_window` - 1 before it (Deep TAMER). The teacher leaves after `budget` positive signals. Its own
+    generator: the defaults are the perfect teacher exactly."""
 
     def __init__(self, noise=0.0, sparsity=1.0, delay=0, credit_window=1, budget=None, seed=0):
         self.noise, self.sparsity, self.delay, self.credit_window = noise, sparsity, delay, credit_window
@@ -306,16 +317,16 @@ class Teacher:
     def __call__(self, step: int, h_star: float) -> dict[int, float]:
         self.perfect_positives += int(h_star > 0)
         flip, click = self.rng.random(2)  # always two draws: the stream does not depend on the answers
-        h = 1.0 - h_star if flip < self.noise else h_star
+        h = (1.0 - h_star if h_star in (0, 1) else -h_star) if flip < self.noise else h_star
         h = h if click < self.sparsity else 0.0
         self.in_flight.append(h)
         if len(self.in_flight) <= self.delay:
             return {}
         h = self.in_flight.popleft()
-        if h <= 0 or self.gone:
+        if h == 0 or self.gone:
             return {}
-        self.positives += 1
-        return dict.fromkeys(range(max(0, step - self.credit_window + 1), step + 1), 1.0)
+        self.positives += int(h > 0)
+        return dict.fromkeys(range(max(0, step - self.credit_window + 1), step + 1), float(h))
 
 
 def tamer_loss(h_net, obs, actions, feedback):
@@ -399,29 +410,62 @@ class ReplayBuffer:
 # ALGO LOGIC: the day (forward phase) and the person at the terminal
 
 
-def forward_phase(env, q_star: np.ndarray, teacher, buffer: ReplayBuffer, evaluator, writer, device, page=None, *,
-                  who: str, seed: int, total_timesteps: int, learning_starts: int, batch_size: int, h_lr: float,
-                  start_e: float, end_e: float, alpha_start: float, alpha_end: float, success_max_steps: int,
-                  budget_ends: bool):  # fmt: skip
-    """The day: TAMER (Eq. 1, gamma = 0) acts on H and fits it to the teacher's yes/no feedback (Eq. 4 through the
-    Teacher, or, by `who` (--teacher), a person at the terminal or the web page); every transition is remembered,
-    every episode tagged. `budget_ends`: the day ends when the teacher's budget is spent."""
-    h_net = QNetwork(buffer.obs.shape[1], int(env.action_space.n)).to(device)
-    h_optimizer = torch.optim.Adam(h_net.parameters(), lr=h_lr, fused=True)
+class Day:
+    """The day's learner and what made it, as `Sleep` is the night's: TAMER's feedback model H (Eq. 1, gamma = 0),
+    its optimiser, and `settings` (every flag marked DAY in Args: a saved day keeps them whole). A change goes here:
+    a new day flag (marked DAY, read from `settings`); `answer`, the perfect teacher's h* (Eq. 4's 0 or 1: any sign
+    and size reaches H as given); H (QNetwork keeps its arguments, which a saved day rebuilds it from); `update`,
+    TAMER's step (Eq. 1); `teacher`, the simulated person."""
+
+    def __init__(self, settings: dict, device, obs_dim: int = 0, n_actions: int = 0, saved: dict | None = None):
+        """A new day's H for `obs_dim` and `n_actions`, or a saved day's (`saved`: its kwargs and state_dict)."""
+        self.settings = settings
+        kwargs = {"obs_dim": obs_dim, "n_actions": n_actions} if saved is None else saved["kwargs"]
+        self.h_net = QNetwork(**kwargs).to(device)  # it keeps its constructor arguments (kwargs) for a saved day
+        if saved is not None:
+            self.h_net.load_state_dict(saved["state_dict"])
+        self.h_optimizer = torch.optim.Adam(self.h_net.parameters(), lr=settings["tamer_h_lr"], fused=True)
+
+    def teacher(self) -> Teacher:  # the simulated person, on a random stream of its own
+        s = self.settings
+        return Teacher(s["teacher_noise"], s["teacher_sparsity"], s["teacher_delay"], s["credit_window"],
+                       s["feedback_budget"], seed=s["seed"] + 7919)  # fmt: skip
+
+    def answer(self, q_star_sa: float, q_star_best: float, alpha: float) -> float:
+        """The perfect teacher's answer h* about (s, a): Eq. 4, 1 or 0."""
+        return oracle_feedback(q_star_sa, q_star_best, alpha)
+
+    def update(self, buffer: ReplayBuffer, idx: torch.Tensor | None = None) -> torch.Tensor:
+        """TAMER's update: H regresses on the feedback (Eq. 1) of the rows `idx` (None: a random batch); H's loss."""
+        n = self.settings["tamer_batch_size"]
+        idx = torch.randint(0, buffer.size, (n,), device=buffer.obs.device) if idx is None else idx
+        obs_b, actions_b, _, feedback_b, _ = buffer.batch(idx)
+        h_loss = tamer_loss(self.h_net, obs_b, actions_b, feedback_b)
+        self.h_optimizer.zero_grad()
+        h_loss.backward()
+        self.h_optimizer.step()
+        return h_loss
+
+
+def forward_phase(day: Day, env, q_star: np.ndarray, teacher, buffer: ReplayBuffer, evaluator, writer, page=None):
+    """The day: TAMER (`day`, Eq. 1, gamma = 0) acts on H and fits it to the teacher's yes/no feedback (Eq. 4
+    through the Teacher, or, by --teacher, a person at the terminal or the web page); every transition is remembered,
+    every episode tagged. With --budget-ends-forward-phase the day ends when the teacher's budget is spent."""
+    s, h_net, device = day.settings, day.h_net, buffer.obs.device
     human = None
-    if who in ("human", "browser"):  # you, at the terminal or at the web page
-        human = HumanTeacher(env.unwrapped.variant, success_max_steps, h_net, device, page)
-    n, log_every = total_timesteps, LOG_FREQUENCY[who]
+    if s["teacher"] in ("human", "browser"):  # you, at the terminal or at the web page
+        human = HumanTeacher(env.unwrapped.variant, s["success_max_steps"], h_net, device, page)
+    n, log_every = s["tamer_total_timesteps"], LOG_FREQUENCY[s["teacher"]]
     progress = Progress("tamer", n, evaluator)
     h_loss = torch.zeros((), device=device)
     optimum_at = None  # (step, +1 signals) at the first evaluation where TAMER's greedy path is the shortest
     evaluated_at = ep_start = ep_length = successes = 0
     ep_return = 0.0
     goal_reward = top_reward(env)
-    obs, _ = env.reset(seed=seed)
+    obs, _ = env.reset(seed=s["seed"])
     for step in range(n):
         StopSignals.check()  # a stop signal ends the run here, between two steps
-        epsilon = linear_schedule(start_e, end_e, int(EXPLORATION_FRACTION * n), step)
+        epsilon = linear_schedule(s["start_e"], s["end_e"], int(EXPLORATION_FRACTION * n), step)
         explore = random.random() < epsilon
         cell = int(obs.argmax())
         if explore:
@@ -433,8 +477,8 @@ def forward_phase(env, q_star: np.ndarray, teacher, buffer: ReplayBuffer, evalua
 
         # the teacher watches (s, a): the perfect answer (Eq. 4), then the person's (Teacher), or yours
         taught = not teacher.gone  # after the budget is spent, TAMER has nothing to learn from
-        feedback_alpha = linear_schedule(alpha_start, alpha_end, n - 1, step)
-        h_star = oracle_feedback(q_star[cell, action], q_star[cell].max(), feedback_alpha) if taught else 0.0
+        feedback_alpha = linear_schedule(s["feedback_alpha_start"], s["feedback_alpha_end"], n - 1, step)  # stricter
+        h_star = day.answer(q_star[cell, action], q_star[cell].max(), feedback_alpha) if taught else 0.0
         if human and taught:
             h_star = human(cell, action, explore, step + 1, teacher.positives, h_star, successes)
             if h_star is None:  # q or the end of the input: stop teaching, the sleep starts
@@ -448,30 +492,25 @@ def forward_phase(env, q_star: np.ndarray, teacher, buffer: ReplayBuffer, evalua
         ep_return += float(reward)
         obs = next_obs
         if terminated or truncated:  # an episode cut off by the end of the phase stays untagged: a failure
-            successes += buffer.tag_episode(ep_start, is_success(terminated, reward, ep_length, success_max_steps,
-                                                                 goal_reward))  # fmt: skip
+            successes += buffer.tag_episode(ep_start, is_success(terminated, reward, ep_length,
+                                                                 s["success_max_steps"], goal_reward))  # fmt: skip
             writer.add_scalar("charts/episodic_return", ep_return, step + 1)
             writer.add_scalar("charts/episodic_length", ep_length, step + 1)
             ep_start, ep_length, ep_return = step + 1, 0, 0.0
             obs, _ = env.reset()
 
         # TAMER's update: H regresses on the feedback (Eq. 1); a person's answer gets several
-        if taught and human and step + 1 >= learning_starts:
-            h_loss = human.learn(h_optimizer, buffer, HUMAN_UPDATES_PER_ANSWER, batch_size)
-        elif taught and step >= learning_starts:
-            idx = torch.randint(0, buffer.size, (batch_size,), device=device)
-            obs_b, actions_b, _, feedback_b, _ = buffer.batch(idx)
-            h_loss = tamer_loss(h_net, obs_b, actions_b, feedback_b)
-            h_optimizer.zero_grad()
-            h_loss.backward()
-            h_optimizer.step()
+        if taught and human and step + 1 >= s["tamer_learning_starts"]:
+            h_loss = human.learn(day, buffer, HUMAN_UPDATES_PER_ANSWER, s["tamer_batch_size"])
+        elif taught and step >= s["tamer_learning_starts"]:
+            h_loss = day.update(buffer)
 
         # TRY NOT TO MODIFY: logging, the divergence check and periodic evaluation
-        last_step = step == n - 1 or (teacher.gone and budget_ends)
+        last_step = step == n - 1 or (teacher.gone and s["budget_ends_forward_phase"])
         if (step + 1) % log_every == 0 or last_step:
             if not math.isfinite(h_loss.item()):
                 raise Diverged(f"TAMER's H diverged (its loss is NaN or inf) by env step {step + 1}; "
-                               f"try a lower --tamer-h-lr (it is {h_lr:g})")  # fmt: skip
+                               f"try a lower --tamer-h-lr (it is {s['tamer_h_lr']:g})")  # fmt: skip
             for tag, value in (("losses/tamer_loss", h_loss.item()), ("feedback/positive", teacher.positives),
                                ("feedback/positive_rate", teacher.positives / (step + 1)),
                                ("feedback/alpha", feedback_alpha), ("charts/epsilon", epsilon),
@@ -490,17 +529,13 @@ def forward_phase(env, q_star: np.ndarray, teacher, buffer: ReplayBuffer, evalua
 
     if evaluated_at != buffer.size:  # the person stopped between two evaluations
         evaluator("tamer", greedy_actions(h_net, device, buffer.obs.shape[1]), buffer.size)
-    stats = {
-        "feedback/positive": teacher.positives,
-        "feedback/perfect_positive": teacher.perfect_positives,
-        "feedback/steps": buffer.size,
-        "feedback/positive_rate": teacher.positives / max(buffer.size, 1),
-        "feedback/step_to_tamer_optimum": None if optimum_at is None else optimum_at[0],
-        "feedback/positive_to_tamer_optimum": None if optimum_at is None else optimum_at[1],
-    }
+    at = optimum_at or (None, None)
+    stats = {"feedback/positive": teacher.positives, "feedback/perfect_positive": teacher.perfect_positives,
+             "feedback/steps": buffer.size, "feedback/positive_rate": teacher.positives / max(buffer.size, 1),
+             "feedback/step_to_tamer_optimum": at[0], "feedback/positive_to_tamer_optimum": at[1]}  # fmt: skip
     if human:
         stats.update(human.finish(buffer.size, teacher.positives, successes))
-    return h_net, stats
+    return stats
 
 
 class HumanTeacher:
@@ -592,17 +627,13 @@ class HumanTeacher:
     def greedy_length(self) -> int:
         return gridworld_env.greedy_episode_length(greedy_actions(self.h_net, self.device), self.variant)
 
-    def learn(self, h_optimizer, buffer: ReplayBuffer, updates: int, batch_size: int) -> torch.Tensor:
+    def learn(self, day: "Day", buffer: ReplayBuffer, updates: int, batch_size: int) -> torch.Tensor:
         """TAMER's update (Eq. 1) after your answer: several gradient steps, each on the newest answer and a replay of
         the earlier ones (Deep TAMER's remedies), so that the answer takes effect before the next move."""
         for _ in range(updates):
             replay = torch.randint(0, buffer.size, (batch_size - 1,), device=self.device)
             newest = torch.tensor([buffer.size - 1], device=self.device)
-            obs_b, actions_b, _, feedback_b, _ = buffer.batch(torch.cat([newest, replay]))
-            h_loss = tamer_loss(self.h_net, obs_b, actions_b, feedback_b)
-            h_optimizer.zero_grad()
-            h_loss.backward()
-            h_optimizer.step()
+            h_loss = day.update(buffer, torch.cat([newest, replay]))
         self.own_way = self.greedy_length()
         if self.own_way < 200 and self.answers_to_goal is None:
             self.answers_to_goal = self.answers
@@ -614,17 +645,6 @@ class HumanTeacher:
             f"answers as the oracle's, Eq. 4); {then}")  # fmt: skip
         return {"feedback/oracle_agreement": self.agreement / max(self.answers, 1), "feedback/answers": self.answers,
                 "feedback/answers_to_tamer_goal": self.answers_to_goal}  # fmt: skip
-
-
-def draw_greedy_path(policy: np.ndarray, variant: str) -> str:
-    """A greedy table policy's path from S drawn on the maze, and where it ends."""
-    next_cell = gridworld_env.transition_table(variant)
-    cell, arrows = gridworld_env.START, {}
-    while cell != gridworld_env.GOAL and cell not in arrows:  # a deterministic path either ends in G or loops
-        arrows[cell] = int(policy[cell])
-        cell = int(next_cell[cell, policy[cell]])
-    ending = f"reaches G in {len(arrows)} steps" if cell == gridworld_env.GOAL else "never reaches G: it loops"
-    return gridworld_env.draw_maze(variant, agent=gridworld_env.START, arrows=arrows) + ending
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -707,6 +727,7 @@ def evaluate(policy: np.ndarray, env: gym.Env, resets: list[dict], success_max_s
     lengths, successes = [], []
     goal_reward = top_reward(env)
     for reset in resets:
+        StopSignals.check()  # a long test (--eval-episodes 100000) stops within an episode
         obs, _ = env.reset(**reset)
         terminated = truncated = False
         length, reward = 0, 0.0
@@ -772,7 +793,7 @@ class Evaluator:
 # main: Algorithm 1 in the paper's order
 
 
-def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict | None = None) -> dict:
+def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", saved: dict | None = None) -> dict:
     run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
     run_start = time.time()
     run_dir = writer = env = evaluator = page = None
@@ -795,7 +816,7 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
         evaluator = Evaluator(args.env_id, args.success_max_steps, args.eval_episodes, args.seed, writer)
         obs_dim, n_actions = env.observation_space.shape[0], int(env.action_space.n)
 
-        if day is None:
+        if saved is None:
             # ---- the oracle: exact Q* by value iteration (the "fully trained model"), or a teacher from a file
             phase, t0 = "oracle", time.time()
             q_star = optimal_q(env) if oracle_q is None else oracle_q
@@ -806,24 +827,16 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
             phase, t0 = "tamer", time.time() - evaluator.seconds  # the phase's clock stops during its evaluations
             buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, device)
             page = open_page(run_dir, args.host, args.participant) if args.teacher == "browser" else None
-            teacher = Teacher(args.teacher_noise, args.teacher_sparsity, args.teacher_delay, args.credit_window,
-                              args.feedback_budget, seed=args.seed + 7919)  # fmt: skip
-            h_net, stats = forward_phase(
-                env, q_star, teacher, buffer, evaluator, writer, device, page, who=args.teacher, seed=args.seed,
-                total_timesteps=args.tamer_total_timesteps, learning_starts=args.tamer_learning_starts,
-                batch_size=args.tamer_batch_size, h_lr=args.tamer_h_lr, start_e=args.start_e, end_e=args.end_e,
-                alpha_start=args.feedback_alpha_start, alpha_end=args.feedback_alpha_end,
-                success_max_steps=args.success_max_steps, budget_ends=args.budget_ends_forward_phase,
-            )  # fmt: skip
+            day = Day(args.day_settings(), device, obs_dim, n_actions)  # the day's learner and settings
+            stats = forward_phase(day, env, q_star, day.teacher(), buffer, evaluator, writer, page)
             summary.update(stats)
             summary["time/tamer_s"] = time.time() - evaluator.seconds - t0
             if args.save_buffer:  # the day as it ended, for later nights (--sleep-from)
-                day_stats = {**stats, "time/tamer_s": summary["time/tamer_s"]}
-                day_args = {name: getattr(args, name) for name in DAY_ARGS}
-                save_day(f"{run_dir}/day.pt", day_args, buffer, h_net, q_star, day_stats)
+                save_day(f"{run_dir}/day.pt", day, buffer, q_star, {**stats, "time/tamer_s": summary["time/tamer_s"]})
         else:  # --sleep-from: a saved day's oracle, memories and H, its random streams where that day left them
-            q_star, buffer, h_net = restore_day(day, device)
-            summary.update(day["day_stats"])
+            q_star, buffer, day = restore_day(saved, device)
+            summary.update(saved["day_stats"], day_settings=saved["day_args"])  # its settings whole, known or not
+        h_net = day.h_net
         save_network(f"{run_dir}/tamer_h.pt", h_net, env_id=args.env_id)
 
         # ---- sleep phase ("night"): offline IQ-Learn on the success set and the whole buffer
@@ -867,7 +880,8 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", day: dict
         if args.capture_video:  # after the evaluation: drawing changes no number
             record_videos(run_dir, {name: policy for name, policy in policies.items() if name != "oracle"})
         if args.teacher in ("human", "browser"):
-            drawn = [f"{title}, greedy from S:\n" + draw_greedy_path(policies[name], env.unwrapped.variant)
+            variant = env.unwrapped.variant
+            drawn = [f"{title}, greedy from S:\n" + gridworld_env.draw_greedy_path(policies[name], variant)
                      for name, title in (("tamer", "TAMER (what you taught)"), ("inform", "INFORM (after the sleep)"))
                      if name in policies]  # fmt: skip
             say("\n" + "\n\n".join(drawn))
@@ -897,19 +911,23 @@ def cli(args: Args) -> int:
         if gridworld_env is None:
             raise InputError("gridworld_env.py (the maze) is not importable: copy it next to this script")
         check_args(args)
-        oracle_q = day = None
+        oracle_q = saved = None
         if args.sleep_from:  # a saved day: no oracle, no forward phase; its day flags replace these
-            day = load_day(args.sleep_from)
-            for name in DAY_ARGS:
-                setattr(args, name, day["day_args"][name])
+            saved = load_day(args.sleep_from)
+            flags = {f.name for f in fields(args)}
+            for name in flags & set(saved["day_args"]):
+                setattr(args, name, saved["day_args"][name])
             try:
                 check_args(args)
             except (InputError, TypeError) as e:  # TypeError: a flag of the wrong type
                 raise InputError(f"{args.sleep_from}/day.pt: its day flags are not valid: {e}") from None
             say(
-                f"[day] sleeping on {args.sleep_from}'s day ({args.env_id}, seed {args.seed}, {day['obs'].shape[0]} "
+                f"[day] sleeping on {args.sleep_from}'s day ({args.env_id}, seed {args.seed}, {saved['obs'].shape[0]} "
                 "steps); its day flags replace these"
             )
+            unknown = {k: v for k, v in saved["day_args"].items() if k not in flags}
+            if unknown:  # a copy's day: its settings are recorded, never dropped
+                say(f"[day] the day's settings that are not this script's flags, kept in summary.json: {unknown}")
         elif args.oracle_path:
             oracle_q = load_oracle(args.oracle_path, args.env_id)
         check_writable("runs")
@@ -917,7 +935,7 @@ def cli(args: Args) -> int:
         say(f"error: {e}", sys.stderr)
         return 2
     stop = StopSignals()
-    summary = main(args, oracle_q, stop, day)
+    summary = main(args, oracle_q, stop, saved)
     gc.freeze()  # the interpreter's last collections over torch's objects take seconds on a busy machine; skip them
     return stop.exit_code(summary.get("status", "interrupted"))
 
@@ -1009,15 +1027,11 @@ def record_videos(run_dir: str, policies: dict[str, np.ndarray]) -> dict:
         env = gym.wrappers.RenderCollection(gym.make(f"KnoxStoneMaze{maze}-v0", render_mode="rgb_array"))
         frames = []
         for start in starts:
-            obs, _ = env.reset(options={"start_cell": start})
-            length, terminated, truncated = 0, False, False
-            while not (terminated or truncated):
-                obs, _, terminated, truncated, _ = env.step(policy[int(obs.argmax())])
-                length += 1
+            length, reached = evaluate(policy, env, start_cells(start), math.inf)  # G reached, in any time
             frames += env.render()  # the episode's frames, from the reset on
             record[f"{name}_{clip}_{start}"] = {"file": f"{name}_{clip}.gif", "variant": maze.lower() or "plain",
-                                                "start_cell": start, "episode_length": length,
-                                                "reached_goal": bool(terminated), "frames": length + 1}  # fmt: skip
+                                                "start_cell": start, "episode_length": int(length),
+                                                "reached_goal": bool(reached), "frames": int(length) + 1}  # fmt: skip
         env.close()
         images = [Image.fromarray(frame) for frame in frames]
         with atomic(f"{run_dir}/videos/{name}_{clip}.gif") as tmp:
@@ -1065,39 +1079,22 @@ def load_oracle(path: str, env_id: str) -> np.ndarray:
     return q_table.double().numpy()
 
 
-def load_q_network(path: str, n_states: int = 30, flag: str = "the network") -> QNetwork:
-    """Rebuild a saved H or Q network (tamer_h.pt, inform_q.pt) for `n_states`-d one-hot observations."""
-    ckpt = read_checkpoint(path, flag)
-    try:
-        net = QNetwork(**ckpt["kwargs"])
-        net.load_state_dict(ckpt["state_dict"])
-    except (KeyError, TypeError, RuntimeError) as e:
-        raise InputError(f"{path}: not a saved network of this script ({str(e).splitlines()[0][:160]})") from None
-    if net.kwargs["obs_dim"] != n_states:
-        raise InputError(f"{path}: a network for {net.kwargs['obs_dim']}-d observations, not {n_states}-d")
-    return net
-
-
 def save_network(path: str, net: QNetwork, **extra) -> None:
     save_atomic({"state_dict": net.state_dict(), "kwargs": net.kwargs, **extra}, path)
 
 
 # Saved days (--save-buffer, --sleep-from): one forward phase, many nights
 DAY_FORMAT = "inform-day-1"
-# the flags that shape a day (a new one of the day's goes here): a saved day records them, and a night on it
-# (--sleep-from) takes them for its own
-DAY_ARGS = ("seed", "env_id", "oracle_path", "tamer_total_timesteps", "tamer_learning_starts", "tamer_batch_size",
-            "tamer_h_lr", "start_e", "end_e", "feedback_alpha_start", "feedback_alpha_end", "success_max_steps",
-            "teacher", "participant", "host", "teacher_noise", "teacher_sparsity", "teacher_delay", "credit_window",
-            "feedback_budget", "budget_ends_forward_phase", "eval_episodes")  # fmt: skip
+DAY_ARGS = tuple(Args().day_settings())  # the flags that shape a day (marked DAY): a saved day records them
 DAY_TENSORS = ("obs", "actions", "next_obs", "feedback", "terminated", "success")  # the buffer, one row a transition
 EPISODE_TABLE = ("episode_start", "episode_end", "episode_length", "episode_success", "episode_ended")
 
 
-def save_day(path: str, day_args: dict, buffer: ReplayBuffer, h_net: QNetwork, q_star: np.ndarray, day_stats: dict):
+def save_day(path: str, day: Day, buffer: ReplayBuffer, q_star: np.ndarray, day_stats: dict):
     """The day as it ended: the buffer cut to its size, the episode table (buffer[start:end], one row an episode; the
-    last row, ended False, is the episode cut off by the end of the phase), the oracle's Q table, TAMER's H, the
-    day's stats and flags, and the random states that the sleep goes on from."""
+    last row, ended False, is the episode cut off by the end of the phase), the oracle's Q table, the day's learner
+    (its settings whole, H with its constructor arguments), the day's stats, and the random states that the sleep
+    goes on from."""
     n, rows = buffer.size, [(start, end, True) for start, end in buffer.episodes]
     if (rows[-1][1] if rows else 0) < n:
         rows.append((rows[-1][1] if rows else 0, n, False))
@@ -1105,12 +1102,12 @@ def save_day(path: str, day_args: dict, buffer: ReplayBuffer, h_net: QNetwork, q
     start, end, ended = (torch.tensor(column, dtype=torch.int64) for column in columns)
     np_state, (version, internal, gauss) = np.random.get_state(), random.getstate()
     save_atomic({
-        "format": DAY_FORMAT, "script": os.path.basename(__file__), "env_id": day_args["env_id"],
-        "seed": day_args["seed"], "day_args": day_args,
+        "format": DAY_FORMAT, "script": os.path.basename(__file__), "env_id": day.settings["env_id"],
+        "seed": day.settings["seed"], "day_args": day.settings,
         **{name: getattr(buffer, name)[:n].to("cpu", copy=True) for name in DAY_TENSORS},  # a copy: not the capacity
         "episode_start": start, "episode_end": end, "episode_length": end - start,
         "episode_success": buffer.success[:n].cpu()[start], "episode_ended": ended.bool(),
-        "h_net": {"state_dict": h_net.state_dict(), "kwargs": h_net.kwargs}, "q_star": torch.tensor(q_star),
+        "h_net": {"state_dict": day.h_net.state_dict(), "kwargs": day.h_net.kwargs}, "q_star": torch.tensor(q_star),
         "rng": {"torch": torch.get_rng_state(), "python": [version, list(internal), gauss],
                 "torch_cuda": torch.cuda.get_rng_state() if buffer.obs.is_cuda else None,
                 "numpy": [np_state[0], torch.from_numpy(np_state[1].astype(np.int64)), *np_state[2:]]},
@@ -1173,29 +1170,32 @@ def load_day(run_dir: str) -> dict:
     if not all(ranges.values()):
         raise InputError(f"{path}: a damaged or tampered day: {', '.join(k for k, ok in ranges.items() if not ok)} "
                          f"out of range")  # fmt: skip
-    try:
-        QNetwork(**day["h_net"]["kwargs"]).load_state_dict(day["h_net"]["state_dict"])
+    try:  # the day's learner, rebuilt from what the day saved (another script's H is refused here, by name)
+        day["learner"] = Day(day["day_args"], torch.device("cpu"), saved=day["h_net"])
         if day["h_net"]["kwargs"]["obs_dim"] != n_states:
             raise ValueError(f"H is a network for {day['h_net']['kwargs']['obs_dim']}-d observations, not {n_states}-d")
         set_rng_state(day["rng"])  # tried here; main seeds, then restore_day sets them again
     except Exception as e:  # a damaged network or random state: KeyError, TypeError, ValueError, RuntimeError
-        raise InputError(f"{path}: a damaged saved day: {(str(e) or type(e).__name__).splitlines()[0][:160]}") from None
+        raise InputError(f"{path}: a damaged saved day, or one this script cannot rebuild (sleep on it with the script "
+                         f"that made it): {(str(e) or type(e).__name__).splitlines()[0][:160]}") from None  # fmt: skip
+    if not all(torch.isfinite(t).all() for t in day["learner"].h_net.state_dict().values()):
+        raise InputError(f"{path}: the day's H holds NaN or inf")
     return day
 
 
-def restore_day(day: dict, device: torch.device) -> tuple[np.ndarray, ReplayBuffer, QNetwork]:
-    """The oracle's Q table, the buffer and H of a day from load_day; then (last: building H draws from torch) the
-    random states as the day left them."""
-    buffer = ReplayBuffer(day["obs"].shape[0], day["obs"].shape[1], device)
+def restore_day(saved: dict, device: torch.device) -> tuple[np.ndarray, ReplayBuffer, Day]:
+    """The oracle's Q table, the buffer and the day's learner (load_day rebuilt it) of a saved day; then the random
+    states as the day left them."""
+    buffer = ReplayBuffer(saved["obs"].shape[0], saved["obs"].shape[1], device)
     for name in DAY_TENSORS:
-        getattr(buffer, name).copy_(day[name])
-    buffer.size = day["obs"].shape[0]
-    rows = zip(day["episode_start"].tolist(), day["episode_end"].tolist(), day["episode_ended"].tolist(), strict=True)
+        getattr(buffer, name).copy_(saved[name])
+    buffer.size = saved["obs"].shape[0]
+    rows = zip(*(saved[k].tolist() for k in ("episode_start", "episode_end", "episode_ended")), strict=True)
     buffer.episodes = [(start, end) for start, end, ended in rows if ended]
-    h_net = QNetwork(**day["h_net"]["kwargs"]).to(device)
-    h_net.load_state_dict(day["h_net"]["state_dict"])
-    set_rng_state(day["rng"])
-    return day["q_star"].double().numpy(), buffer, h_net
+    day = saved["learner"]
+    day.h_net.to(device)
+    set_rng_state(saved["rng"])
+    return saved["q_star"].double().numpy(), buffer, day
 
 
 def check_args(args: Args) -> None:

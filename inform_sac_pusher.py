@@ -534,13 +534,11 @@ class ReplayBuffer:
 
 class Day:
     """The day's learner and what made it, as `Night` is the night's: TAMER's twin feedback models H (Eq. 1, gamma =
-    0), its actor trained SAC-style on H, their optimisers, and `settings`: every flag marked DAY in Args, which a
-    saved day keeps whole (a night on the day records them, and takes those this script knows for its own flags).
-    Where a change to the day goes:
-    - a new day flag: a field of Args marked DAY, read here from `settings`;
-    - `answer`: the perfect teacher's h* about (s, a), Eq. 4's 0 or 1; the teacher passes any sign and size to H;
-    - `h_kwargs`, `actor_kwargs`: what H and the actor are built from; a saved day keeps them and is rebuilt from them;
-    - `update`: TAMER's update (Eq. 1, then the actor on H); `teacher`: the simulated person (Teacher)."""
+    0), its actor trained SAC-style on H, their optimisers, and `settings` (every flag marked DAY in Args: a saved day
+    keeps them whole). A change goes here: a new day flag (marked DAY, read from `settings`); `answer`, the perfect
+    teacher's h* (Eq. 4's 0 or 1: any sign and size reaches H as given); `h_kwargs`, `actor_kwargs`, what H and the
+    actor are built from (a saved day rebuilds them from these); `update`, TAMER's step; `teacher`, the simulated
+    person."""
 
     def __init__(self, settings: dict, device, space: gym.spaces.Box | None = None, obs_dim=0, saved=None):
         """A new day for actions in `space` and `obs_dim`-d observations, or a saved day's learner (`saved`: the
@@ -566,10 +564,6 @@ class Day:
         s = self.settings
         return Teacher(s["teacher_noise"], s["teacher_sparsity"], s["teacher_delay"], s["credit_window"],
                        s["feedback_budget"], seed=s["seed"] + 7919)  # fmt: skip
-
-    def alpha(self, step: int) -> float:  # Eq. 4's alpha rises linearly over the day: the teacher gets stricter
-        s = self.settings
-        return linear_schedule(s["feedback_alpha_start"], s["feedback_alpha_end"], s["tamer_total_timesteps"] - 1, step)
 
     def answer(self, q_star_sa: torch.Tensor, q_star_best: torch.Tensor, alpha: float) -> float:
         """The perfect teacher's answer h* about (s, a): Eq. 4, 1 or 0."""
@@ -605,7 +599,7 @@ def forward_phase(day: Day, env, oracle_actor, oracle_qf, teacher, outcome, buff
     ep_start, ep_length, ep_return, last_return = 0, 0, 0.0, float("nan")
     for step in range(n):
         StopSignals.check()  # a stop signal ends the run here, between two steps
-        feedback_alpha = day.alpha(step)
+        feedback_alpha = linear_schedule(s["feedback_alpha_start"], s["feedback_alpha_end"], n - 1, step)  # stricter
         if step < s["tamer_learning_starts"]:
             action_t = torch.as_tensor(env.action_space.sample(), device=device)
         else:
@@ -645,11 +639,9 @@ def forward_phase(day: Day, env, oracle_actor, oracle_qf, teacher, outcome, buff
         if (step + 1) % 100 == 0 or last_step:
             check_finite({"tamer_loss": h_loss}, {}, "TAMER's feedback model H", f"env step {step + 1}", "--tamer-h-lr")
         if (step + 1) % LOG_FREQUENCY == 0 or last_step:
-            logs = {"losses/tamer_loss": h_loss.item(), "losses/tamer_entropy_coef": day.log_ent_coef.exp().item()}
-            logs.update(
-                {"feedback/positive": teacher.positives, "feedback/positive_rate": teacher.positives / (step + 1)}
-            )
-            logs.update({"feedback/alpha": feedback_alpha, "charts/SPS": progress.sps(step + 1)})
+            logs = {"losses/tamer_loss": h_loss.item(), "losses/tamer_entropy_coef": day.log_ent_coef.exp().item(),
+                    "feedback/positive": teacher.positives, "feedback/positive_rate": teacher.positives / (step + 1),
+                    "feedback/alpha": feedback_alpha, "charts/SPS": progress.sps(step + 1)}  # fmt: skip
             for tag, value in logs.items():
                 writer.add_scalar(tag, value, step + 1)
         report = {"return": last_return}
@@ -1039,21 +1031,12 @@ def train_oracle(env_id: str, seed: int, n: int, outcome: Outcome, writer, devic
 class RecoveredReward:
     """The reward INFORM recovers (Eq. 3), imitation-style: reward(obs, action, next_obs, terminated) -> array.
     V(s') is averaged over `samples` actions drawn with a fixed generator, so the reward is deterministic. On the CPU
-    (copies of networks trained on the GPU)."""
+    (copies of networks trained on the GPU). inform_utils/recovered_reward.py loads it from a run and wraps an env
+    with it, so that any Gymnasium agent trains on it."""
 
     def __init__(self, q_net: QEnsemble, actor: Actor, gamma: float, temperature: float, samples: int = 16):
         self.q_net, self.actor, self.gamma, self.temperature = on_cpu(q_net), on_cpu(actor), gamma, temperature
         self.samples = samples
-
-    @classmethod
-    def load(cls, run_dir: str, samples: int = 16) -> "RecoveredReward":  # from a run's inform_critic.pt and actor
-        for name in ("inform_critic.pt", "inform_actor.pt"):
-            check_crc(os.path.join(run_dir, name), os.path.join(run_dir, name))
-        critic = torch.load(os.path.join(run_dir, "inform_critic.pt"), weights_only=True)
-        q_net = QEnsemble(**critic["kwargs"])
-        q_net.load_state_dict(critic["state_dict"])
-        actor = actor_from_checkpoint(torch.load(os.path.join(run_dir, "inform_actor.pt"), weights_only=True))
-        return cls(q_net, actor, critic["gamma"], critic["temperature"], samples)
 
     @torch.no_grad()
     def __call__(self, obs, action, next_obs, terminated) -> np.ndarray:
@@ -1067,23 +1050,6 @@ class RecoveredReward:
             [soft_value(self.q_net, self.actor, next_t, self.temperature, g) for _ in range(self.samples)]
         )
         return recover_reward(self.q_net(obs_t, act_t).min(0).values, v_next.mean(0), term_t, self.gamma).numpy()
-
-
-class RecoveredRewardWrapper(gym.Wrapper):
-    """Any Gymnasium agent trains on the recovered reward; the env's own goes to info['env_reward']."""
-
-    def __init__(self, env: gym.Env, reward_fn: RecoveredReward):
-        super().__init__(env)
-        self.reward_fn, self._obs = reward_fn, None
-
-    def reset(self, **kwargs):
-        self._obs, info = self.env.reset(**kwargs)
-        return self._obs, info
-
-    def step(self, action):
-        next_obs, reward, terminated, truncated, info = self.env.step(action)
-        new_reward, self._obs = float(self.reward_fn(self._obs, action, next_obs, terminated)[0]), next_obs
-        return next_obs, new_reward, terminated, truncated, {**info, "env_reward": reward}
 
 
 # ALGO LOGIC, Pusher only: the obstacle test (Fig. 5) and its boxes: three 3 cm cubes on the table (docs/protocol.md),
@@ -1341,54 +1307,30 @@ GL_HINT = "install EGL (Debian: apt-get install libegl1 libegl-mesa0) or OSMesa 
 
 
 def check_video(env_id: str) -> None:
-    """Before anything is written: pick the headless GL backend (egl when MUJOCO_GL is unset and there is no display)
-    and render one frame; InputError, one line, if it cannot."""
-    import warnings
+    """--capture-video, before anything is written: MuJoCo renders headless here and mp4 can be written (InputError,
+    one line, if not). Its plumbing is inform_utils/videos.py, imported only under this flag."""
 
-    if not os.environ.get("MUJOCO_GL") and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
-        os.environ["MUJOCO_GL"] = "egl"  # unset or empty, and no screen
-    if os.environ.get("MUJOCO_GL") not in (None, "egl", "osmesa", "glfw"):
-        raise InputError(f"--capture-video: MUJOCO_GL={os.environ['MUJOCO_GL']!r} is none of egl, osmesa, glfw")
-    if importlib.util.find_spec("imageio_ffmpeg") is None:
-        raise InputError("--capture-video writes mp4 with imageio-ffmpeg: pip install imageio-ffmpeg")
-    gl, frame, hook = f"MUJOCO_GL={os.environ.get('MUJOCO_GL')}", None, sys.unraisablehook
-    sys.unraisablehook = lambda unraisable: None  # a viewer that failed to start raises again as it is collected
-    try:
-        with contextlib.suppress(Exception), warnings.catch_warnings():  # a failing backend warns, then raises
-            warnings.simplefilter("ignore")
-            env = make_env(env_id, 0, render_mode="rgb_array", width=16, height=16)
+    def one_frame() -> np.ndarray:
+        with contextlib.closing(make_env(env_id, 0, render_mode="rgb_array", width=16, height=16)) as env:
             env.reset(seed=0)
-            frame = env.render()
-            env.close()
-        gc.collect()
-    finally:
-        sys.unraisablehook = hook
-    if not isinstance(frame, np.ndarray) or frame.shape != (16, 16, 3):
-        raise InputError(f"--capture-video: MuJoCo cannot render with {gl}; {GL_HINT}")
+            return env.render()
+
+    if (problem := videos().gl_problem(one_frame)) is not None:
+        raise InputError(problem)
+
+
+def videos():  # --capture-video's plumbing, beside this script in the repository
+    try:
+        from inform_utils import videos
+    except ModuleNotFoundError:
+        raise InputError("--capture-video needs the repository's inform_utils/videos.py beside this script") from None
+    return videos
 
 
 def video_env(env_id: str, seed: int, obstacles=None, size: int = VIDEO_SIZE) -> gym.Env:
     """The evaluation env, rendering every reset and step into a list (Gymnasium's RenderCollection)."""
     env = make_env(env_id, seed, obstacles, render_mode="rgb_array", width=size, height=size)
     return gym.wrappers.RenderCollection(env)
-
-
-def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
-    """H.264 mp4 by imageio-ffmpeg (Gymnasium's RecordVideo needs moviepy), under a temporary name, then renamed."""
-    import imageio_ffmpeg
-
-    tmp = path[: -len(".mp4")] + ".tmp.mp4"  # ffmpeg reads the container from the extension
-    try:
-        options = {"fps": fps, "codec": "libx264", "quality": 6, "macro_block_size": 16, "ffmpeg_log_level": "error"}
-        writer = imageio_ffmpeg.write_frames(tmp, frames[0].shape[1::-1], **options)
-        writer.send(None)
-        for frame in frames:
-            writer.send(np.ascontiguousarray(frame))
-        writer.close()
-        os.replace(tmp, path)
-    finally:
-        with contextlib.suppress(FileNotFoundError):
-            os.remove(tmp)
 
 
 def record_videos(env_id, seed, outcome, policies: dict, boxes, reset_seed: int, run_dir: str) -> None:
@@ -1403,7 +1345,7 @@ def record_videos(env_id, seed, outcome, policies: dict, boxes, reset_seed: int,
         for name, actor in policies.items():
             res = evaluate(actor, env, 1, lambda ep, s=start: s, True, torch.Generator(), outcome)
             frames, key = env.render(), f"{name}{suffix}"
-            write_video(f"{run_dir}/videos/{key}.mp4", frames, env.metadata["render_fps"])
+            videos().write_video(f"{run_dir}/videos/{key}.mp4", frames, env.metadata["render_fps"])
             record[key] = {"file": f"{key}.mp4", "frames": len(frames), "size": list(frames[0].shape)}
             record[key].update({"final_distance": res["final_distance"], "reset_seed": start})
         env.close()
@@ -1604,7 +1546,7 @@ def load_day(run_dir: str) -> dict:
         why = " ".join(str(e).split())[:200]
         raise InputError(f"--sleep-from {path}: this script cannot rebuild the day's TAMER ({type(e).__name__}: "
                          f"{why}); sleep on it with the script that made it") from None  # fmt: skip
-    if not all(torch.isfinite(p).all() for net in (learner.h_net, learner.actor) for p in net.parameters()):
+    if not all(torch.isfinite(t).all() for net in (learner.h_net, learner.actor) for t in net.state_dict().values()):
         raise InputError(f"--sleep-from {path}: the day's TAMER networks hold NaN or inf")
     return day
 
@@ -1764,8 +1706,7 @@ def cli(args: Args, make_teacher=None) -> int:
                   f"{saved['obs'].shape[0]} steps); its day flags replace this run's", flush=True)  # fmt: skip
             unknown = {k: v for k, v in saved["day_args"].items() if k not in flags and k not in DAY_CONSTANTS}
             if unknown:  # a copy's day: its settings are recorded, never dropped
-                print(f"[day] the day's settings that are not this script's flags, recorded in summary.json "
-                      f"(day_settings): {unknown}", flush=True)  # fmt: skip
+                print(f"[day] the day's settings that are not this script's flags, kept in summary.json: {unknown}")
         check_args(args)
         if args.capture_video:
             check_video(args.env_id)

@@ -23,7 +23,6 @@ import random
 import signal
 import sys
 import time
-import warnings
 import zipfile
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Annotated, get_type_hints
@@ -1009,43 +1008,21 @@ def video_env(env_id: str, size: int = VIDEO_SIZE) -> gym.Env:
 
 
 def check_video(env_id: str) -> None:
-    """Before anything is written: the headless GL backend (egl when MUJOCO_GL is unset and there is no display)
-    renders a frame, and imageio-ffmpeg is there; InputError, one line, if not."""
+    """Before anything is written: MuJoCo renders headless here and mp4 can be written (inform_utils/videos.py,
+    imported only under --capture-video); InputError, one line, if not."""
     if env_id in MAZE_IDS:
         raise InputError(f"--capture-video films a SAC teacher; inform_dqn_gridworld.py draws the maze's, not {env_id}")
-    if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
-        os.environ["MUJOCO_GL"] = "egl"
-    if importlib.util.find_spec("imageio_ffmpeg") is None:
-        raise InputError("--capture-video writes mp4 with imageio-ffmpeg: pip install imageio-ffmpeg==0.8.1")
-    try:
-        with warnings.catch_warnings():  # a failing backend warns before it raises: one line is enough
-            warnings.simplefilter("ignore")
-            env = video_env(env_id, size=16)
-            env.reset(seed=0)
-            np.asarray(env.render()[-1]).reshape(16, 16, 3)  # a ValueError if MuJoCo rendered no image
-            env.close()
-    except Exception as e:
-        raise InputError(f"--capture-video: MuJoCo cannot render with MUJOCO_GL={os.environ.get('MUJOCO_GL')} "
-                         f"({type(e).__name__}); install EGL (Debian: apt-get install libegl1 libegl-mesa0) or "
-                         "OSMesa (apt-get install libosmesa6, then MUJOCO_GL=osmesa)") from None  # fmt: skip
+    from inform_utils import videos
 
+    def one_frame() -> np.ndarray:
+        env = video_env(env_id, size=16)
+        env.reset(seed=0)
+        frame = env.render()[-1]
+        env.close()
+        return frame
 
-def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
-    """H.264 mp4 by imageio-ffmpeg (Gymnasium's RecordVideo needs moviepy), under a temporary name, then renamed."""
-    import imageio_ffmpeg
-
-    tmp = path[: -len(".mp4")] + ".tmp.mp4"  # ffmpeg reads the container from the extension
-    try:
-        writer = imageio_ffmpeg.write_frames(tmp, frames[0].shape[1::-1], fps=fps, codec="libx264", quality=6,
-                                             macro_block_size=16, ffmpeg_log_level="error")  # fmt: skip
-        writer.send(None)
-        for frame in frames:
-            writer.send(np.ascontiguousarray(frame))
-        writer.close()
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+    if (problem := videos.gl_problem(one_frame)) is not None:
+        raise InputError(problem)
 
 
 def record_teacher(args: Args, actor: Actor, run_dir: str, device: torch.device) -> None:
@@ -1055,6 +1032,8 @@ def record_teacher(args: Args, actor: Actor, run_dir: str, device: torch.device)
     env, t0 = video_env(args.env_id), time.time()
     evaluation = evaluate(actor, env, VIDEO_EPISODES, FINAL_EVAL_SEED, device, args.outcome())
     frames = env.render()
+    from inform_utils.videos import write_video  # checked by check_video
+
     write_video(path := os.path.join(run_dir, "videos", "oracle.mp4"), frames, env.metadata["render_fps"])
     record = {"file": "oracle.mp4", "size": list(frames[0].shape), "frames": len(frames), "evaluation": evaluation}
     atomic_write(

@@ -360,6 +360,12 @@ def day(module, day_args, env, oracle_actor, oracle_qf, buffer, cpu) -> None:
     if "args" in inspect.signature(module.forward_phase).parameters:
         module.forward_phase(day_args, env, oracle_actor, oracle_qf, buffer, NullEvaluator(), NullWriter(), cpu)
         return
+    if hasattr(module, "Day"):  # since the day's learner and settings became one object
+        day = module.Day(day_args.day_settings(), cpu, env.action_space, buffer.obs.shape[1])
+        outcome = module.Outcome(day_args.success_info_key, day_args.success_distance, day_args.success_return)
+        module.forward_phase(day, env, oracle_actor, oracle_qf, day.teacher(), outcome, buffer, NullEvaluator(),
+                             NullWriter())  # fmt: skip
+        return
     a = day_args
     teacher = module.Teacher(a.teacher_noise, a.teacher_sparsity, a.teacher_delay, a.credit_window, a.feedback_budget,
                              seed=a.seed + 7919)  # fmt: skip

@@ -114,6 +114,26 @@ def evaluate_pusher(args: Pusher) -> dict:
     return {**metrics, **obstacle}
 
 
+def load_q_network(path: str, n_states: int = 30, flag: str = "the network"):
+    """A saved H or Q network of inform_dqn_gridworld.py (tamer_h.pt, inform_q.pt), rebuilt from its arguments, for
+    `n_states`-d one-hot observations, with finite weights; the script's InputError otherwise."""
+    import torch
+
+    import inform_dqn_gridworld as maze
+
+    ckpt = maze.read_checkpoint(path, flag)
+    try:
+        net = maze.QNetwork(**ckpt["kwargs"])
+        net.load_state_dict(ckpt["state_dict"])
+    except (KeyError, TypeError, RuntimeError) as e:
+        raise maze.InputError(f"{path}: not a saved network of this script ({str(e).splitlines()[0][:160]})") from None
+    if net.kwargs["obs_dim"] != n_states:
+        raise maze.InputError(f"{path}: a network for {net.kwargs['obs_dim']}-d observations, not {n_states}-d")
+    if not all(torch.isfinite(t).all() for t in net.state_dict().values()):
+        raise maze.InputError(f"{path}: its weights hold NaN or inf")
+    return net
+
+
 def evaluate_maze(args: Maze) -> dict:
     """The saved network's greedy policy under the run's final tests (eval/policy_* and the maze's variants)."""
     import torch
@@ -123,7 +143,7 @@ def evaluate_maze(args: Maze) -> dict:
     run = run_args(maze, args, "network")
     evaluator = maze.Evaluator(run.env_id, run.success_max_steps, run.eval_episodes, run.seed)
     n_states = evaluator.envs["plain"].observation_space.shape[0]
-    net = maze.load_q_network(args.network, n_states)
+    net = load_q_network(args.network, n_states)
     metrics = evaluator("policy", maze.greedy_actions(net, torch.device("cpu"), n_states), 0)
     evaluator.close()
     return metrics

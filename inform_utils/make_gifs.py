@@ -32,6 +32,7 @@ from PIL import Image, ImageDraw, ImageFont
 import gridworld_env
 import inform_dqn_gridworld as maze
 import inform_sac_pusher as isp
+from inform_utils.evaluate_policy import load_q_network
 
 POLICIES = ("tamer", "inform")
 
@@ -211,8 +212,8 @@ def maze_gif(run_dir: str, out_dir: str) -> str:
     summary = read_summary(run_dir, "inform_dqn_gridworld.py")
     a = summary["args"]
     try:
-        nets = {"tamer": maze.load_q_network(os.path.join(run_dir, "tamer_h.pt"), flag="--maze-run"),
-                "inform": maze.load_q_network(os.path.join(run_dir, "inform_q.pt"), flag="--maze-run")}  # fmt: skip
+        nets = {"tamer": load_q_network(os.path.join(run_dir, "tamer_h.pt"), flag="--maze-run"),
+                "inform": load_q_network(os.path.join(run_dir, "inform_q.pt"), flag="--maze-run")}  # fmt: skip
     except maze.InputError as e:
         raise ValueError(str(e)) from None
     policies = {p: maze.greedy_actions(net, torch.device("cpu")) for p, net in nets.items()}

@@ -58,7 +58,7 @@ def short_pusher_episode(env_id: str, tmp_path, steps: int = 8, size: int = 160)
         for _ in range(steps):
             env.step(env.action_space.high)  # full torque on every joint: the arm moves
         frames = env.render()
-        isp.write_video(str(tmp_path / f"{name}.mp4"), frames, env.metadata["render_fps"])
+        isp.videos().write_video(str(tmp_path / f"{name}.mp4"), frames, env.metadata["render_fps"])
         env.close()
         videos[name] = (frames, read_mp4(tmp_path / f"{name}.mp4"))
     return videos

@@ -14,6 +14,7 @@ from conftest import Child
 
 import gridworld_env as g
 import inform_dqn_gridworld as inform
+from inform_utils.evaluate_policy import load_q_network
 
 SCRIPT = "inform_dqn_gridworld.py"
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -361,7 +362,7 @@ def test_save_load_same_actions(tmp_path):
     torch.manual_seed(0)
     net = inform.QNetwork(30, 4)
     inform.save_network(str(tmp_path / "q.pt"), net, env_id="KnoxStoneMaze-v0")
-    loaded = inform.load_q_network(str(tmp_path / "q.pt"))
+    loaded = load_q_network(str(tmp_path / "q.pt"))
     obs = torch.eye(30)
     assert torch.equal(net(obs), loaded(obs))
     assert np.array_equal(inform.greedy_actions(net, "cpu"), inform.greedy_actions(loaded, "cpu"))

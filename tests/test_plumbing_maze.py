@@ -159,15 +159,8 @@ def day_file(tmp_path_factory):
         if i == 2:
             buffer.tag_episode(0, True)
     buffer.feedback[[1, 4]] = 1.0
-    h_net = inform.QNetwork(g.N_CELLS, g.N_ACTIONS)
-    inform.save_day(
-        str(path / "day.pt"),
-        {k: getattr(args, k) for k in inform.DAY_ARGS},
-        buffer,
-        h_net,
-        g.optimal_q("plain"),
-        {"feedback/steps": 6},
-    )
+    day = inform.Day(args.day_settings(), torch.device("cpu"), g.N_CELLS, g.N_ACTIONS)
+    inform.save_day(str(path / "day.pt"), day, buffer, g.optimal_q("plain"), {"feedback/steps": 6})
     return path
 
 

@@ -211,7 +211,9 @@ def check_run(tmp_path, proc):
         assert rate * 3 == pytest.approx(round(rate * 3)) and 0 <= round(rate * 3) <= 3  # a mean over its 3 episodes
         assert np.isfinite(summary[f"eval/authors_test/{p}_return"])
     # the recovered reward loads from the run directory and drives a wrapped env
-    env = isp.RecoveredRewardWrapper(gym.make("Pusher-v5"), isp.RecoveredReward.load(run_dir))
+    from inform_utils.recovered_reward import RecoveredRewardWrapper, load
+
+    env = RecoveredRewardWrapper(gym.make("Pusher-v5"), load(run_dir))
     env.reset(seed=0)
     _, r, _, _, info = env.step(env.action_space.sample())
     assert isinstance(r, float) and "env_reward" in info

@@ -144,25 +144,20 @@ def test_a_day_saved_and_restored_in_process(tmp_path):
         if i in (2, 4):
             buffer.tag_episode(0 if i == 2 else 3, i == 2)
     buffer.feedback[[1, 5]] = 1.0
-    h_net = inform.QNetwork(g.N_CELLS, g.N_ACTIONS)
+    day = inform.Day(args.day_settings(), torch.device("cpu"), g.N_CELLS, g.N_ACTIONS)
+    h_net = day.h_net
     random.seed(1)
     np.random.seed(2)
     torch.manual_seed(3)
-    inform.save_day(
-        str(tmp_path / "day.pt"),
-        {k: getattr(args, k) for k in inform.DAY_ARGS},
-        buffer,
-        h_net,
-        g.optimal_q("plain"),
-        {"feedback/steps": 7},
-    )
+    inform.save_day(str(tmp_path / "day.pt"), day, buffer, g.optimal_q("plain"), {"feedback/steps": 7})
     expected = (random.random(), np.random.rand(), torch.rand(3))
 
     day = inform.load_day(str(tmp_path))
     assert [day["day_args"][k] for k in ("seed", "teacher_noise", "tamer_total_timesteps")] == [4, 0.0, 5000]
     assert day["episode_start"].tolist() == [0, 3, 5] and day["episode_end"].tolist() == [3, 5, 7]
     assert day["episode_success"].tolist() == [True, False, False] and day["episode_ended"].tolist() == [1, 1, 0]
-    q_star, restored, h = inform.restore_day(day, torch.device("cpu"))
+    q_star, restored, learner = inform.restore_day(day, torch.device("cpu"))
+    h = learner.h_net
     assert (random.random(), np.random.rand()) == expected[:2] and torch.equal(torch.rand(3), expected[2])
     assert restored.size == 7 and restored.episodes == buffer.episodes
     for name in inform.DAY_TENSORS:

@@ -25,7 +25,8 @@ SHARED_FLAGS = (
 )  # fmt: skip
 # the reading order: these top-level definitions come in this order, and main before the plumbing
 READING_ORDER = ("Args", "make_env", "linear_schedule", "oracle_feedback", "Teacher", "tamer_loss", "soft_value",
-                 "iq_loss", "recover_reward", "ReplayBuffer", "forward_phase", "sleep_phase", "main")  # fmt: skip
+                 "iq_loss", "recover_reward", "ReplayBuffer", "Day", "forward_phase", "sleep_phase",
+                 "main")  # fmt: skip
 
 
 def shared_block(script: str) -> list[str]:
@@ -85,6 +86,9 @@ def test_linear_schedule_by_hand():
 
 def test_the_siblings_are_called_alike():
     params = {script: list(inspect.signature(script.main).parameters) for script in (pusher, maze)}
-    assert params[pusher][:4:2] == params[maze][:4:2] == ["args", "stop"]  # main(args, oracle, stop, day, ...)
+    assert params[pusher][:4:2] == params[maze][:4:2] == ["args", "stop"]  # main(args, oracle, stop, saved, ...)
     assert params[pusher][1].startswith("oracle") and params[maze][1].startswith("oracle")
-    assert params[pusher][3] == params[maze][3] == "day"
+    assert params[pusher][3] == params[maze][3] == "saved"  # a saved day (--sleep-from), or None
+    for script in (pusher, maze):  # the day's learner and settings in one object, which the day's phase takes
+        assert list(inspect.signature(script.forward_phase).parameters)[0] == "day"
+        assert set(script.DAY_ARGS) == set(script.Args().day_settings())

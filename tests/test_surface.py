@@ -16,6 +16,7 @@ DECLARED = {
         "Args", "main", "cli", "check_args", "make_env", "Outcome", "In", "InputError", "StopSignals",  # running it
         "QEnsemble", "Actor", "HIDDEN_SIZE", "Teacher", "oracle_q", "oracle_feedback", "linear_schedule",  # the parts
         "tamer_loss", "update_actor", "iq_loss", "soft_value", "recover_reward", "soft_update", "SLEEP_GAMMA",
+        "RecoveredReward",  # inform_utils/recovered_reward.py loads it from a run
         "TAMER_POLICY_LR",
         "Night",  # the night, which the study subclasses
         "Evaluator", "evaluate", "obstacle_test", "obstacle_skipped", "object_xy", "check_video", "video_env",
@@ -23,7 +24,7 @@ DECLARED = {
     },
     "inform_dqn_gridworld": {
         "Args", "Sleep", "cli", "main", "check_args", "Evaluator", "StopSignals", "Teacher", "ReplayBuffer",
-        "tamer_loss", "iq_loss", "greedy_actions", "load_q_network", "InputError",
+        "tamer_loss", "iq_loss", "greedy_actions", "QNetwork", "read_checkpoint", "InputError",
     },
     "oracle_train": {"Actor"},
 }  # fmt: skip
