@@ -15,6 +15,17 @@ out of the task (its column of J set to zero) and held there; the rest take the 
 whole, never clipped joint by joint, to stay within the action limits (its direction kept). The controller reads only
 the observation (obs[:7] joint angles, obs[7:14] velocities), so it serves a policy's interface too.
 
+What limits the push on Pusher-v5 (measured; `python -m inform_utils.pusher_contact`): not the object's mass (its
+slides' armature 0.04 and damping 0.5 dwarf it, and the same xml pushes fine under MuJoCo 2.3.7: this demonstrator
+scores 0.80 on starts 1000-1029 with v5's xml under 2.3.7, 0.00 under 4.0.0), but MuJoCo 4's contact: it regularises the
+arm-object contact by the object's body_invweight0 = 1 / mass (1.27e5; 2.3.7 counted the armature: 16.7), so R is
+~6,700 (2.3.7: 1.9) and the contact holds ~0.39 N per metre of penetration. The object moves at f / 0.5, so one
+capsule pushes it at <= 0.05 m/s (deeper than 7 cm the crossbar passes through it); the fork's corners, two contacts
+at once, push at <= 0.08 (inner corner, as the SAC teacher does) and <= 0.10 (outer corner). A start needs 0.1-0.3 m
+of push, so the push alone takes 2-6 s of the episode's 5, and this controller's approach to behind the object takes
+another 1.3-2.9 s (26-58 steps; the SAC teacher touches the object at steps 10-19). This demonstrator pushes with the
+crossbar's middle, one contact: 0.03-0.04 m/s. What it would take: a corner push and an approach in under a second.
+
     python -m inform_utils.pusher_control --episodes 100              # the demonstrator on reset seeds 0-99
 """
 
