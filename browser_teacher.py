@@ -3,7 +3,7 @@ No to what it does (button or key: y, n; space for no answer), and "End the day"
 page then shows. A script imports this module only under `--teacher browser`.
 
 One local page, served by the standard library's HTTP server in a daemon thread; one inline HTML page, no build step.
-The standard library, not a server package (Flask, aiohttp): six routes and long polling need nothing more, and no
+The standard library, not a server package (Flask, aiohttp): seven routes and long polling need nothing more, and no
 new pin is needed to run it.
 Safe by default: it listens on 127.0.0.1 unless told otherwise; the printed address carries a random token and a
 request without it gets 403; only the routes below exist (any other path: 404) and no part of a request reaches the
@@ -17,6 +17,8 @@ crashed browser, a closed lid), another page holding the token may take over by 
     GET  /frame.png   the newest frame as PNG (its sequence number in the X-Frame-Seq header)
     GET  /outcome     the picture of what came of the night (PNG, or an animated GIF)
     POST /answer      {"nonce", "answer": "yes" | "no" | "none", "question": id | null, "seq": frame, "waited_ms"}
+    POST /drive       the Pusher: {"drive": "take" | "target" | "release", "target": [x, y]}: the person takes the
+                      arm (its fingertip follows the target, metres in the table's plane) or gives it back
     POST /end         the person ends the day
     POST /bye         the page is being closed or reloaded: the day ends if, `close_grace` s later, no page is open
 
@@ -35,7 +37,9 @@ as Deep TAMER does (Warnell et al. 2018: a delay uniform over 0.2-4 s), and `lab
         page.show_outcome("TAMER: 19 steps from S; INFORM: 19", image=rgb)
 
 Every answer is one line of `answers.jsonl` in the run directory (flushed at once): its time, the step, the action,
-the answer and the frame shown (sequence number and SHA-256; a maze's drawing itself). The page keeps an answer in
+the answer and the frame shown (sequence number and SHA-256; a maze's drawing itself); so is every take-over of the
+arm, target and giving back (`"event": "drive"`, with the step it came at). While the person holds the arm,
+`driving` is True and `target` their point; the script turns it into the arm's action. The page keeps an answer in
 the browser's storage until the server has it, so a reload or a dropped connection loses none and the page resumes.
 """
 
@@ -43,6 +47,7 @@ import hashlib
 import http.cookies
 import io
 import json
+import math
 import os
 import re
 import secrets
@@ -188,6 +193,7 @@ class BrowserTeacher:
         linger: float = 5.0,
         quiet: bool = False,
         takeover_after: float = 5.0,
+        no_value: float = 0.0,
     ):
         if task not in TASKS:
             raise ValueError(f"task must be one of {TASKS}, got {task!r}")
@@ -195,6 +201,11 @@ class BrowserTeacher:
             raise ValueError(f"pace must be above 0 steps a second, got {pace}")
         if not 0 <= delay[0] < delay[1]:
             raise ValueError(f"delay must be (low, high) seconds with 0 <= low < high, got {delay}")
+        if no_value not in (0.0, -1.0):
+            raise ValueError(f"no_value must be 0 (the paper's no feedback) or -1 (TAMER's), got {no_value}")
+        self.labels = {**LABELS, "no": float(no_value)}  # the label a No gives: 0 by default, or TAMER's -1
+        self.driving = False  # the person holds the arm (the Pusher), and moves its fingertip's target (x, y)
+        self.target: tuple[float, float] | None = None
         self.task = task
         self.participant = participant
         self.budget = budget
@@ -245,7 +256,7 @@ class BrowserTeacher:
         self.answers_path = os.path.join(run_dir, "answers.jsonl")
         self._log = open(self.answers_path, "a", encoding="utf-8")
         start = {"event": "start", "task": task, "participant": participant, "budget": budget, "pace": pace}
-        self._record(start | {"delay": self.delay, "host": host, "port": self.port})
+        self._record(start | {"delay": self.delay, "host": host, "port": self.port, "no_value": self.labels["no"]})
         shown_host = socket.gethostname() if host in ("", "0.0.0.0", "::") else host
         shown_host = f"[{shown_host}]" if ":" in shown_host else shown_host
         self.url = f"http://{shown_host}:{self.port}/?token={self.token}"
@@ -487,6 +498,8 @@ class BrowserTeacher:
             "outcome": self._outcome,
             "delay": self.delay,
             "pace": self.pace,
+            "driving": self.driving,
+            "target": self.target,
         }
 
     def _wait_state(self, since: int | None, role: str, session, page, connected) -> dict:
@@ -559,7 +572,7 @@ class BrowserTeacher:
             else:
                 frame = self._frame_record(seq)
                 step = frame[1]
-            answer = Answer(LABELS[label], label, given, step, self._step, question)
+            answer = Answer(self.labels[label], label, given, step, self._step, question)
             self._counts[label] += 1
             record = {"event": "answer", "participant": self.participant, "mode": "ask" if question else "stream"}
             record |= {"question": question, "step": step, "step_at_arrival": self._step, "action": frame[2]}
@@ -575,6 +588,31 @@ class BrowserTeacher:
                 self._streamed.append(answer)
             self._changed()
             return 200, {"taken": True}
+
+    def _take_drive(self, body: dict) -> tuple[int, dict]:
+        """A POSTed take-over of the arm: "take" it (at `target`), move its "target", or "release" it; (HTTP status,
+        reply). Each is a line of answers.jsonl with the step it came at."""
+        kind, target = body.get("drive"), body.get("target")
+        if kind not in ("take", "target", "release"):
+            return 400, {"error": "drive is one of take, target, release"}
+        if kind != "release" and not (
+            isinstance(target, list) and len(target) == 2
+            and all(isinstance(v, int | float) and math.isfinite(v) and abs(v) < 5 for v in target)
+        ):  # fmt: skip
+            return 400, {"error": "a take or a target needs target: [x, y], metres in the table's plane"}
+        with self._cond:
+            if self.ended is not None:
+                return 409, {"driving": False, "why": "the day is over"}
+            if self.task != "pusher" or self._mode != "stream":
+                return 409, {"driving": False, "why": "the arm is not streaming now"}
+            if kind == "target" and not self.driving:
+                return 409, {"driving": False, "why": "take the arm first"}
+            self.driving = kind != "release"
+            self.target = (float(target[0]), float(target[1])) if kind != "release" else self.target
+            self._record({"event": "drive", "participant": self.participant, "drive": kind, "step": self._step,
+                          "target": None if self.target is None else list(self.target)})  # fmt: skip
+            self._changed()
+            return 200, {"driving": self.driving}
 
     def _session(self, cookie_header: str | None, make: bool) -> tuple[str | None, str | None]:
         """(the request's session, a new session id to set as a cookie) for one request."""
@@ -659,6 +697,7 @@ class _Handler(BaseHTTPRequestHandler):
             "/frame.png": ("GET", self.frame),
             "/outcome": ("GET", self.outcome),
             "/answer": ("POST", self.answer),
+            "/drive": ("POST", self.drive),
             "/end": ("POST", self.end),
             "/bye": ("POST", self.bye),
         }
@@ -670,7 +709,7 @@ class _Handler(BaseHTTPRequestHandler):
         session, new = self.teacher._session(self.headers.get("Cookie"), make=path == "/")
         page = query.get("page", [""])[0]
         page = page if NONCE.fullmatch(page) else None
-        role = self.teacher._role(session, page, act=path in ("/answer", "/end"))
+        role = self.teacher._role(session, page, act=path in ("/answer", "/drive", "/end"))
         self.session, self.page_id = session, page
         handle(query, role, new)
 
@@ -748,6 +787,14 @@ class _Handler(BaseHTTPRequestHandler):
             return self.reply_json(403, {"error": "read-only: another page teaches this run"})
         self.reply_json(*self.teacher._take_answer(body))
 
+    def drive(self, query, role, new_session):
+        body = self.body()
+        if body is None:
+            return self.reply_json(400, {"error": "the body must be a JSON object of at most 4096 bytes"})
+        if role != "teacher":
+            return self.reply_json(403, {"error": "read-only: another page teaches this run"})
+        self.reply_json(*self.teacher._take_drive(body))
+
     def end(self, query, role, new_session):
         if role != "teacher":
             return self.reply_json(403, {"error": "read-only: another page teaches this run"})
@@ -793,6 +840,8 @@ button.yes{background:#e8f5e9;border-color:#2e7d32} button.no{background:#ffebee
 button:disabled{opacity:.4;cursor:default} #end{margin-left:1.2rem}
 kbd{border:1px solid #aaa;border-radius:3px;padding:0 .25rem;font-size:.85em;background:#fafafa}
 #hint{color:#555;font-size:.95rem}
+#map{border:1px solid #bbb;border-radius:6px;background:#f4efe6;cursor:crosshair}
+#drive-status{color:#333;margin:.3rem 0} #drive-status.you{color:#1b5e20;font-weight:bold}
 </style></head>
 <body>
 <h1>INFORM: teach the agent</h1>
@@ -801,7 +850,11 @@ kbd{border:1px solid #aaa;border-radius:3px;padding:0 .25rem;font-size:.85em;bac
 <div id="banner" hidden></div>
 <div id="day">
 <div id="question"></div>
-<div id="view"><pre id="maze" hidden></pre><img id="frame" alt="the agent" hidden></div>
+<div id="view"><pre id="maze" hidden></pre><img id="frame" alt="the agent" hidden>
+<canvas id="map" width="240" height="240" hidden
+ title="the table from above: red the goal, white the object, blue the fingertip, green your target"></canvas></div>
+<div id="drive" hidden><button id="take">Take the arm <kbd>t</kbd></button>
+<button id="release">Give it back <kbd>g</kbd></button><div id="drive-status"></div></div>
 <div id="info"></div>
 <div id="buttons">
 <button id="yes" class="yes" disabled>Yes <kbd>y</kbd></button>
@@ -889,6 +942,56 @@ async function flush() {  // send the kept answers, oldest first, until the serv
   } finally { flushing = false; render(); }
 }
 
+const MAP = {x0: -0.1, x1: 0.9, y0: -0.8, y1: 0.2};  // the table's plane the map shows, metres (x right, y up)
+let myTarget = null;  // the target this page last sent, while it holds the arm (a poll's reply may lag behind it)
+function toMap(p) {
+  const c = $("map");
+  return [(p[0] - MAP.x0) / (MAP.x1 - MAP.x0) * c.width, (MAP.y1 - p[1]) / (MAP.y1 - MAP.y0) * c.height];
+}
+function fromMap(px, py) {
+  const c = $("map");
+  return [MAP.x0 + px / c.width * (MAP.x1 - MAP.x0), MAP.y1 - py / c.height * (MAP.y1 - MAP.y0)];
+}
+function tableMap() { return state && state.task === "pusher" && state.info && state.info._map; }
+function canDrive() { const s = state; return s && s.role === "teacher" && s.mode === "stream" && !s.ended && !gone; }
+function drawMap() {
+  const c = $("map"), m = tableMap();
+  c.hidden = !m;
+  if (!m) return;
+  const g = c.getContext("2d");
+  g.clearRect(0, 0, c.width, c.height);
+  const dot = (p, r, fill, line) => {
+    const [x, y] = toMap(p);
+    g.beginPath(); g.arc(x, y, r, 0, 2 * Math.PI); g.fillStyle = fill; g.fill();
+    if (line) { g.strokeStyle = line; g.stroke(); }
+  };
+  dot(m.goal, 9, "#e53935");
+  dot(m.object, 7, "#ffffff", "#555");
+  dot(m.tip, 5, "#1e88e5");
+  const t = state.driving ? (myTarget || state.target) : null;
+  if (t) {
+    const [x, y] = toMap(t);
+    g.strokeStyle = "#2e7d32"; g.lineWidth = 2;
+    g.beginPath(); g.moveTo(x - 7, y); g.lineTo(x + 7, y); g.moveTo(x, y - 7); g.lineTo(x, y + 7); g.stroke();
+    g.lineWidth = 1;
+  }
+}
+let driving = Promise.resolve();
+function drive(kind, target) {  // take the arm at `target`, move its target, or give it back
+  if (!canDrive() || (kind === "target" && !state.driving)) return;
+  myTarget = kind === "release" ? null : target;
+  state.driving = kind !== "release";  // shown at once; the server's state follows
+  if (target) state.target = target;
+  const body = JSON.stringify(kind === "release" ? {drive: kind} : {drive: kind, target});
+  const post = () => fetch(url("/drive"), {method: "POST", headers: {"Content-Type": "application/json"}, body});
+  driving = driving.then(post).catch(() => setOffline(true));  // in the order given
+  render();
+}
+function nudge(dx, dy) {  // the arrow keys: the target 2 cm along x or y
+  const t = myTarget || state.target || (tableMap() || {}).tip;
+  if (t) drive("target", [t[0] + dx, t[1] + dy]);
+}
+
 function setOffline(on) { if (offline !== on) { offline = on; render(); } }
 
 function describe(info) {
@@ -940,11 +1043,22 @@ function render() {
   $("end").textContent = endArmed > Date.now() ? "Click again to end the day" : "End the day";
   const window = `Your answer applies to what happened ${s.delay[0]}–${s.delay[1]} s before it.`;
   $("hint").textContent = s.mode === "stream" ? window : "";
+  const pusher = s.task === "pusher" && !s.ended && !gone;
+  $("drive").hidden = !pusher;
+  $("take").disabled = !canDrive() || s.driving;
+  $("release").disabled = !canDrive() || !s.driving;
+  $("drive-status").className = s.driving ? "you" : "";
+  $("drive-status").textContent = s.driving
+    ? "You drive the arm: click the map or use the arrow keys (2 cm a press); g gives it back."
+    : "The agent drives. t, or a click on the map, takes the arm: its fingertip follows your target.";
+  if (!s.driving) myTarget = null;
+  drawMap();
   const day = $("day").dataset;  // for a test (or a study's screen recorder) to read
   day.question = s.question && s.mode === "ask" ? s.question.id : "";
   day.open = q === null ? "0" : "1";
   day.mode = gone ? "closed" : s.mode;
   day.answers = s.answers;
+  day.driving = s.driving ? "1" : "0";
   if (s.outcome) {
     $("outcome").hidden = false;
     if ($("outcome-text").dataset.text !== s.outcome.text) {
@@ -1014,8 +1128,23 @@ $("end").addEventListener("click", async (e) => {
   endArmed = 0;
   try { await fetch(url("/end"), {method: "POST"}); } catch (err) { setOffline(true); }
 });
+$("take").addEventListener("click", (e) => {
+  e.currentTarget.blur();
+  if (tableMap()) drive("take", tableMap().tip);
+});
+$("release").addEventListener("click", (e) => { e.currentTarget.blur(); drive("release"); });
+$("map").addEventListener("click", (e) => {
+  const box = $("map").getBoundingClientRect(), c = $("map");
+  const xy = fromMap((e.clientX - box.left) * c.width / box.width, (e.clientY - box.top) * c.height / box.height);
+  drive(state && state.driving ? "target" : "take", xy);
+});
 document.addEventListener("keydown", (e) => {
-  if (e.repeat || e.ctrlKey || e.metaKey || e.altKey) return;
+  if (e.ctrlKey || e.metaKey || e.altKey) return;
+  const step = {ArrowRight: [0.02, 0], ArrowLeft: [-0.02, 0], ArrowUp: [0, 0.02], ArrowDown: [0, -0.02]}[e.key];
+  if (step && state && state.driving) { e.preventDefault(); nudge(...step); return; }
+  if (e.repeat) return;
+  if ((e.key === "t" || e.key === "T") && tableMap() && !state.driving) { drive("take", tableMap().tip); return; }
+  if ((e.key === "g" || e.key === "G") && state && state.driving) { drive("release"); return; }
   const label = {y: "yes", Y: "yes", n: "no", N: "no", " ": "none"}[e.key];
   if (label) { e.preventDefault(); answer(label); }
 });

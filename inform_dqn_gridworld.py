@@ -34,7 +34,7 @@ import tempfile
 import time
 import typing
 import zipfile
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, is_dataclass
 from typing import Annotated, Literal
 
 # the signals that stop a run, which then saves what finished: Ctrl-C, kill and Slurm (SIGTERM), a closed terminal
@@ -189,9 +189,9 @@ class Args:
         return self
 
     def day_settings(self) -> dict:
-        """What the day runs with: every flag marked DAY (a subclass's too), kept whole by a saved day."""
-        hints = typing.get_type_hints(type(self), include_extras=True)
-        marked = [f.name for f in fields(self) if DAY in getattr(hints[f.name], "__metadata__", ())]
+        """What the day runs with: every flag marked DAY, here or in a subclass (which may redefine one), kept whole."""
+        hints = [typing.get_type_hints(c, include_extras=True) for c in type(self).__mro__ if is_dataclass(c)]
+        marked = [f.name for f in fields(self) if any(DAY in getattr(h.get(f.name), "__metadata__", ()) for h in hints)]
         return {name: getattr(self, name) for name in marked}
 
     def night_settings(self) -> dict:

@@ -39,7 +39,7 @@ import time
 import typing
 import xml.etree.ElementTree as ET
 import zipfile
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, is_dataclass
 from typing import Annotated, Literal
 
 # the signals that stop a run, which then saves what finished: Ctrl-C, kill and Slurm (SIGTERM), a closed terminal
@@ -213,9 +213,9 @@ class Args:
         return Outcome(self.success_info_key, self.success_distance, self.success_return)
 
     def day_settings(self) -> dict:
-        """What the day runs with: every flag marked DAY (a subclass's too), kept whole by a saved day."""
-        hints = typing.get_type_hints(type(self), include_extras=True)
-        marked = [f.name for f in fields(self) if DAY in getattr(hints[f.name], "__metadata__", ())]
+        """What the day runs with: every flag marked DAY, here or in a subclass (which may redefine one), kept whole."""
+        hints = [typing.get_type_hints(c, include_extras=True) for c in type(self).__mro__ if is_dataclass(c)]
+        marked = [f.name for f in fields(self) if any(DAY in getattr(h.get(f.name), "__metadata__", ()) for h in hints)]
         return {name: getattr(self, name) for name in marked}
 
     def sleep_recipe(self) -> dict:
@@ -294,6 +294,7 @@ class BatchedLinear(nn.Module):
         return torch.baddbmm(self.bias, x, self.weight)
 
 
+# held source-identical in inform_sac_pusher.py and oracle_train.py (a test): a change goes into both
 class QEnsemble(nn.Module):
     """`n` Q (or H) networks as one module: twin critics with n=2, the sleep critic with n=1. Returns [n, B]."""
 
@@ -411,6 +412,9 @@ class Teacher:
     def gone(self) -> bool:  # the budget is spent: no more feedback from now on
         return self.budget is not None and self.positives >= self.budget
 
+    def drive(self, obs: torch.Tensor) -> torch.Tensor | None:  # a person at the page may take the arm: their action
+        return None
+
     def __call__(self, step: int, h_star: float, action=None) -> dict[int, float]:  # the action: for a person's eyes
         self.perfect_positives += int(h_star > 0)
         flip, click = self.rng.random(2)  # always two draws: the stream does not depend on the answers
@@ -495,12 +499,13 @@ class ReplayBuffer:
         self.feedback = torch.zeros(capacity, device=device)  # h, written by the teacher when a signal arrives
         self.terminated = torch.zeros(capacity, device=device)
         self.success = torch.zeros(capacity, dtype=torch.bool, device=device)
+        self.driven = torch.zeros(capacity, dtype=torch.bool, device=device)  # a person at the page drove the arm
         self.episodes: list[tuple[int, int, float]] = []  # (first step, end step, shortfall: see Outcome)
         self.size = 0  # transitions stored (fewer than the capacity when the teacher's budget ends the day early)
 
-    def add(self, obs, action, next_obs, terminated) -> None:
+    def add(self, obs, action, next_obs, terminated, driven: bool = False) -> None:
         self.obs[self.size], self.actions[self.size], self.next_obs[self.size] = obs, action, next_obs
-        self.terminated[self.size] = float(terminated)
+        self.terminated[self.size], self.driven[self.size] = float(terminated), driven
         self.size += 1
 
     def tag_episode(self, start: int, shortfall: float, success: bool) -> None:
@@ -605,6 +610,8 @@ def forward_phase(day: Day, env, oracle_actor, oracle_qf, teacher, outcome, buff
         else:
             with torch.no_grad():
                 action_t = day.actor.get_action(obs_t.unsqueeze(0))[0][0]
+        driven = teacher.drive(obs_t)  # None, or the action of a person who has taken the arm (at the web page)
+        action_t = action_t if driven is None else driven
 
         # ALGO LOGIC: the teacher watches (s, a): the perfect answer (Eq. 4), then the person's (Teacher)
         taught = not teacher.gone  # after the budget is spent, TAMER has nothing to learn from
@@ -616,7 +623,7 @@ def forward_phase(day: Day, env, oracle_actor, oracle_qf, teacher, outcome, buff
 
         next_obs, reward, terminated, truncated, info = env.step(action_t.cpu().numpy())
         next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
-        buffer.add(obs_t, action_t, next_t, terminated)
+        buffer.add(obs_t, action_t, next_t, terminated, driven is not None)
         ep_return += float(reward)
         ep_length += 1
         last_step = step == n - 1 or (teacher.gone and s["budget_ends_forward_phase"])
@@ -657,6 +664,7 @@ def forward_phase(day: Day, env, oracle_actor, oracle_qf, teacher, outcome, buff
           f"{successes}/{len(buffer.episodes)} episodes tagged success", flush=True)  # fmt: skip
     stats = {"feedback/positive": positives, "feedback/perfect_positive": teacher.perfect_positives}
     stats.update({"feedback/steps": buffer.size, "feedback/positive_rate": positives / buffer.size})
+    stats["feedback/driven_steps"] = int(buffer.driven[: buffer.size].sum())  # a person's own steps (the web page)
     stats.update({"sleep/success_episodes": int(successes), "sleep/episodes": len(buffer.episodes)})
     return {**stats, "losses/tamer_entropy_coef": day.log_ent_coef.exp().item()}
 
@@ -1231,12 +1239,11 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
         else:  # --sleep-from: the saved day's memories and TAMER, and the random streams where the day left them
             day, stats = restore_day(saved, buffer, evaluator, device)
             summary["day_settings"] = saved["day_args"]  # whole, as the day recorded them (known here or not)
-        h_net, tamer_actor = day.h_net, day.actor
         summary["time/tamer_s"] = time.time() - evaluator.seconds - t0
         summary["sps/tamer"] = stats["feedback/steps"] / max(summary["time/tamer_s"], 1e-9)
         summary.update(stats)  # a saved day's stats bring the day's own time
-        save_actor(f"{run_dir}/tamer_actor.pt", tamer_actor, env_id=args.env_id)
-        save_critic(f"{run_dir}/tamer_h.pt", h_net, obs_dim, act_dim, env_id=args.env_id)
+        save_actor(f"{run_dir}/tamer_actor.pt", day.actor, env_id=args.env_id)
+        save_critic(f"{run_dir}/tamer_h.pt", day.h_net, obs_dim, act_dim, env_id=args.env_id)
         if args.save_buffer:
             day_stats = {**stats, "time/tamer_s": summary["time/tamer_s"], "sps/tamer": summary["sps/tamer"]}
             save_day(f"{run_dir}/day.pt", day, buffer, oracle_ckpt, day_stats, evaluator.generator)
@@ -1245,7 +1252,8 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
         phase, t0 = "sleep", time.time() - evaluator.seconds
         if args.sleep_seed is not None:  # another night on the same day
             torch.manual_seed(args.sleep_seed)
-        night = args.night(tamer_actor, device, tamer={"h_net": h_net, "ent_coef": stats["losses/tamer_entropy_coef"]})
+        night = args.night(day.actor, device, tamer={"h_net": day.h_net,
+                                                     "ent_coef": stats["losses/tamer_entropy_coef"]})  # fmt: skip
         summary.update(sleep_phase(night, buffer, args.sleep_gradient_steps, args.sleep_batch_size, evaluator, writer,
                                    device))  # fmt: skip
         q_net, inform_actor, selected = night.q_net, night.actor, night.selected
@@ -1254,7 +1262,7 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
         save_actor(f"{run_dir}/inform_actor.pt", inform_actor, env_id=args.env_id)
         extra = {"env_id": args.env_id, "gamma": SLEEP_GAMMA, "temperature": args.sleep_temperature}
         save_critic(f"{run_dir}/inform_critic.pt", q_net, obs_dim, act_dim, **extra)
-        policies = {"oracle": oracle_actor, "tamer": tamer_actor, "inform": inform_actor}
+        policies = {"oracle": oracle_actor, "tamer": day.actor, "inform": inform_actor}
         if selected is not None:  # the checkpoint picked offline, beside the last one
             save_actor(f"{run_dir}/inform_selected_actor.pt", selected["actor"], env_id=args.env_id)
             policies["inform_selected"] = selected["actor"]
@@ -1309,13 +1317,8 @@ GL_HINT = "install EGL (Debian: apt-get install libegl1 libegl-mesa0) or OSMesa 
 def check_video(env_id: str) -> None:
     """--capture-video, before anything is written: MuJoCo renders headless here and mp4 can be written (InputError,
     one line, if not). Its plumbing is inform_utils/videos.py, imported only under this flag."""
-
-    def one_frame() -> np.ndarray:
-        with contextlib.closing(make_env(env_id, 0, render_mode="rgb_array", width=16, height=16)) as env:
-            env.reset(seed=0)
-            return env.render()
-
-    if (problem := videos().gl_problem(one_frame)) is not None:
+    small = {"render_mode": "rgb_array", "width": 16, "height": 16}
+    if (problem := videos().gl_problem(lambda: make_env(env_id, 0, **small))) is not None:
         raise InputError(problem)
 
 
@@ -1488,7 +1491,7 @@ def oracle_checkpoint(actor: Actor, qf: QEnsemble, env_id: str, steps: int, seed
 # saved days (--save-buffer, --sleep-from): a day is deterministic, so it is saved once and slept on many times
 DAY_FORMAT = "inform-day-2"
 DAY_ARGS = tuple(Args().day_settings())  # the flags that shape a day (marked DAY): a saved day records them
-DAY_TENSORS = ("obs", "actions", "next_obs", "feedback", "terminated", "success")
+DAY_TENSORS = ("obs", "actions", "next_obs", "feedback", "terminated", "success", "driven")
 # what shaped a day and is a constant now, under the flag names that days record it by
 DAY_CONSTANTS = {"hidden_size": HIDDEN_SIZE, "eval_frequency": EVAL_FREQUENCY, "tamer_policy_lr": TAMER_POLICY_LR}
 DAY_CONSTANTS["tamer_policy_frequency"] = 1
@@ -1533,6 +1536,7 @@ def load_day(run_dir: str) -> dict:
     ran = {k: day["day_args"].get(k, v) for k, v in DAY_CONSTANTS.items()}
     if ran != DAY_CONSTANTS:
         raise InputError(f"--sleep-from {path}: the day ran with {ran}, this script has {DAY_CONSTANTS}")
+    day.setdefault("driven", torch.zeros(len(day.get("obs", ())), dtype=torch.bool))  # saved before a person drove
     check_day(day, path)
     day["oracle"]["path"] = day["oracle_path"] or f"the oracle saved in {path}"
     if "kwargs" not in day["tamer_h"]:  # saved before days kept their networks' arguments: today's (checked above)
@@ -1557,8 +1561,8 @@ def check_day(day: dict, path: str) -> None:
     try:
         n, (obs_dim, act_dim), table = day["obs"].shape[0], env_shapes(day["env_id"]), day["episode_start"].shape
         starts, ends, term = day["episode_start"], day["episode_end"], day["terminated"]
-        shapes = {"obs": (n, obs_dim), "next_obs": (n, obs_dim), "actions": (n, act_dim), "feedback": (n,)}
-        shapes.update({"terminated": (n,), "success": (n,), "episode_end": table, "episode_shortfall": table})
+        shapes = {"obs": (n, obs_dim), "next_obs": (n, obs_dim), "actions": (n, act_dim), "episode_end": table}
+        shapes.update(dict.fromkeys(("feedback", "terminated", "success", "driven"), (n,)), episode_shortfall=table)
         checks = {"shapes": all(day[k].shape == shape for k, shape in shapes.items()) and len(table) == 1}
         checks["values"] = all(torch.isfinite(day[k]).all() for k in ("obs", "next_obs", "actions", "feedback"))
         checks["terminated flags"] = bool(((term == 0) | (term == 1)).all())

@@ -227,6 +227,7 @@ class BatchedLinear(nn.Module):
         return torch.baddbmm(self.bias, x, self.weight)
 
 
+# held source-identical in inform_sac_pusher.py and oracle_train.py (a test): a change goes into both
 class QEnsemble(nn.Module):
     """`n` Q (or H) networks as one module: twin critics with n=2, the sleep critic with n=1. Returns [n, B]."""
 
@@ -1014,14 +1015,7 @@ def check_video(env_id: str) -> None:
         raise InputError(f"--capture-video films a SAC teacher; inform_dqn_gridworld.py draws the maze's, not {env_id}")
     from inform_utils import videos
 
-    def one_frame() -> np.ndarray:
-        env = video_env(env_id, size=16)
-        env.reset(seed=0)
-        frame = env.render()[-1]
-        env.close()
-        return frame
-
-    if (problem := videos.gl_problem(one_frame)) is not None:
+    if (problem := videos.gl_problem(lambda: video_env(env_id, size=16))) is not None:
         raise InputError(problem)
 
 

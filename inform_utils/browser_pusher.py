@@ -3,8 +3,9 @@
 steps a second; the person answers Yes or No whenever the arm does well or badly (button, or keys y, n). An answer is
 about what the page showed 0.2-4 s before it (`--credit-delay`, Deep TAMER's window, which weighs each step by the
 chance that the delay fell while it was on the screen). A step's label is the credit-weighted mean of the answers
-about it (yes 1, no 0): Deep TAMER trains on each answer with its weight, and a squared loss on one label a step has
-the same minimum. Pusher's h is 0 or 1, so a step no answer is about keeps 0, as after a No. "End the day" (or closing
+about it (yes 1, no 0, or -1 with `--no-label -1`, TAMER's signed answer): Deep TAMER trains on each answer with its
+weight, and a squared loss on one label a step has the same minimum. A step no answer is about keeps 0, the paper's
+"no feedback" (by default also a No's label). "End the day" (or closing
 the page, or `--tamer-total-timesteps` steps) starts the night (the day starts when the page is opened); the page then
 shows TAMER's and INFORM's episodes from the run's start and the final numbers. Everything else is the core script's
 run: the same summary.json, the same flags (a person's day is shorter by default), --save-buffer for nights on the
@@ -14,7 +15,7 @@ day.
     python -m inform_utils.browser_pusher --participant P01 --host 0.0.0.0:8000 --pace 5 --save-buffer
 
 Every answer is a line of runs/{run}/answers.jsonl (its time, step, action and the frame shown). The core script
-stays within its flag budget; this module holds the page's four flags (as inform_utils/sleep_variants_pusher.py
+stays within its flag budget; this module holds the page's five flags (as inform_utils/sleep_variants_pusher.py
 holds the study's).
 """
 
@@ -58,14 +59,16 @@ SIMULATED_ONLY = {"teacher_noise": 0.0, "teacher_sparsity": 1.0, "teacher_delay"
 
 @dataclass
 class Args(isp.Args):
-    participant: str | None = None
+    participant: Annotated[str | None, isp.DAY] = None
     """the person's ID, written with each answer into runs/{run}/answers.jsonl"""
     host: str = "127.0.0.1"
     """where the page listens, HOST or HOST:PORT (0.0.0.0: other machines too; no port: any free one)"""
-    pace: Annotated[float, isp.In(0, 100, "(]")] = 10.0
+    pace: Annotated[float, isp.In(0, 100, "(]"), isp.DAY] = 10.0
     """env steps a second: how fast the arm moves on the page (a Pusher episode is 100 steps)"""
-    credit_delay: tuple[float, float] = (0.2, 4.0)
+    credit_delay: Annotated[tuple[float, float], isp.DAY] = (0.2, 4.0)
     """seconds: an answer is about what the page showed this long before it, uniformly (Deep TAMER's window)"""
+    no_label: Annotated[float, isp.DAY] = 0.0
+    """the label a No gives: 0 (the paper's "no feedback", as a step nobody judged) or -1 (TAMER's negative)"""
     # a person's day, shorter than the simulated teacher's: 6,000 steps are 10 minutes at 10 steps a second
     tamer_total_timesteps: Annotated[int, isp.In(1)] = 6000
     """environment steps of the day at most (the person may end it sooner)"""
@@ -78,7 +81,9 @@ class Args(isp.Args):
 class PageTeacher:
     """The person at the page, with the simulated Teacher's interface: called once a step with the oracle's perfect
     answer h* (kept for the record only) and the action; shows the step and returns {step: label} of the answers
-    that arrived since. `gone`: the person ended the day, closed the page, or spent the budget."""
+    that arrived since. `gone`: the person ended the day, closed the page, or spent the budget. `drive`: while the
+    person holds the arm, the step's action is theirs (the fingertip controller towards their target), and H hears
+    it as a yes: a person's own action is what they would have answered yes to (docs/protocol.md)."""
 
     def __init__(self, args: Args, env, run_dir: str):
         import browser_teacher
@@ -86,7 +91,7 @@ class PageTeacher:
         host, port = browser_teacher.host_and_port(args.host)
         self.page = browser_teacher.BrowserTeacher(run_dir, "pusher", host, port, participant=args.participant,
                                                    budget=args.feedback_budget, pace=args.pace,
-                                                   delay=args.credit_delay)  # fmt: skip
+                                                   delay=args.credit_delay, no_value=args.no_label)  # fmt: skip
         self.env, self.last_step, self.budget = env, args.tamer_total_timesteps - 1, args.feedback_budget
         self.camera = camera_env(args.env_id, FRAME_SIZE)
         self.camera.reset(seed=args.seed)
@@ -94,6 +99,9 @@ class PageTeacher:
         self.frame = None
         self.credited: dict[int, tuple[float, float]] = {}  # step: (sum of weight * answer, sum of weights)
         self.positives = self.perfect_positives = 0
+        from inform_utils.pusher_control import FingertipController
+
+        self.controller, self.drove = FingertipController(env.unwrapped.model), False
 
     def wait_for_person(self) -> None:  # the day starts when the person opens the page (a stop ends the wait)
         while not self.page.person_here(0.2):
@@ -104,6 +112,15 @@ class PageTeacher:
         spent = self.budget is not None and self.positives >= self.budget
         return self.page.ended is not None or spent
 
+    def drive(self, obs_t: torch.Tensor) -> torch.Tensor | None:
+        """The person's action while they hold the arm: joint torques that bring the fingertip to their target (the
+        operational-space controller of inform_utils/pusher_control.py, within the action limits); None otherwise."""
+        target = self.page.target
+        self.drove = self.page.driving and target is not None and not self.gone
+        if not self.drove:
+            return None
+        return torch.as_tensor(self.controller(obs_t.cpu().numpy(), target), dtype=torch.float32, device=obs_t.device)
+
     def __call__(self, step: int, h_star: float, action=None) -> dict[int, float]:
         self.perfect_positives += int(h_star > 0)
         if step % self.every == 0 or self.frame is None:  # the camera's copy of the arm, where the day's arm is
@@ -113,12 +130,15 @@ class PageTeacher:
         obs = self.env.unwrapped._get_obs()
         info = {"object to goal": f"{np.linalg.norm(obs[17:20] - obs[20:23]):.2f} m"}  # Pusher's observation
         info.update(_obs=obs.tolist(), _action=None if action is None else action.tolist())  # for a script's eyes
+        info["_map"] = {"tip": obs[14:16].tolist(), "object": obs[17:19].tolist(), "goal": obs[20:22].tolist()}
         self.page.show(step, self.frame, action=info["_action"], info=info)
         if step == self.last_step:  # first: an answer the page took before the end is among those below
             self.page.end_day("the day's steps are done")
         answers = [a for a in self.page.answers() if a.value is not None]
         self.positives += sum(a.value > 0 for a in answers)
         labels = weighted_labels(self.credited, [(a.value, self.page.credit(a)) for a in answers])
+        if self.drove:  # the person's own step: a yes, weighed with any answer about it
+            labels.update(weighted_labels(self.credited, [(1.0, {step: 1.0})]))
         return {t: h for t, h in labels.items() if t <= step}
 
 
@@ -171,6 +191,8 @@ def check_page_args(args: Args) -> None:
     low, high = args.credit_delay
     if not (0 <= low < high and math.isfinite(high)):
         raise isp.InputError(f"--credit-delay must be LOW HIGH seconds with 0 <= LOW < HIGH, got {low} {high}")
+    if args.no_label not in (0.0, -1.0):
+        raise isp.InputError(f"--no-label must be 0 (no feedback) or -1 (TAMER's negative answer), got {args.no_label}")
     changed = [f"--{k.replace('_', '-')}" for k, v in SIMULATED_ONLY.items() if getattr(args, k) != v]
     if changed:
         raise isp.InputError(f"{', '.join(changed)}: the simulated teacher's; the page takes the person's answers as "

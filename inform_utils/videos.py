@@ -12,14 +12,15 @@ import sys
 import warnings
 from collections.abc import Callable
 
+import gymnasium as gym
 import numpy as np
 
 GL_HINT = "install EGL (Debian: apt-get install libegl1 libegl-mesa0) or OSMesa (libosmesa6, MUJOCO_GL=osmesa)"
 
 
-def gl_problem(render: Callable[[], np.ndarray]) -> str | None:
-    """None if `render` (one 16 x 16 RGB frame of the task) works headless and imageio-ffmpeg is there; else what is
-    wrong and how to fix it, in one line. Picks egl when MUJOCO_GL is unset and there is no display."""
+def gl_problem(make_env: Callable[[], gym.Env]) -> str | None:
+    """None if the env `make_env` makes (rendering 16 x 16 RGB frames) renders headless and imageio-ffmpeg is there;
+    else what is wrong and how to fix it, in one line. Picks egl when MUJOCO_GL is unset and there is no display."""
     if not os.environ.get("MUJOCO_GL") and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
         os.environ["MUJOCO_GL"] = "egl"  # unset or empty, and no screen
     if os.environ.get("MUJOCO_GL") not in (None, "egl", "osmesa", "glfw"):
@@ -31,7 +32,11 @@ def gl_problem(render: Callable[[], np.ndarray]) -> str | None:
     try:
         with contextlib.suppress(Exception), warnings.catch_warnings():  # a failing backend warns, then raises
             warnings.simplefilter("ignore")
-            frame = np.asarray(render())
+            env = make_env()
+            env.reset(seed=0)
+            frame = env.render()  # a frame, or (Gymnasium's RenderCollection) the frames so far
+            frame = np.asarray(frame[-1] if isinstance(frame, list) else frame)
+            env.close()
         gc.collect()
     finally:
         sys.unraisablehook = hook

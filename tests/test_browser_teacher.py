@@ -233,6 +233,22 @@ def test_answers_reach_the_loop_and_answers_jsonl(teacher):
     assert (state["answers"], state["yes"], state["no"], state["none"], state["budget"]) == (3, 1, 1, 1, 5)
 
 
+def test_a_no_can_be_tamers_minus_one_and_is_recorded_so(tmp_path):
+    with BrowserTeacher(str(tmp_path / "run"), quiet=True, close_grace=0.3, linger=0, no_value=-1.0) as teacher:
+        loop = Loop(teacher, moves=2)
+        person = Session(teacher)
+        person.load()
+        for number, label in enumerate(["no", "yes"], start=1):
+            person.open_question(number)
+            assert person.answer(label, number, f"nonce-{number}") == (200, {"taken": True})
+        loop.join()
+        assert loop.returned == [-1.0, 1.0]  # the loop gets TAMER's signed labels
+        assert [row["value"] for row in lines(teacher)] == [-1.0, 1.0]
+        assert lines(teacher, "start")[0]["no_value"] == -1.0
+    with pytest.raises(ValueError, match="no_value"):
+        BrowserTeacher(str(tmp_path / "bad"), quiet=True, no_value=0.5)
+
+
 def test_a_body_nested_thousands_deep_gets_a_400(teacher):
     person = Session(teacher)
     person.load()
@@ -793,6 +809,63 @@ def test_a_person_teaches_the_pusher_through_the_page_and_sees_the_night(new_pag
     assert int(labelled.max()) <= max(row["step_at_arrival"] for row in rows)  # an answer is about what came before
 
 
+def test_a_person_takes_the_arm_drives_its_fingertip_by_keys_and_gives_it_back(new_page, tmp_path, monkeypatch):
+    """Take control at the Pusher's page (issue 53): t takes the arm, the arrow keys move the fingertip's target 2 cm
+    a press, the arm gets there (the operational-space controller, within the action limits), g gives it back. The
+    person's steps are marked in the saved day and in answers.jsonl, and H hears each as a yes."""
+    import torch
+
+    monkeypatch.setenv("PYTHONPATH", REPO)
+    monkeypatch.setenv("MUJOCO_GL", os.environ.get("MUJOCO_GL", "egl"))
+    flags = ["--participant", "D1", "--pace", "40", "--save-buffer", *PUSHER_TINY]
+    child = Child([sys.executable, "-m", "inform_utils.browser_pusher", *flags], cwd=tmp_path)
+    url = child.wait_for_line("[teacher] open the teaching page", timeout=180).split(": ", 1)[1].strip()
+    (run_dir,) = (tmp_path / "runs").iterdir()
+    page = new_page(url)
+    wait_until(lambda: page.evaluate("Boolean(state && state.info && state.info._map)"), "the table's map")
+    assert page.is_visible("#map") and page.get_attribute("#day", "data-driving") == "0"
+    page.keyboard.press("t")
+    wait_until(lambda: page.get_attribute("#day", "data-driving") == "1", "the arm taken")
+    start = page.evaluate("state.target")
+    for key, presses in (("ArrowLeft", 14), ("ArrowUp", 8)):  # 28 cm towards the arm, 16 cm towards the goal
+        for _ in range(presses):
+            page.keyboard.press(key)
+            time.sleep(0.02)
+    target = [start[0] - 0.28, start[1] + 0.16]
+    wait_until(lambda: np.allclose(page.evaluate("state.target"), target, atol=1e-9), "the target at the server")
+
+    def tip_distance():
+        return float(np.linalg.norm(np.array(page.evaluate("state.info._map.tip")) - target))
+
+    wait_until(lambda: tip_distance() < 0.02, "the fingertip at the target", timeout=60)
+    time.sleep(0.5)  # a few more steps held there
+    assert tip_distance() < 0.02
+    page.keyboard.press("g")
+    wait_until(lambda: page.get_attribute("#day", "data-driving") == "0", "the arm given back")
+    time.sleep(0.5)
+    page.click("#end")
+    page.click("#end")
+    code, out, err = child.finish(timeout=300)
+    assert code == 0, err[-2000:]
+
+    with open(run_dir / "answers.jsonl") as f:
+        drives = [row for row in map(json.loads, f) if row["event"] == "drive"]
+    assert [row["drive"] for row in drives] == ["take", *["target"] * 22, "release"]
+    assert np.allclose(drives[-2]["target"], target) and all(row["participant"] == "D1" for row in drives)
+    taken, released = drives[0]["step"], drives[-1]["step"]
+    day = torch.load(run_dir / "day.pt", weights_only=True)
+    driven = day["driven"].nonzero().squeeze(-1)
+    assert driven.numel() > 10 and bool((driven[1:] - driven[:-1] == 1).all())  # one stretch of the person's steps
+    # a drive is recorded with the step on the screen; the steps after it (the next one may be on its way) are driven
+    assert 0 < int(driven[0]) - taken <= 2 and 0 <= int(driven[-1]) - released <= 2
+    assert bool((day["feedback"][driven] > 0.99).all())  # H hears the person's own steps as yes
+    assert bool((day["actions"][driven].abs() <= 2.0).all())
+    tip = day["next_obs"][int(driven[-1]), 14:17].numpy()  # where the person left the fingertip
+    assert np.linalg.norm(tip - np.array([*target, -0.275])) < 0.02, tip
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["status"] == "completed" and summary["feedback/driven_steps"] == driven.numel()
+
+
 @pytest.mark.parametrize(
     ("values", "phrase"),
     [
@@ -802,6 +875,7 @@ def test_a_person_teaches_the_pusher_through_the_page_and_sees_the_night(new_pag
         ({"env_id": "Reacher-v5"}, "the page shows the Pusher only"),
         ({"host": "127.0.0.1:99999"}, "--host must be HOST or HOST:PORT"),
         ({"pace": 0.0}, r"--pace must be in \(0, 100\]"),
+        ({"no_label": 0.5}, "--no-label must be 0"),
     ],
 )
 def test_the_pusher_pages_flags_are_checked(values, phrase):

@@ -580,7 +580,10 @@ def test_both_scripts_carry_the_same_networks_and_judge_episodes_alike():
     import oracle_train
 
     for name in ("BatchedLinear", "QEnsemble", "Actor", "soft_update", "Outcome", "check_crc"):
-        assert inspect.getsource(getattr(isp, name)) == inspect.getsource(getattr(oracle_train, name)), name
+        assert inspect.getsource(getattr(isp, name)) == inspect.getsource(getattr(oracle_train, name)), (
+            f"{name} differs between inform_sac_pusher.py and oracle_train.py; a teacher's checkpoint loads into "
+            "either script's networks, so change both alike (a new layer: an argument off by default in both)"
+        )
     for name in ("check_crc", "strict_json"):  # beside the shared plumbing: the maze's copy is the same code
         assert inspect.getsource(getattr(isp, name)) == inspect.getsource(getattr(inform_dqn_gridworld, name)), name
 

@@ -92,3 +92,7 @@ def test_the_siblings_are_called_alike():
     for script in (pusher, maze):  # the day's learner and settings in one object, which the day's phase takes
         assert list(inspect.signature(script.forward_phase).parameters)[0] == "day"
         assert set(script.DAY_ARGS) == set(script.Args().day_settings())
+    from inform_utils import browser_pusher, sleep_variants_maze, sleep_variants_pusher
+
+    for module, script in ((browser_pusher, pusher), (sleep_variants_pusher, pusher), (sleep_variants_maze, maze)):
+        assert set(script.DAY_ARGS) <= set(module.Args().day_settings()), module  # a flag redefined stays the day's
