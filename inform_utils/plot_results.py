@@ -44,7 +44,7 @@ class Args:
     runs_dir: str = "runs"
     """where the runs are"""
     out: str | None = None
-    """where the PNGs go (None: a fresh folder {runs_dir}/figures__{time}, never over what the repository keeps)"""
+    """where the PNGs go (None: a fresh folder runs/figures__{time}, never over what the repository keeps)"""
 
 
 def mtime(path: str) -> float:
@@ -236,7 +236,7 @@ def main(args: Args) -> None:
     if not os.path.isdir(args.runs_dir):
         raise ValueError(f"--runs-dir {args.runs_dir}: no such directory (run the experiments first, see README)")
     if args.out is None:  # a fresh folder: a run of plot_results never writes over another's, nor the repository's
-        args.out = os.path.join(args.runs_dir, f"figures__{time.strftime('%Y%m%d-%H%M%S')}")
+        args.out = os.path.join("runs", f"figures__{time.strftime('%Y%m%d-%H%M%S')}")
         args.out += f"_{time.time_ns()}" if os.path.lexists(args.out) else ""
     if os.path.exists(args.out) and not os.path.isdir(args.out):
         raise ValueError(f"--out {args.out}: exists and is not a directory (the figures go into a directory)")
