@@ -16,7 +16,6 @@ For each Pusher run directory (its tamer_actor.pt and inform_actor.pt, as `resul
 """
 
 import copy
-import json
 import os
 import sys
 from dataclasses import dataclass
@@ -26,6 +25,7 @@ import torch
 import tyro
 
 import inform_sac_pusher as isp
+from inform_utils.files import BadFile, read_json, write_json
 
 
 @dataclass
@@ -77,8 +77,7 @@ def scale_to(tamer, direction: dict, states: torch.Tensor, target: float) -> flo
 
 
 def shift(run_dir: str, perturbations: int, generator: torch.Generator) -> dict:
-    with open(os.path.join(run_dir, "summary.json")) as f:
-        summary = json.load(f)
+    summary = read_json(os.path.join(run_dir, "summary.json"))
     run = summary["args"]
     actors = {}
     for name in ("tamer", "inform"):
@@ -135,8 +134,23 @@ def line(r: dict) -> str:
     )
 
 
+def check(args: Args) -> None:
+    """Bad input, before the work: ValueError, one line."""
+    if not args.runs:
+        raise ValueError("pass at least one Pusher run directory (with tamer_actor.pt and inform_actor.pt)")
+    if args.perturbations < 1:
+        raise ValueError(f"--perturbations must be >= 1 (random moves per run), got {args.perturbations}")
+    if args.out is not None and (os.path.isdir(args.out) or not os.path.isdir(os.path.dirname(args.out) or ".")):
+        raise ValueError(f"--out {args.out}: must name a file in an existing directory")
+
+
 def main() -> int:
     args = tyro.cli(Args, description=__doc__.split("\n\n")[0])
+    try:
+        check(args)
+    except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     torch.set_num_threads(1)
     generator = torch.Generator().manual_seed(args.seed)
     results = []
@@ -144,13 +158,14 @@ def main() -> int:
         for run_dir in args.runs:
             results.append(shift(run_dir, args.perturbations, generator))
             print(line(results[-1]), flush=True)
-    except (isp.InputError, OSError, KeyError) as e:
+    except (isp.InputError, BadFile, OSError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
+    except KeyError as e:  # a summary.json without what a Pusher run records
+        print(f"error: a summary.json lacks {e} (not a Pusher run of inform_sac_pusher.py?)", file=sys.stderr)
+        return 2
     if args.out:
-        with open(args.out + ".tmp", "w") as f:
-            json.dump(results, f, indent=1)
-        os.replace(args.out + ".tmp", args.out)
+        write_json(args.out, results)
     return 0
 
 

@@ -2,7 +2,9 @@
 
     python -m inform_utils.plot_results --maze-exp fig3 --pusher-exp fig3 --out docs/figures
 
-Writes, each only when its runs exist:
+Without --out the figures go into a fresh folder runs/figures__{time} (never over the committed docs/figures). A
+run whose files cannot be read, or a maze run whose sleep was skipped (no INFORM), is left out, and the figure and the
+output say so; a damaged recovered_reward.pt (its CRC-32) is refused. Writes, each only when its runs exist:
 - fig3_maze.png: TAMER's greedy episode length against env steps, INFORM's against sleep steps, the oracle (Fig. 3);
 - fig3_pusher.png: the same for Pusher's return (Fig. 3);
 - fig5b_obstacle.png: final object-goal distances of TAMER and INFORM on the obstacle env (Fig. 5b);
@@ -11,9 +13,10 @@ Writes, each only when its runs exist:
 """
 
 import glob
-import json
+import io
 import os
 import sys
+import time
 from dataclasses import dataclass
 
 import matplotlib
@@ -25,6 +28,7 @@ from matplotlib.patches import Polygon, Rectangle
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 import gridworld_env
+from inform_utils.files import atomic, check_crc, read_json, read_npz
 
 COLOURS = {"oracle": "black", "tamer": "tab:orange", "inform": "tab:blue"}
 
@@ -39,19 +43,37 @@ class Args:
     """exp_name of the reward-experiment runs (each holds one reward source and one bootstrap, with all agents)"""
     runs_dir: str = "runs"
     """where the runs are"""
-    out: str = "docs/figures"
-    """where the PNGs go"""
+    out: str | None = None
+    """where the PNGs go (None: a fresh folder runs/figures__{time}, never over what the repository keeps)"""
 
 
-def completed_runs(runs_dir: str, pattern: str) -> list[str]:
-    """Run directories matching the pattern whose summary.json says completed, newest per seed."""
-    by_seed = {}
-    for path in sorted(glob.glob(os.path.join(runs_dir, pattern, "summary.json")), key=os.path.getmtime):
-        with open(path) as f:
-            summary = json.load(f)
-        if summary.get("status") == "completed":
+def mtime(path: str) -> float:
+    return os.lstat(path).st_mtime  # a dangling link too (it is then left out, with a note)
+
+
+def completed_runs(runs_dir: str, pattern: str, notes: list[str] | None = None) -> list[str]:
+    """Run directories matching the pattern whose summary.json says completed, newest per seed. A summary that cannot
+    be read, and a run whose sleep was skipped (no INFORM to draw), are left out with a note in `notes`."""
+    by_seed, notes = {}, [] if notes is None else notes
+    for path in sorted(glob.glob(os.path.join(runs_dir, pattern, "summary.json")), key=mtime):
+        try:
+            summary = read_json(path)
+        except ValueError as e:
+            notes.append(f"left out {os.path.basename(os.path.dirname(path))}: {str(e).removeprefix(path + ': ')}")
+            continue
+        if summary.get("status") == "completed" and summary.get("sleep_skipped"):
+            notes.append(f"left out {os.path.basename(os.path.dirname(path))}: its sleep was skipped (no INFORM)")
+        elif summary.get("status") == "completed":
             by_seed[summary.get("seed")] = os.path.dirname(path)
     return [by_seed[s] for s in sorted(by_seed)]
+
+
+def save(fig: Figure, path: str) -> None:
+    """A PNG whole or not at all."""
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=120)
+    with atomic(path, "wb") as f:
+        f.write(buffer.getvalue())
 
 
 def curves(run_dirs: list[str], tag: str, last_step_arg: str) -> tuple[np.ndarray, np.ndarray]:
@@ -59,8 +81,7 @@ def curves(run_dirs: list[str], tag: str, last_step_arg: str) -> tuple[np.ndarra
     budget (the run's args[last_step_arg]); a final value some scripts log past it is left out."""
     series = []
     for run_dir in run_dirs:
-        with open(os.path.join(run_dir, "summary.json")) as f:
-            last_step = json.load(f)["args"][last_step_arg]
+        last_step = read_json(os.path.join(run_dir, "summary.json"))["args"][last_step_arg]
         acc = EventAccumulator(run_dir, size_guidance={"scalars": 0})
         acc.Reload()
         events = {e.step: e.value for e in acc.Scalars(tag) if e.step <= last_step}  # a repeated step: the last
@@ -75,15 +96,16 @@ def band(ax, steps, values, label, colour):
     ax.fill_between(steps, mean - std, mean + std, color=colour, alpha=0.2)
 
 
-def fig3(run_dirs: list[str], metric: str, ylabel: str, path: str, title: str) -> None:
-    """TAMER against env steps (left), INFORM against sleep steps (right), the oracle as a line in both."""
+def fig3(run_dirs: list[str], metric: str, ylabel: str, path: str, title: str, notes: tuple = ()) -> None:
+    """TAMER against env steps (left), INFORM against sleep steps (right), the oracle as a line in both; the runs left
+    out (`notes`) said under it."""
     fig = Figure(figsize=(11, 4))
     day, night = fig.subplots(1, 2, sharey=True)
     steps, tamer = curves(run_dirs, f"eval/tamer_{metric}", "tamer_total_timesteps")
     band(day, steps, tamer, "TAMER", COLOURS["tamer"])
     sleep_steps, inform = curves(run_dirs, f"eval/inform_{metric}", "sleep_gradient_steps")
     band(night, sleep_steps, inform, "INFORM", COLOURS["inform"])
-    oracle = np.mean([json.load(open(os.path.join(d, "summary.json")))[f"eval/oracle_{metric}"] for d in run_dirs])
+    oracle = np.mean([read_json(os.path.join(d, "summary.json"))[f"eval/oracle_{metric}"] for d in run_dirs])
     for ax in (day, night):
         ax.axhline(oracle, color=COLOURS["oracle"], ls="--", lw=2, label="oracle", zorder=3)
         ax.legend(loc="lower right")
@@ -94,17 +116,19 @@ def fig3(run_dirs: list[str], metric: str, ylabel: str, path: str, title: str) -
     day.set_ylim(low - 0.08 * (high - low), high + 0.08 * (high - low))
     day.set(xlabel="environment steps (forward phase)", ylabel=ylabel, title=f"{title}: day (TAMER)")
     night.set(xlabel="gradient steps (sleep phase, no env steps)", title=f"{title}: sleep (INFORM)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    fig.tight_layout(rect=(0, 0.05 if notes else 0, 1, 1))
+    if notes:
+        text = "; ".join(notes)
+        fig.text(0.01, 0.01, text if len(text) < 220 else f"{text[:200]}... ({len(notes)} runs left out)", fontsize=7)
+    save(fig, path)
 
 
 def fig5b(run_dirs: list[str], path: str) -> None:
     """Final object-goal distance on the obstacle env, every episode of every seed, per policy."""
     data = {}
     for run_dir in run_dirs:
-        with np.load(os.path.join(run_dir, "obstacle_distances.npz")) as npz:
-            for policy in npz.files:
-                data.setdefault(policy, []).append(npz[policy])
+        for policy, values in read_npz(os.path.join(run_dir, "obstacle_distances.npz")).items():
+            data.setdefault(policy, []).append(values)
     policies = [p for p in ("oracle", "tamer", "inform") if p in data]
     fig = Figure(figsize=(6, 4))
     ax = fig.subplots()
@@ -112,7 +136,7 @@ def fig5b(run_dirs: list[str], path: str) -> None:
     ax.set(ylabel="final object-goal distance (m)", title=f"Pusher + obstacle, {len(run_dirs)} seeds")
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save(fig, path)
 
 
 def reward_figure(table: np.ndarray, title: str):
@@ -160,9 +184,8 @@ def completed_reward_runs(runs_dir: str, exp_name: str) -> dict:
     the arm (an env arm appears in every run of its bootstrap; runs on the same seeds hold the same agents)."""
     found = {}
     pattern = os.path.join(runs_dir, f"KnoxStoneMazeWall-v0__{exp_name}__*", "summary.json")
-    for path in sorted(glob.glob(pattern), key=os.path.getmtime):
-        with open(path) as f:
-            summary = json.load(f)
+    for path in sorted(glob.glob(pattern), key=mtime):
+        summary = read_json(path)
         if summary.get("status") == "completed" and "arms" in summary:  # older runs had no agents.npz
             for arm in summary["arms"]:
                 found.setdefault(summary["args"]["num_episodes"], {})[arm] = (os.path.dirname(path), summary)
@@ -183,8 +206,8 @@ def fig6(runs: dict, path: str) -> None:
             bootstrap, reward = arm.split("/")
             colour, reward_label = REWARD_STYLE[reward]
             style, bootstrap_label = BOOTSTRAP_STYLE[bootstrap.removesuffix("_bootstrap")]
-            with np.load(os.path.join(run_dir, "agents.npz")) as npz:
-                steps, lengths = npz[f"{arm}/steps"], npz[f"{arm}/lengths"]
+            npz = read_npz(os.path.join(run_dir, "agents.npz"), (f"{arm}/steps", f"{arm}/lengths"))
+            steps, lengths = npz[f"{arm}/steps"], npz[f"{arm}/lengths"]
             grid = np.linspace(0, steps[:, -1].max(), 300)[1:]
             # an agent that finished its episodes in fewer steps is held at its last length (np.interp does that)
             values = np.stack([np.interp(grid, s, v) for s, v in zip(steps, lengths, strict=True)])
@@ -206,34 +229,44 @@ def fig6(runs: dict, path: str) -> None:
                      fontsize=10)  # fmt: skip
         ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), fontsize=8)
         ax.grid(alpha=0.3)
-    fig.savefig(path, dpi=120)
+    save(fig, path)
 
 
 def main(args: Args) -> None:
     if not os.path.isdir(args.runs_dir):
         raise ValueError(f"--runs-dir {args.runs_dir}: no such directory (run the experiments first, see README)")
+    if args.out is None:  # a fresh folder: a run of plot_results never writes over another's, nor the repository's
+        args.out = os.path.join("runs", f"figures__{time.strftime('%Y%m%d-%H%M%S')}")
+        args.out += f"_{time.time_ns()}" if os.path.lexists(args.out) else ""
     if os.path.exists(args.out) and not os.path.isdir(args.out):
         raise ValueError(f"--out {args.out}: exists and is not a directory (the figures go into a directory)")
+    notes = []
+    maze = completed_runs(args.runs_dir, f"KnoxStoneMaze-v0__{args.maze_exp}__*", notes)
+    reward = None
+    if maze:  # the checkpoint is verified (its CRC-32) before anything is drawn
+        path = os.path.join(maze[0], "recovered_reward.pt")
+        check_crc(path)
+        reward = torch.load(path, weights_only=True)["reward"].numpy()
     os.makedirs(args.out, exist_ok=True)
     written = []
-    maze = completed_runs(args.runs_dir, f"KnoxStoneMaze-v0__{args.maze_exp}__*")
     if maze:
-        fig3(maze, "episode_length", "greedy episode length", f"{args.out}/fig3_maze.png", "Maze")
-        ckpt = torch.load(os.path.join(maze[0], "recovered_reward.pt"), weights_only=True)
-        seed = json.load(open(os.path.join(maze[0], "summary.json")))["seed"]
-        reward_figure(ckpt["reward"].numpy(), f"recovered reward r(s, a), seed {seed}").savefig(
-            f"{args.out}/recovered_reward.png", dpi=120
-        )
+        fig3(maze, "episode_length", "greedy episode length", f"{args.out}/fig3_maze.png", "Maze", tuple(notes))
+        seed = read_json(os.path.join(maze[0], "summary.json"))["seed"]
+        save(reward_figure(reward, f"recovered reward r(s, a), seed {seed}"), f"{args.out}/recovered_reward.png")
         written += ["fig3_maze.png", "recovered_reward.png"]
-    pusher = completed_runs(args.runs_dir, f"Pusher-v*__{args.pusher_exp}__*")
+    pusher_notes = []
+    pusher = completed_runs(args.runs_dir, f"Pusher-v*__{args.pusher_exp}__*", pusher_notes)
+    notes += pusher_notes
     if pusher:
-        fig3(pusher, "return", "episode return", f"{args.out}/fig3_pusher.png", "Pusher")
+        fig3(pusher, "return", "episode return", f"{args.out}/fig3_pusher.png", "Pusher", tuple(pusher_notes))
         fig5b(pusher, f"{args.out}/fig5b_obstacle.png")
         written += ["fig3_pusher.png", "fig5b_obstacle.png"]
     reward_runs = completed_reward_runs(args.runs_dir, args.qlearning_exp)
     if reward_runs:
         fig6(reward_runs, f"{args.out}/fig6_wall_maze.png")
         written.append("fig6_wall_maze.png")
+    for note in notes:
+        print(note)
     print(f"wrote {', '.join(written) or 'nothing (no finished runs found)'} to {args.out}")
 
 

@@ -17,7 +17,7 @@ TAMER's per-seed mean (2 sd / sqrt(episodes), averaged over the seeds).
         runs/Pusher-v5__inform_sac_pusher__2__* runs/Pusher-v5__inform_sac_pusher__3__*
 """
 
-import json
+import io
 import os
 import sys
 from dataclasses import dataclass
@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 import tyro
 from scipy import stats
+
+from inform_utils.files import atomic, read_json, read_npz, write_json
 
 
 @dataclass
@@ -45,16 +47,9 @@ def load_run(run_dir: str) -> dict:
     path = os.path.join(run_dir, "obstacle_distances.npz")
     if not os.path.isfile(path) or not os.path.isfile(os.path.join(run_dir, "summary.json")):
         raise ValueError(f"{run_dir}: no obstacle_distances.npz and summary.json (did the run finish?)")
-    try:
-        with open(os.path.join(run_dir, "summary.json")) as f:
-            summary = json.load(f)
-        with np.load(path) as data:
-            distances = {k: data[k] for k in data.files}
-    except (OSError, ValueError) as e:  # JSONDecodeError is a ValueError; so is a pickled or corrupt .npz
-        raise ValueError(
-            f"{run_dir}: cannot read its summary.json or obstacle_distances.npz ({type(e).__name__})"
-        ) from None
-    if not isinstance(summary, dict) or "success_distance" not in summary.get("args", {}):
+    summary = read_json(os.path.join(run_dir, "summary.json"))  # BadFile, a ValueError: one line, exit 2
+    distances = read_npz(path)  # truncated, damaged or pickled: one line too
+    if not isinstance(summary.get("args"), dict) or "success_distance" not in summary["args"]:
         raise ValueError(f"{run_dir}/summary.json: not a summary of inform_sac_pusher.py (no args.success_distance)")
     if "tamer" not in distances or "inform" not in distances:
         raise ValueError(f"{path}: needs 'tamer' and 'inform' arrays")
@@ -149,8 +144,7 @@ def fig5a(runs: list[dict], path: str) -> None:
     fig = Figure(figsize=(4 * len(runs), 4.2))
     axes = fig.subplots(1, len(runs), squeeze=False)[0]
     for ax, run in zip(axes, runs, strict=True):
-        with np.load(os.path.join(run["run_dir"], "obstacle_paths.npz")) as data:
-            paths = {k: data[k] for k in data.files}
+        paths = read_npz(os.path.join(run["run_dir"], "obstacle_paths.npz"))
         for name, colour in (("tamer", "tab:orange"), ("inform", "tab:blue")):
             ax.plot(*paths[f"{name}_plain"].T, "--", color=colour, lw=1, label=f"{name.upper()}, no boxes")
             ax.plot(*paths[f"{name}_obstacle"].T, "-", color=colour, lw=2, label=f"{name.upper()}, boxes")
@@ -164,7 +158,10 @@ def fig5a(runs: list[dict], path: str) -> None:
     axes[0].set_ylabel("y (m)")
     axes[0].legend(fontsize=7, loc="best")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    buffer = io.BytesIO()  # the PNG whole or not at all
+    fig.savefig(buffer, format="png", dpi=120)
+    with atomic(path, "wb") as f:
+        f.write(buffer.getvalue())
 
 
 def main(args: Args) -> dict:
@@ -209,8 +206,7 @@ def main(args: Args) -> dict:
         fig5a(runs, args.fig5a)
         print(f"  Fig. 5a: {args.fig5a}")
     if args.output:
-        with open(args.output, "w") as f:
-            json.dump(out, f, indent=2)
+        write_json(args.output, out, indent=2)
     return out
 
 

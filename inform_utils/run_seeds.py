@@ -36,6 +36,10 @@ from typing import Literal
 
 import tyro
 
+if not __package__:  # run as a file (python inform_utils/run_seeds.py): its package is found from the repository
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from inform_utils.files import BadFile, check_writable, read_json  # noqa: E402
+
 
 @dataclass
 class Args:
@@ -239,6 +243,9 @@ def is_campaigns(recorded: dict, campaign: dict) -> bool:
     return True
 
 
+_unreadable: set[str] = set()  # the summaries newest_summary() has warned about
+
+
 def newest_summary(args: Args, run: Run, completed: bool = True, since: float = 0.0) -> tuple[str, dict] | None:
     """The newest summary.json of this campaign's run: this script, experiment name and seed, and every other flag
     the campaign's (completed only, unless told otherwise; two scripts may share an experiment name: each
@@ -247,14 +254,20 @@ def newest_summary(args: Args, run: Run, completed: bool = True, since: float = 
     for folder in filter(None, (args.runs_dir, args.results_dir)):
         paths += glob.glob(os.path.join(folder, f"*__{args.exp_name}__{run.seed}__*", "summary.json"))
     flags = run_flags(args, run)
-    for path in sorted(paths, key=os.path.getmtime, reverse=True):
-        if os.path.getmtime(path) < since:
+    for path in sorted(paths, key=lambda p: os.lstat(p).st_mtime, reverse=True):
+        if os.lstat(path).st_mtime < since:
             break
         if os.path.dirname(path).endswith(".tmp"):  # a run half-copied into --results-dir never counts
             continue
-        with open(path) as f:
-            summary = json.load(f)
+        try:  # unreadable, half-written, a dangling link: not a finished run (said once), so it is run again
+            summary = read_json(path)
+        except BadFile as e:
+            if path not in _unreadable:
+                _unreadable.add(path)
+                print(f"warning: {e}; not counted as a finished run", file=sys.stderr, flush=True)
+            continue
         recorded = summary.get("args", {})
+        recorded = recorded if isinstance(recorded, dict) else {}
         if (
             summary.get("script") == os.path.basename(args.script)
             and (not completed or summary.get("status") == "completed")
@@ -311,16 +324,22 @@ def keep(args: Args, run: Run, since: float) -> None:
         return
     tmp, skipped = dest + ".tmp", []
     shutil.rmtree(tmp, ignore_errors=True)
-    os.makedirs(tmp)
-    for name in sorted(os.listdir(run_dir)):
-        path = os.path.join(run_dir, name)
-        if not os.path.isfile(path):
-            continue
-        if os.path.getsize(path) > args.keep_max_mb * 2**20:
-            skipped.append(f"{name} ({os.path.getsize(path) / 2**20:.0f} MB)")
-            continue
-        shutil.copy2(path, tmp)
-    os.replace(tmp, dest)
+    try:
+        os.makedirs(tmp)
+        for name in sorted(os.listdir(run_dir)):
+            path = os.path.join(run_dir, name)
+            if not os.path.isfile(path):
+                continue
+            if os.path.getsize(path) > args.keep_max_mb * 2**20:
+                skipped.append(f"{name} ({os.path.getsize(path) / 2**20:.0f} MB)")
+                continue
+            shutil.copy2(path, tmp)
+        os.replace(tmp, dest)
+    except OSError as e:  # a full or read-only disk: the run stays in runs/, the table still comes
+        shutil.rmtree(tmp, ignore_errors=True)
+        print(f"warning: {run}: not kept in {dest} ({e.strerror or e}); it stays in {run_dir}", file=sys.stderr,
+              flush=True)  # fmt: skip
+        return
     print(f"{run}: kept in {dest}" + (f" (not copied, over --keep-max-mb: {', '.join(skipped)})" if skipped else ""),
           flush=True)  # fmt: skip
 
@@ -627,10 +646,7 @@ def main(args: Args) -> dict[str, dict]:
         for seed in args.seeds:
             found = newest_summary(args, Run(seed, point))
             paths[seed] = found[0] if found else None
-        summaries = []
-        for path in filter(None, paths.values()):
-            with open(path) as f:
-                summaries.append(json.load(f))
+        summaries = [read_json(path) for path in filter(None, paths.values())]
         label = Run(0, point).label
         missing = [s for s, p in paths.items() if p is None]
         if not summaries:
@@ -688,6 +704,8 @@ def validate(args: Args) -> None:
         raise ValueError(f"--keep-max-mb must be > 0, got {args.keep_max_mb}")
     if args.results_dir is not None and os.path.exists(args.results_dir) and not os.path.isdir(args.results_dir):
         raise ValueError(f"--results-dir {args.results_dir}: exists and is not a directory")
+    if args.results_dir is not None:
+        check_writable(args.results_dir, "--results-dir")
     if not os.path.isfile(args.script):
         raise ValueError(f"{args.script}: no such script")
     given = set(flag_values(args.script_args))

@@ -6,9 +6,12 @@ Each night runs `python -m inform_utils.sleep_variants_pusher --sleep-from DAY` 
 study's switches) with the variant's flags, a 15% hold-out (so every night logs the offline criterion on the same
 held-out episodes), any flags given after `--`, and a sleep seed; then its INFORM actor (and the one the offline
 criterion picked) is tested on 50 random starts by `inform_utils.evaluate_policy pusher`. What a night leaves is
-copied to {results_dir}/{campaign}/{day}/{variant}__sleep{seed}/ (summary.json, obstacle_distances.npz,
-random_starts.json), and a night already there is not run again: the study resumes. --table prints the table from the
-results alone.
+copied at once to {results_dir}/{campaign}/{day}/{variant}__sleep{seed}/ (summary.json, obstacle_distances.npz,
+random_starts.json, and night.json: its day by content, day.pt's sha256, and every flag it ran with). A night of the
+campaign already there is not run again: the study resumes; a campaign that holds a night of another day.pt or other
+flags is refused before anything runs. --table prints the table from the results alone, each night it cannot read
+named with its cause. Exit 0; 1 if a night failed; 2 for bad input (or a night that refuses its input); 128 + the
+signal if stopped (the night in progress saves what finished and is not kept).
 
     python inform_sac_pusher.py --env-id Pusher-v4 --seed 1 --save-buffer          # a day: runs/<day>/day.pt
     python -m inform_utils.sleep_study --days runs/<day> --campaign sleep_study    # the nights on it
@@ -20,11 +23,13 @@ On the maze, a night has no hold-out and no random-start test (its tests already
 columns are the greedy path from S, the held-out start cells and all 29 cells.
 """
 
+import contextlib
 import glob
 import json
 import os
 import re
 import shutil
+import signal
 import statistics
 import subprocess
 import sys
@@ -32,8 +37,25 @@ import time
 from dataclasses import dataclass, field
 from typing import Literal
 
-import numpy as np
-import tyro
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def stopped_while_starting(signum, frame):
+    """A stop before the study has started anything (numpy and tyro take a moment to load): one line."""
+    with contextlib.suppress(OSError):
+        os.write(2, f"error: stopped by {signal.Signals(signum).name} before any night ran\n".encode())
+    os._exit(128 + signum)
+
+
+if __name__ == "__main__":  # before the slow imports, so that no stop ever ends in a traceback
+    for sig in STOP_SIGNALS:
+        if signal.getsignal(sig) is not signal.SIG_IGN:  # an ignored SIGINT (nohup, `&`) stays ignored
+            signal.signal(sig, stopped_while_starting)
+
+import numpy as np  # noqa: E402
+import tyro  # noqa: E402
+
+from inform_utils.files import BadFile, check_writable, copy, read_json, read_npz, sha256, write_json  # noqa: E402
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # the variants of the sleep (docs/protocol.md, "Saved days and the sleep's variants"), in the order they run: the
@@ -156,21 +178,139 @@ def night_dir(args: Args, day_name: str, variant: str, seed: int) -> str:
     return os.path.join(args.results_dir, args.campaign, day_name, f"{variant}__sleep{seed}")
 
 
-def completed(path: str) -> bool:
-    try:
-        with open(os.path.join(path, "summary.json")) as f:
-            return json.load(f).get("status") == "completed" and os.path.isfile(
-                os.path.join(path, "random_starts.json")
-            )
-    except (OSError, ValueError):
-        return False
+def day_name(day: str) -> str:
+    return os.path.basename(os.path.normpath(day))
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# TRY NOT TO MODIFY: a night's identity, the children and the stop, the kept files
+
+
+class Stopped(Exception):
+    """A stop signal came: the study ends after the child it was waiting for, which saved what finished."""
+
+
+class NightFailed(Exception):
+    """A night, or a test of its policies, ended without a result: the study goes on and exits 1 at the end."""
+
+
+class Stop:
+    """The first SIGINT/SIGTERM/SIGHUP is remembered and passed on once to the live child (each child runs in its own
+    process group, so a terminal's Ctrl-C reaches it only through the study); a second one kills the child. The
+    handler only records and passes on; the study looks at `signum` before each child."""
+
+    def __init__(self):
+        self.signum, self.count, self.procs = 0, 0, set()
+
+    def handler(self, signum, frame):
+        self.count += 1
+        self.signum = self.signum or signum
+        for proc in list(self.procs):
+            with contextlib.suppress(ProcessLookupError):
+                proc.send_signal(signal.SIGKILL if self.count > 1 else signum)
+
+    @contextlib.contextmanager
+    def installed(self):
+        # a SIGINT ignored at start (nohup, a shell's `&`) stays ignored, as Python itself does
+        old = {s: signal.signal(s, self.handler) for s in STOP_SIGNALS if signal.getsignal(s) is not signal.SIG_IGN}
+        try:
+            yield self
+        finally:
+            for s, handler in old.items():
+                signal.signal(s, handler)
 
 
 def child_env() -> dict:  # a child finds the repository's modules from any working directory
     return {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [REPO, os.environ.get("PYTHONPATH")]))}
 
 
-def random_starts(run_dir: str, seed: int, env_id: str, episodes: int) -> dict:
+def run_child(cmd: list[str], stop: Stop) -> subprocess.CompletedProcess:
+    """A child of the study (a night, a test of its policies) in its own process group. Stopped if a stop came
+    before it started or while it ran (it then saved what finished)."""
+    if stop.signum:
+        raise Stopped
+    proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=child_env(), process_group=0)  # fmt: skip
+    stop.procs.add(proc)
+    if stop.signum:  # it came between the start and the line above
+        proc.send_signal(stop.signum)
+    try:
+        out, err = proc.communicate()
+    finally:
+        stop.procs.discard(proc)
+    if stop.signum:
+        raise Stopped
+    return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
+
+
+def last_json(proc: subprocess.CompletedProcess, what: str) -> dict:
+    """The JSON object a test (inform_utils.evaluate_policy) prints last; NightFailed if it failed or printed none."""
+    if proc.returncode != 0:
+        raise NightFailed(f"{what} failed ({proc.returncode}): {proc.stderr.strip()[-300:]}")
+    try:
+        return json.loads(proc.stdout[proc.stdout.index("{") :])
+    except ValueError:
+        raise NightFailed(f"{what} printed no result: {proc.stdout.strip()[-300:]}") from None
+
+
+def identity(args: Args, extra: list[str], day_sha: str, night_flags: list[str]) -> dict:
+    """What makes a night the campaign's: its script, the flags after `--` every night of the campaign gets, the
+    random-start test's episodes (Pusher), its day by content (day.pt's sha256, whatever its folder is called) and
+    every flag it ran with. Kept beside the night as night.json."""
+    pusher = STUDIES[args.script].pusher
+    return {"script": args.script, "flags": list(extra), "random_start_episodes": args.random_start_episodes
+            if pusher else None, "day_sha256": day_sha, "night_flags": night_flags}  # fmt: skip
+
+
+CAMPAIGN_KEYS = ("script", "flags", "random_start_episodes")  # what every night of one campaign shares
+
+
+def conflicts(args: Args, planned: dict[str, dict]) -> list[str]:
+    """The nights already kept in the campaign that are not its own: kept by an older study (no night.json) or one
+    whose record is damaged, run with other flags after `--` (or another script or random-start test), on another
+    day.pt in a folder of the same name, or with other flags of their own. `planned`: {night folder: its identity}."""
+    mine = next(iter(planned.values()), None)
+    days = {os.path.dirname(path): record["day_sha256"] for path, record in planned.items()}
+    found = []
+    for path in night_dirs(args):
+        try:
+            record = read_json(os.path.join(path, "night.json"))
+        except BadFile as e:
+            found.append(f"{path} has no readable record of its day and flags ({str(e).rsplit('(', 1)[-1]}")
+            continue
+        if mine is not None and any(record.get(k) != mine[k] for k in CAMPAIGN_KEYS):
+            ran = " ".join(record.get("flags") or []) or "none"
+            found.append(f"{path} ran with other flags after -- ({ran}) or another script or --random-start-episodes")
+        elif os.path.dirname(path) in days and record.get("day_sha256") != days[os.path.dirname(path)]:
+            found.append(f"{path} is a night on another day.pt kept in a folder of the same name")
+        elif path in planned and record != planned[path]:
+            found.append(f"{path} ran with other flags ({' '.join(record.get('night_flags') or [])})")
+    return found
+
+
+def read_night(path: str, pusher: bool) -> tuple[dict | None, str]:
+    """A night kept in a campaign: (its summary with its random-start test, "") if it completed and its files are
+    whole; else (None, why it is left out)."""
+    try:
+        summary = read_json(os.path.join(path, "summary.json"))
+        if summary.get("status") != "completed":
+            cause = summary.get("signal") or summary.get("error")
+            return None, f"{summary.get('status')} in its {summary.get('phase')} phase ({cause})"
+        summary.update(read_json(os.path.join(path, "random_starts.json")))
+        if pusher and os.path.lexists(os.path.join(path, "obstacle_distances.npz")):  # whole, if it is there
+            read_npz(os.path.join(path, "obstacle_distances.npz"), ("tamer", "inform"))
+    except BadFile as e:
+        return None, str(e)
+    if not re.fullmatch(r".+__sleep\d+", os.path.basename(path)):
+        return None, "not named {variant}__sleep{seed}"
+    return summary, ""
+
+
+def completed(path: str, pusher: bool = False) -> bool:
+    return read_night(path, pusher)[0] is not None
+
+
+def random_starts(run_dir: str, seed: int, env_id: str, episodes: int, stop: Stop) -> dict:
     """inform_utils.evaluate_policy of each saved policy on random starts (deterministic actions; a short obstacle
     part)."""
     out = {}
@@ -180,59 +320,94 @@ def random_starts(run_dir: str, seed: int, env_id: str, episodes: int) -> dict:
             continue
         cmd = [sys.executable, "-m", "inform_utils.evaluate_policy", "pusher", path, "--env-id", env_id]
         cmd += ["--seed", str(seed), "--random-starts", "--eval-episodes", str(episodes), "--obstacle-episodes", "1"]
-        proc = subprocess.run(cmd, capture_output=True, text=True, check=True, env=child_env())
-        metrics = json.loads(proc.stdout[proc.stdout.index("{") :])
+        metrics = last_json(run_child(cmd, stop), f"the random-start test of {path}")
         for key in ("return", "final_distance", "success_rate"):
             out[f"random_starts/{name}_{key}"] = metrics[f"eval/policy_{key}"]
     return {**out, "random_starts/episodes": episodes} if out else out
 
 
-def run_night(args: Args, day: str, variant: str, seed: int, extra: list[str]) -> None:
-    day_name = os.path.basename(os.path.normpath(day))
-    dest = night_dir(args, day_name, variant, seed)
-    if completed(dest):
-        return
+def night_command(args: Args, day: str, variant: str, seed: int, extra: list[str]) -> list[str]:
     study = STUDIES[args.script]
-    cmd = [sys.executable, "-m", study.runner, "--sleep-from", day, "--exp-name", f"night_{variant}"]
-    cmd += ["--sleep-seed", str(seed), *study.common, *extra, *study.variants[variant]]
+    flags = ["--exp-name", f"night_{variant}", "--sleep-seed", str(seed), *study.common, *extra]
+    return [sys.executable, "-m", study.runner, "--sleep-from", day, *flags, *study.variants[variant]]
+
+
+def run_night(args: Args, day: str, variant: str, seed: int, record: dict, stop: Stop) -> bool:
+    """One night, kept in {results_dir}/{campaign}/{day}/{variant}__sleep{seed}/ with its record (night.json), all at
+    once: False if it failed. A night of the campaign already there is not run again. ValueError if the night refused
+    its input (exit 2: every night would)."""
+    study = STUDIES[args.script]
+    dest = night_dir(args, day_name(day), variant, seed)
+    if os.path.isdir(dest) and completed(dest, study.pusher):  # conflicts() has checked that it is the campaign's
+        return True
+    cmd = night_command(args, day, variant, seed, record["flags"])
     t0 = time.time()
-    print(f"[study] {day_name} {variant} sleep seed {seed}: {' '.join(cmd[1:])}", flush=True)
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=child_env())
-    line = next((x for x in proc.stdout.splitlines() if x.startswith("run directory:")), None)
-    if proc.returncode != 0 or line is None:
-        print(f"[study] failed ({proc.returncode}): {proc.stderr.strip()[-500:]}", flush=True)
-        return
-    run_dir = line.split(": ", 1)[1]
-    with open(os.path.join(run_dir, "summary.json")) as f:
-        summary = json.load(f)
-    extra = {}
-    if study.pusher:
-        extra = random_starts(run_dir, summary["seed"], summary["args"]["env_id"], args.random_start_episodes)
-    os.makedirs(dest, exist_ok=True)
-    for name in ("summary.json", "obstacle_distances.npz") if study.pusher else ("summary.json",):
-        shutil.copy(os.path.join(run_dir, name), dest)
-    with open(os.path.join(dest, "random_starts.json"), "w") as f:
-        json.dump(extra, f, indent=1)
+    print(f"[study] {day_name(day)} {variant} sleep seed {seed}: {' '.join(cmd[1:])}", flush=True)
+    try:
+        proc = run_child(cmd, stop)
+        line = next((x for x in proc.stdout.splitlines() if x.startswith("run directory:")), None)
+        if proc.returncode == 2:
+            said = proc.stderr.strip().splitlines()[-1:] or ["no message"]
+            raise ValueError(f"the {variant} night on {day} refuses its input: {said[0].removeprefix('error: ')}")
+        if proc.returncode != 0 or line is None:
+            raise NightFailed(f"exit {proc.returncode}: {proc.stderr.strip()[-500:]}")
+        run_dir = line.split(": ", 1)[1]
+        summary = read_json(os.path.join(run_dir, "summary.json"))
+        tested = {}
+        if study.pusher:
+            tested = random_starts(run_dir, summary["seed"], summary["args"]["env_id"], args.random_start_episodes,
+                                   stop)  # fmt: skip
+    except (NightFailed, BadFile) as e:
+        print(f"[study] failed ({e})", flush=True)
+        return False
+    keep(dest, run_dir, tested, record, study.pusher)
     print(f"[study] done in {time.time() - t0:.0f}s: {dest}", flush=True)
+    return True
+
+
+def keep(dest: str, run_dir: str, tested: dict, record: dict, pusher: bool) -> None:
+    """The night's files into `dest` at once: copied into a hidden folder beside it, which then takes its place (a
+    night of the campaign that did not complete, run again, is replaced)."""
+    parent, name = os.path.split(dest)
+    tmp, old = os.path.join(parent, f".{name}.tmp"), os.path.join(parent, f".{name}.old")
+    for path in (tmp, old):
+        shutil.rmtree(path, ignore_errors=True)
+    try:
+        os.makedirs(tmp)
+        for file in ("summary.json", "obstacle_distances.npz") if pusher else ("summary.json",):
+            copy(os.path.join(run_dir, file), os.path.join(tmp, file))
+        write_json(os.path.join(tmp, "random_starts.json"), tested)
+        write_json(os.path.join(tmp, "night.json"), record)
+        if os.path.lexists(dest):
+            os.replace(dest, old)
+        os.replace(tmp, dest)
+    except OSError as e:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise OSError(f"cannot keep the night in {dest} ({e.strerror or e}); nothing half-written is left there") from e
+    shutil.rmtree(old, ignore_errors=True)
 
 
 def night_dirs(args: Args) -> list[str]:
     return sorted(glob.glob(os.path.join(args.results_dir, args.campaign, "*", "*__sleep*")))
 
 
-def load(args: Args) -> list[dict]:
-    rows = []
+def scan(args: Args) -> tuple[list[dict], list[tuple[str, str]]]:
+    """The campaign's completed nights as rows of the table, and the night folders left out, with why."""
+    rows, left_out = [], []
     for path in night_dirs(args):
-        if not completed(path):
+        summary, why = read_night(path, STUDIES[args.script].pusher)
+        if summary is None:
+            left_out.append((path, why))
             continue
-        with open(os.path.join(path, "summary.json")) as f:
-            summary = json.load(f)
-        with open(os.path.join(path, "random_starts.json")) as f:
-            summary.update(json.load(f))
         variant, seed = os.path.basename(path).rsplit("__sleep", 1)
         day = os.path.basename(os.path.dirname(path))  # the summary's own "seed" is the day's
         rows.append({**summary, "day": day, "dir": os.path.basename(path), "variant": variant, "sleep_seed": int(seed)})
-    return sorted(rows, key=lambda r: (r["day"], r["variant"] != "default", r["variant"], r["sleep_seed"]))
+    rows.sort(key=lambda r: (r["day"], r["variant"] != "default", r["variant"], r["sleep_seed"]))
+    return rows, left_out
+
+
+def load(args: Args) -> list[dict]:
+    return scan(args)[0]
 
 
 def first_nights(rows: list[dict]) -> dict:
@@ -298,14 +473,14 @@ def tamer_spread(args: Args, rows: list[dict]) -> float | None:
         means = []
         for path in paths:
             if os.path.isfile(os.path.join(path, "obstacle_distances.npz")):
-                with np.load(os.path.join(path, "obstacle_distances.npz")) as d:
-                    means.append(float(np.mean(d["tamer"])))
+                tamer = read_npz(os.path.join(path, "obstacle_distances.npz"), ("tamer",))["tamer"]
+                means.append(float(np.mean(tamer)))
         if len(set(means)) > 1:  # nights that share a stream repeat its mean to the bit: one stream is no spread
             spreads.append(max(means) - min(means))
     return max(spreads) if spreads else None
 
 
-def obstacle_test(args: Args, nights: list[dict], policy: str, noise: float | None = None) -> dict:
+def obstacle_test(args: Args, nights: list[dict], policy: str, noise: float | None = None) -> dict | None:
     """The policy's obstacle final distances against TAMER's, on the days its nights ran. A day's margin is TAMER's
     mean minus the policy's mean over its nights that day (positive: closer), TAMER read from the variant's first night
     of the day. The headline test is over days: a paired t-test of the days' means (p_day; None on one day). Beside it
@@ -316,9 +491,14 @@ def obstacle_test(args: Args, nights: list[dict], policy: str, noise: float | No
 
     mine, by_day = [], {}
     for r in nights:
-        with np.load(os.path.join(args.results_dir, args.campaign, r["day"], r["dir"], "obstacle_distances.npz")) as d:
-            mine.extend(d[policy])
-            by_day.setdefault(r["day"], (np.array(d["tamer"]), []))[1].append(float(np.mean(d[policy])))
+        path = os.path.join(args.results_dir, args.campaign, r["day"], r["dir"], "obstacle_distances.npz")
+        d = read_npz(path) if os.path.lexists(path) else {}
+        if policy not in d:  # a night without the test or the policy (a tiny night's offline criterion picked none)
+            continue
+        mine.extend(d[policy])
+        by_day.setdefault(r["day"], (np.array(d["tamer"]), []))[1].append(float(np.mean(d[policy])))
+    if not by_day:
+        return None
     tamer = [float(np.mean(t)) for t, _ in by_day.values()]
     means = [statistics.mean(m) for _, m in by_day.values()]
     margins = [t - m for t, m in zip(tamer, means, strict=True)]
@@ -348,7 +528,8 @@ def obstacle_text(test: dict) -> str:
 
 
 def obstacle_p(args: Args, nights: list[dict], policy: str, noise: float | None = None) -> str:
-    return obstacle_text(obstacle_test(args, nights, policy, noise))
+    test = obstacle_test(args, nights, policy, noise)
+    return "-" if test is None else obstacle_text(test)
 
 
 def table_row(cells: list[str]) -> str:
@@ -367,11 +548,11 @@ def table(args: Args) -> str:
     verdict, one row per variant, policy and measure."""
     study = STUDIES[args.script]
     columns = study.columns
-    rows = load(args)
-    if not rows:
-        return f"no completed nights under {args.results_dir}/{args.campaign}"
+    rows, left_out = scan(args)
+    notes = [f"\nnot in the table: {os.path.relpath(path, args.results_dir)}, {why}" for path, why in left_out]
+    if not rows:  # kept for their curves, left out of the table: say so
+        return "\n".join([f"no completed nights under {args.results_dir}/{args.campaign}", *notes])
     days = sorted({r["day"] for r in rows})
-    unfinished = [path for path in night_dirs(args) if not completed(path)]
     spread = {name: seed_spread(rows, key.format(p="inform")) for name, key, _ in columns}
     lines = [f"{len(rows)} nights on {len(days)} day(s): {', '.join(days)}"]
     measured = ", ".join(f"{k} {v:.3g}" for k, v in spread.items() if v is not None)
@@ -401,6 +582,8 @@ def table(args: Args) -> str:
     for variant in ran:
         mine = [r for r in rows if r["variant"] == variant]
         for p in ("inform", "inform_selected") if study.pusher else ("inform",):
+            if not any(key.format(p=p) in r for r in mine for _, key, _ in columns):
+                continue  # a policy none of its nights has (tiny nights: the offline criterion picked none)
             cells = [mean_sd([r.get(key.format(p=p)) for r in mine]) for _, key, _ in columns]
             beats = "-"
             if variant not in CONTROLS:
@@ -413,13 +596,7 @@ def table(args: Args) -> str:
     lines += ["", default_rule(args, rows, ran, noise)] if study.pusher else []
     lines += ["", method_rule(args, rows, [v for v in ran if v in METHODS])] if study.pusher else []
     lines += ["", per_day(rows, ran)] if study.pusher else []
-    for path in unfinished:  # kept for their curves, left out of the table: say so
-        with open(os.path.join(path, "summary.json")) as f:
-            summary = json.load(f)
-        cause = summary.get("signal") or summary.get("error")
-        why = f"{summary.get('status')} in its {summary.get('phase')} phase ({cause})"
-        lines.append(f"\nnot in the table: {os.path.relpath(path, args.results_dir)}, {why}")
-    return "\n".join(lines)
+    return "\n".join([*lines, *notes])  # kept for their curves, left out of the table: say so
 
 
 def per_day(rows: list[dict], variants: list[str]) -> str:
@@ -503,6 +680,8 @@ def rule_test(
         return ["0", "-", "-"], {t: f"open: ran on 0 of {len(seeds)} days" for t in TESTS}
     oracle = day_means(rows, "oracle", "eval/{p}_return")
     test = obstacle_test(args, nights, policy, noise)
+    if test is None:  # none of its nights has this policy
+        return ["0", "-", "-"], {t: "no: none of its nights has this policy" for t in TESTS}
     mine = day_means(rows, variant, "eval/{p}_return", policy)
     within = sum(oracle[d] - v <= RULE_ORACLE_GAP * abs(oracle[d]) for d, v in mine.items())
     n, left = test["days"], len(seeds) - test["days"]  # days run, days still to run
@@ -533,7 +712,8 @@ def default_rule(args: Args, rows: list[dict], variants: list[str], noise: float
     lines += table_head([*head, "a new default? per-day test", "pooled test"])
     passed = {}  # label: (variant, policy, the tests it passed by)
     for variant, policy in [(v, p) for v in candidates for p in ("inform", "inform_selected")]:
-        if not any(r["variant"] == variant and r.get("seed") in RULE_SEEDS for r in rows):
+        mine = [r for r in rows if r["variant"] == variant and r.get("seed") in RULE_SEEDS]
+        if not any(f"eval/{policy}_return" in r for r in mine):  # not run, or no such policy (no offline pick)
             continue
         cells, answers = rule_test(args, rows, variant, policy, RULE_SEEDS, RULE_CLOSER_DAYS, noise)
         label = variant if policy == "inform" else f"{variant}, offline pick"
@@ -563,27 +743,28 @@ def default_rule(args: Args, rows: list[dict], variants: list[str], noise: float
     return "\n".join([*lines, "", verdict_line])
 
 
-def tamer_streams(args: Args, day: str) -> None:
+def tamer_streams(args: Args, day: str, stop: Stop) -> bool:
     """The day's TAMER actor under its run's sampled test (the fixed start, --eval-episodes episodes) in each of
     STREAMS, other streams of sampled actions than the run's own: {results_dir}/{campaign}/<day>/tamer_streams.json.
-    Every night of a day tests TAMER in the same stream, so the nights alone show no spread."""
-    dest = os.path.join(args.results_dir, args.campaign, os.path.basename(os.path.normpath(day)), "tamer_streams.json")
+    Every night of a day tests TAMER in the same stream, so the nights alone show no spread. False if a test failed."""
+    dest = os.path.join(args.results_dir, args.campaign, day_name(day), "tamer_streams.json")
     if os.path.isfile(dest):
-        return
-    with open(os.path.join(day, "summary.json")) as f:
-        run = json.load(f)
+        return True
+    run = read_json(os.path.join(day, "summary.json"))
     cmd = [sys.executable, "-m", "inform_utils.evaluate_policy", "pusher", os.path.join(day, "tamer_actor.pt")]
     cmd += ["--env-id", run["args"]["env_id"], "--seed", str(run["seed"]), "--obstacle-episodes", "0"]
     cmd += ["--eval-episodes", str(run["args"]["eval_episodes"])]
     returns = {}
     for stream in STREAMS:
-        proc = subprocess.run([*cmd, "--stream", str(stream)], capture_output=True, text=True, check=True,
-                              env=child_env())  # fmt: skip
-        returns[str(stream)] = json.loads(proc.stdout[proc.stdout.index("{") :])["eval/policy_return_sampled"]
+        try:
+            test = last_json(run_child([*cmd, "--stream", str(stream)], stop), f"TAMER's test in stream {stream}")
+        except NightFailed as e:
+            print(f"[study] failed ({e})", flush=True)
+            return False
+        returns[str(stream)] = test["eval/policy_return_sampled"]
     os.makedirs(os.path.dirname(dest), exist_ok=True)
-    with open(dest + ".tmp", "w") as f:
-        json.dump({"eval/tamer_return_sampled": returns, "command": " ".join(cmd[1:])}, f, indent=1)
-    os.replace(dest + ".tmp", dest)
+    write_json(dest, {"eval/tamer_return_sampled": returns, "command": " ".join(cmd[1:])})
+    return True
 
 
 def return_spread(args: Args, rows: list[dict]) -> float | None:
@@ -594,9 +775,10 @@ def return_spread(args: Args, rows: list[dict]) -> float | None:
         path = os.path.join(args.results_dir, args.campaign, day, "tamer_streams.json")
         if not os.path.isfile(path):
             return None
-        with open(path) as f:
-            values = list(json.load(f)["eval/tamer_return_sampled"].values())
+        values = list(read_json(path).get("eval/tamer_return_sampled", {}).values())
         values += [r[SAMPLED.format(p="tamer")] for r in rows if r["day"] == day and SAMPLED.format(p="tamer") in r]
+        if not values:
+            return None
         spreads.append(max(values) - min(values))
     return max(spreads) if spreads else None
 
@@ -677,26 +859,89 @@ def rule_means(rows: list[dict], variants: list[str]) -> list[str]:
     return lines
 
 
+def validate(args: Args) -> dict[str, str]:
+    """Bad input, before anything runs: ValueError, one line. Returns {day: day.pt's sha256}."""
+    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._+=-]{0,99}", args.campaign):  # one folder under results/
+        raise ValueError(f"--campaign {args.campaign[:100]!r}: one folder name under {args.results_dir}/ (letters, "
+                         "digits and ._+=-, no / or ..)")  # fmt: skip
+    study = STUDIES[args.script]
+    unknown = [v for v in args.variants or [] if v not in study.variants]
+    if unknown:
+        raise ValueError(f"unknown variant(s) {', '.join(unknown)}; choose from {', '.join(study.variants)}")
+    if args.table:
+        return {}
+    if not args.sleep_seeds or args.random_start_episodes < 1:
+        raise ValueError("--sleep-seeds must name at least one seed, and --random-start-episodes be >= 1")
+    days = {}
+    for day in args.days:
+        if not os.path.isfile(os.path.join(day, "day.pt")):
+            raise ValueError(f"{day} holds no day.pt; make one with {args.script} --save-buffer")
+        days[day] = sha256(os.path.join(day, "day.pt"))
+    by_name = {}
+    for day, sha in days.items():
+        other = by_name.setdefault(day_name(day), (day, sha))
+        if other[1] != sha:  # the campaign keeps a day's nights under its folder's name
+            raise ValueError(f"--days {other[0]} and {day}: two different days in folders of one name; give one of "
+                             "them another folder name (or run it in another --campaign)")  # fmt: skip
+    check_writable(os.path.join(args.results_dir, args.campaign), "--results-dir")
+    return days
+
+
+def study_main(args: Args, extra: list[str]) -> int:
+    """Run the campaign's nights that are not kept yet, then print the table. Exit 0, 1 if a night failed, 2 for bad
+    input (ValueError, raised before anything runs, or by a night that refuses its input), 128 + the signal if
+    stopped."""
+    days = validate(args)
+    if args.table:
+        print(table(args))
+        return 0
+    study = STUDIES[args.script]
+    plan = [(day, variant, seed) for variant in args.variants or list(study.variants)
+            for seed in (args.sleep_seeds if variant in study.all_seeds else args.sleep_seeds[:1])
+            for day in args.days]  # fmt: skip
+    records = {}
+    for day, variant, seed in plan:
+        night_flags = night_command(args, day, variant, seed, extra)[5:]  # after `-m runner --sleep-from DAY`
+        records[night_dir(args, day_name(day), variant, seed)] = identity(args, extra, days[day], night_flags)
+    found = conflicts(args, records)
+    if found:
+        more = f" (and {len(found) - 1} more)" if found[1:] else ""
+        raise ValueError(f"--campaign {args.campaign}: {found[0]}{more}; a campaign keeps only its own nights: name "
+                         "another --campaign, or move those away")  # fmt: skip
+    failed = []
+    with Stop().installed() as stop:
+        try:
+            for day, variant, seed in plan:
+                if stop.signum:
+                    raise Stopped
+                if not run_night(args, day, variant, seed, records[night_dir(args, day_name(day), variant, seed)],
+                                 stop):  # fmt: skip
+                    failed.append(f"{variant} sleep seed {seed} on {day_name(day)}")
+            for day in args.days if study.pusher else ():
+                if not tamer_streams(args, day, stop):
+                    failed.append(f"TAMER's streams on {day_name(day)}")
+            text = table(args)
+        except Stopped:
+            text = None
+        if stop.signum:  # a stop while the table was made, too: the study did not finish
+            where = os.path.join(args.results_dir, args.campaign)
+            print(f"error: stopped by {signal.Signals(stop.signum).name}; the nights that finished are kept in "
+                  f"{where}, run the same command again to resume", file=sys.stderr)  # fmt: skip
+            return 128 + stop.signum
+    print(text)
+    if failed:
+        print(f"error: {len(failed)} of {len(plan)} night(s) or tests failed ({'; '.join(failed)}); run the same "
+              "command again to retry them", file=sys.stderr)  # fmt: skip
+        return 1
+    return 0
+
+
 if __name__ == "__main__":
     argv = sys.argv[1:]
     extra = argv[argv.index("--") + 1 :] if "--" in argv else []  # flags after -- go to every night
-    args = tyro.cli(Args, args=argv[: argv.index("--")] if "--" in argv else argv)
-    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._+=-]{0,99}", args.campaign):  # one folder under results/
-        sys.exit(f"error: --campaign {args.campaign[:100]!r}: one folder name under {args.results_dir}/ (letters, "
-                 "digits and ._+=-, no / or ..)")  # fmt: skip
-    study = STUDIES[args.script]
-    variants = args.variants or list(study.variants)
-    unknown = [v for v in variants if v not in study.variants]
-    if unknown:
-        sys.exit(f"error: unknown variant(s) {', '.join(unknown)}; choose from {', '.join(study.variants)}")
-    if not args.table:
-        for day in args.days:
-            if not os.path.isfile(os.path.join(day, "day.pt")):
-                sys.exit(f"error: {day} holds no day.pt; make one with {args.script} --save-buffer")
-        for variant in variants:
-            for seed in args.sleep_seeds if variant in study.all_seeds else args.sleep_seeds[:1]:
-                for day in args.days:
-                    run_night(args, day, variant, seed, extra)
-        for day in args.days if study.pusher else ():
-            tamer_streams(args, day)
-    print(table(args))
+    args = tyro.cli(Args, args=argv[: argv.index("--")] if "--" in argv else argv)  # a malformed flag: tyro, exit 2
+    try:
+        sys.exit(study_main(args, extra))
+    except (ValueError, OSError) as e:  # BadFile is a ValueError; an OSError: results/ could not take a night
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(2 if isinstance(e, ValueError) else 1)

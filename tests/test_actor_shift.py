@@ -57,3 +57,32 @@ def test_a_night_that_did_not_move_the_actor_moves_nothing(tmp_path):
         assert m["same_weights"] == m["same_actions"] == same["tamer"]
     assert moved["relative_weight_change"] > 0.5 and moved["mean_action_change"] > 0
     assert len(moved["random_moves"]) == 2 and proc.stdout.count("\n") == 2
+
+
+@pytest.mark.parametrize(
+    ("flags", "phrase"),
+    [
+        ([], "pass at least one Pusher run directory"),
+        (["run", "--perturbations", "0"], "--perturbations must be >= 1"),
+        (["run", "--perturbations", "-5"], "--perturbations must be >= 1"),
+        (["run", "--out", "run"], "--out run: must name a file"),
+    ],
+)
+def test_bad_input_is_one_line_before_the_work(tmp_path, flags, phrase):
+    """Issue 55, item 13: with no run folders, exit 0 and nothing printed; --perturbations 0 or -5, a traceback after
+    all the work; --out naming a folder, a traceback and a stray <out>.tmp."""
+    (tmp_path / "run").mkdir()
+    cmd = [sys.executable, "-m", "inform_utils.actor_shift", *flags]
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path, timeout=300,
+                          env={**os.environ, "PYTHONPATH": REPO})  # fmt: skip
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert proc.stderr.strip().splitlines() == [proc.stderr.strip()] and proc.stderr.startswith("error: ")
+    assert phrase in proc.stderr and os.listdir(tmp_path) == ["run"] and proc.stdout == ""
+
+
+def test_a_truncated_summary_is_one_line(tmp_path):
+    (tmp_path / "summary.json").write_text('{"seed": 3, "ar')
+    proc = subprocess.run([sys.executable, "-m", "inform_utils.actor_shift", str(tmp_path)], capture_output=True,
+                          text=True, cwd=REPO, timeout=300)  # fmt: skip
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    assert proc.stderr.startswith(f"error: {tmp_path / 'summary.json'}: cannot read it (half-written or damaged")

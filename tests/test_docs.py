@@ -33,7 +33,7 @@ MODULES = {
     },
 }
 FILES = {"benchmarks/benchmark.py", "benchmarks/compile_sleep.py"}  # tyro scripts, not importable as modules
-NO_ARGS = {"browser_teacher.py"}  # a library: run with flags, a mistake
+NO_ARGS = {"browser_teacher.py", "inform_utils.files"}  # libraries: run with flags, a mistake
 STOP_TIMES = "benchmarks/stop_times.py"  # stop_times.py N SCRIPT FLAGS...: the flags are SCRIPT's
 SHELL_SPLIT = re.compile(r"&&|\|\||[;|()]")
 PYTHON = re.compile(r"^(?:\S*/)?python3?(?:\.\d+)?$")

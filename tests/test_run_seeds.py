@@ -348,3 +348,47 @@ def test_recorded_args_against_the_campaigns():
     assert not run_seeds.is_campaigns({"seed": 7, "exp_name": "c", "noise": 0.2, "new": 3}, campaign)
     changed = {**campaign, "args": {**campaign["args"], "new": 4}}
     assert not run_seeds.is_campaigns({"seed": 7, "exp_name": "c", "noise": 0.1}, changed)  # made before "new"
+
+
+def test_unreadable_summaries_of_the_campaign_do_not_stop_it(tmp_path, monkeypatch, fake_script, capsys):
+    """Issue 55, item 8: a matching summary.json that is truncated, a dangling link or unreadable (here a directory)
+    crashed run_seeds before any run, so the campaign could never resume. Such a run is not a finished one: it is run
+    again, with a warning."""
+    monkeypatch.chdir(tmp_path)
+    for seed, kind in ((1, "truncated"), (2, "dangling"), (3, "unreadable")):
+        run_dir = tmp_path / "runs" / f"Fake-v0__u__{seed}__1"
+        run_dir.mkdir(parents=True)
+        if kind == "truncated":
+            (run_dir / "summary.json").write_text('{"status": "completed", "seed": 1, "scr')
+        elif kind == "dangling":
+            os.symlink(tmp_path / "nowhere.json", run_dir / "summary.json")
+        else:
+            (run_dir / "summary.json").mkdir()
+    table = run_seeds.main(run_seeds.Args(script="fake.py", exp_name="u", seeds=[1, 2, 3], workers=1))[""]
+    assert [s for s, _ in calls(tmp_path)] == [1, 2, 3] and table["eval/x"]["n"] == 3
+    err = capsys.readouterr().err
+    assert "half-written or damaged" in err and "a dangling link" in err and "a directory, not a file" in err
+
+
+def test_a_results_dir_that_cannot_be_written_is_refused_before_any_run(tmp_path, fake_script):
+    """Issue 55, item 8: a --results-dir that cannot take files was a traceback after the runs, with no table. It is
+    refused first, in one line; a copy that fails later (a full disk) leaves the run in runs/ and the table comes."""
+    (tmp_path / "afile").write_text("")
+    result = subprocess.run([sys.executable, RUN_SEEDS, "--script", "fake.py", "--exp-name", "r", "--seeds", "1",
+                             "--results-dir", "afile/kept"], cwd=tmp_path, capture_output=True, text=True,
+                            timeout=120)  # fmt: skip
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert result.stderr.strip() == f"error: --results-dir afile/kept: {tmp_path / 'afile'} is a file, not a directory"
+    assert not (tmp_path / "calls.txt").exists()
+
+
+def test_a_run_that_cannot_be_kept_stays_in_runs_and_the_table_comes(tmp_path, monkeypatch, fake_script, capsys):
+    monkeypatch.chdir(tmp_path)
+
+    def full_disk(*a, **k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(run_seeds.shutil, "copy2", full_disk)
+    table = run_seeds.main(run_seeds.Args(script="fake.py", exp_name="f", seeds=[1], results_dir="kept"))[""]
+    assert table["eval/x"]["n"] == 1 and os.listdir("kept") == []  # no half-copied run
+    assert "not kept in kept/Fake-v0__f__1__" in capsys.readouterr().err
