@@ -19,7 +19,11 @@ import typing
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 HISTORY = {"results.md", "teacher_notes.md"}  # what ran then, with the flags of then
 # a flag a page names as gone on purpose: (page, flag), each with the reason
-OLD_NAMES = {("docs/pusher_notes.md", "--tamer-q-lr"): "its list of changes: `--tamer-q-lr` is now `--tamer-h-lr`"}
+OLD_NAMES = {
+    ("docs/pusher_notes.md", "--tamer-q-lr"): "its list of changes: `--tamer-q-lr` is now `--tamer-h-lr`",
+    **{("docs/shape.md", hack): "a hack's flag, made on a copy (tests/test_day_hack.py, tests/test_night_hack.py)"
+       for hack in ("--teacher-negative-beta", "--tamer-layer-norm", "--sleep-q-l2-coef")},
+}  # fmt: skip
 # the programs the docs run: the scripts, the helpers (python -m) and the benchmarks, by how a command names them
 MODULES = {
     "inform_sac_pusher.py": "inform_sac_pusher",
@@ -33,7 +37,13 @@ MODULES = {
     },
 }
 FILES = {"benchmarks/benchmark.py", "benchmarks/compile_sleep.py"}  # tyro scripts, not importable as modules
-NO_ARGS = {"browser_teacher.py", "inform_utils.files"}  # libraries: run with flags, a mistake
+NO_ARGS = {
+    "browser_teacher.py",
+    "inform_utils.files",
+    "inform_utils.recovered_reward",
+    "inform_utils.videos",
+    "inform_utils.pusher_contact",  # a measurement with no flags
+}  # libraries
 STOP_TIMES = "benchmarks/stop_times.py"  # stop_times.py N SCRIPT FLAGS...: the flags are SCRIPT's
 SHELL_SPLIT = re.compile(r"&&|\|\||[;|()]")
 PYTHON = re.compile(r"^(?:\S*/)?python3?(?:\.\d+)?$")
