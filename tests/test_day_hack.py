@@ -211,3 +211,24 @@ def test_a_day_whose_tamer_networks_hold_nan_is_refused_in_one_line(script, tmp_
     result, run_dir, _ = run(tmp_path, REPO, [script, "--sleep-from", str(tmp_path / "nan"), *night_flags])
     assert result.returncode == 2 and run_dir is None, result.stderr[-2000:]
     assert result.stderr.count("\n") == 1 and "NaN" in result.stderr, result.stderr
+
+
+# the maze's paths check what they are given, and its long tests look for a stop (issue 55, items 3 and 6) ---------
+def test_a_maze_network_holding_nan_is_refused_by_evaluate_policy(tmp_path):
+    net = maze.QNetwork(30, 4)
+    with torch.no_grad():
+        net.network[0].weight[0, 0] = float("nan")
+    maze.save_network(str(tmp_path / "inform_q.pt"), net, env_id="KnoxStoneMaze-v0")  # the script's own writer
+    env = {**os.environ, "PYTHONPATH": REPO}
+    cmd = [sys.executable, "-m", "inform_utils.evaluate_policy", "maze", str(tmp_path / "inform_q.pt")]
+    result = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 2 and result.stderr.count("\n") == 1 and "NaN" in result.stderr, result.stderr
+
+
+def test_the_maze_evaluation_looks_for_a_stop_every_episode(monkeypatch):
+    stop = type("Stop", (), {"received": ["SIGTERM"], "raised": False, "finished": False})()
+    monkeypatch.setattr(maze.StopSignals, "current", stop)
+    env = maze.make_env("FrozenLake-v1")
+    with pytest.raises(KeyboardInterrupt):  # before a single episode of the 100,000
+        maze.evaluate(maze.np.zeros(16, dtype=int), env, [{"seed": s} for s in range(100_000)], 100)
+    assert stop.raised
