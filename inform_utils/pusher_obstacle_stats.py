@@ -26,7 +26,9 @@ import numpy as np
 import tyro
 from scipy import stats
 
-from inform_utils.files import atomic, read_json, read_npz, write_json
+if not __package__:  # run as a file (python inform_utils/pusher_obstacle_stats.py): its package from the repository
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from inform_utils.files import atomic, read_json, read_npz, write_json  # noqa: E402
 
 
 @dataclass

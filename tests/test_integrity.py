@@ -15,6 +15,7 @@ import inform_dqn_gridworld as maze
 import inform_sac_pusher as isp
 import oracle_train as ot
 import q_learning_recovered_reward as qr
+from inform_utils.recovered_reward import load as load_recovered_reward
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 V5_TEACHER = os.path.join(REPO, "oracles", "Pusher-v5__sac_oracle.pt")
@@ -49,7 +50,7 @@ def test_a_flipped_pusher_teacher_actor_and_critic_are_refused(tmp_path):
     shutil.copytree(V4_RUN, run_dir)
     flipped(f"{V4_RUN}/inform_critic.pt", run_dir / "inform_critic.pt")
     with pytest.raises(isp.InputError, match="inform_critic.pt: damaged"):  # the recovered reward's networks
-        isp.RecoveredReward.load(str(run_dir))
+        load_recovered_reward(str(run_dir))
 
 
 def test_a_flipped_day_is_refused_before_it_is_read(tmp_path):

@@ -17,6 +17,7 @@ DECLARED = {
         "QEnsemble", "Actor", "HIDDEN_SIZE", "Teacher", "oracle_q", "oracle_feedback", "linear_schedule",  # the parts
         "tamer_loss", "update_actor", "iq_loss", "soft_value", "recover_reward", "soft_update", "SLEEP_GAMMA",
         "RecoveredReward",  # inform_utils/recovered_reward.py loads it from a run
+        "DAY",  # the mark of a day's flag (the page's Args redefine some)
         "TAMER_POLICY_LR",
         "Night",  # the night, which the study subclasses
         "Evaluator", "evaluate", "obstacle_test", "obstacle_skipped", "object_xy", "check_video", "video_env",
