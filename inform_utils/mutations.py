@@ -43,6 +43,9 @@ MAZE_EQ2 = "tests/test_inform_gridworld.py::test_iq_loss_eq2_by_hand"
 MAZE_EQ2_GRADIENT = "tests/test_inform_gridworld.py::test_iq_loss_uses_target_network_on_next_state_without_gradient"
 MAZE_OPTIMUM, MAZE_LOSSES = f"{LEARNING}::test_maze_short_run_reaches_the_optimum", f"{LEARNING}::test_maze_losses_fall"
 TABULAR_LEARNS = "tests/test_q_learning_recovered_reward.py::test_each_bootstrap_learns_a_known_good_reward"
+STUDY, METHODS_TESTS = "inform_utils/sleep_variants_pusher.py", "tests/test_sleep_methods.py"
+DWBC_LEARNS = f"{METHODS_TESTS}::test_dwbc_finds_the_success_sets_action_where_failures_share_its_states"
+PU_TD3BC_LEARNS = f"{METHODS_TESTS}::test_pu_td3bc_learns_its_reward_first_then_acts_on_where_an_action_leads"
 # iq_loss's last line is the same in both scripts: its value kept, its gradient zero (no error at backward())
 IQ_TOTAL = "return sum(terms.values()), terms  # the total and its named terms: the sleep logs whatever terms come back"
 NO_GRADIENT = "return sum(terms.values()).detach() + 0.0 * sum(terms.values()), terms  # the same value, no gradient"
@@ -134,6 +137,28 @@ MUTATIONS: list[Mutation] = [
              "y = gamma * soft_value(target_net(next_obs), temperature)",
              (MAZE_EQ2,),
              "y(s') bootstraps past G"),
+    # the nights of other methods (the sleep study's): each mechanism removed on a day whose failures share the
+    # success set's states
+    Mutation("dwbc_without_weights", STUDY,
+             'dwbc_policy_loss(nll[expert], nll[other], d[expert], d[other], DWBC["alpha"], DWBC["eta"])',
+             "torch.cat([nll[expert], nll[other]]).mean()",
+             (DWBC_LEARNS,),
+             "DWBC's policy loss without d's weights: plain cloning of every row"),
+    Mutation("dwbc_d_fixed", STUDY,
+             'return d.clamp(*DWBC["d_range"])',
+             "return d * 0.0 + 0.5",
+             (DWBC_LEARNS,),
+             "DWBC's discriminator output fixed at 0.5 (its weights then 4.5 on the success set, 1 on the rest)"),
+    Mutation("pu_td3bc_plain_cross_entropy", STUDY,
+             'loss = nn_pu_loss(reward(obs[p]).squeeze(-1), reward(obs[u]).squeeze(-1), eta)',
+             "loss = F.softplus(-reward(obs[p])).mean() + F.softplus(reward(obs[u])).mean()",
+             (PU_TD3BC_LEARNS,),
+             "the reward's stage by plain cross-entropy: the day's success rows counted as negatives, not PU"),
+    Mutation("pu_td3bc_critic_weight0", STUDY,
+             'td3bc_actor_loss(self.critic(z, pi)[0], pi, actions, TD3BC["alpha"])',
+             "td3bc_actor_loss(self.critic(z, pi)[0], pi, actions, 0.0)",
+             (PU_TD3BC_LEARNS,),
+             "TD3+BC's critic weight (alpha) at 0: plain cloning of the batch's actions"),
     # the tabular agents on the recovered reward
     Mutation("tabular_alpha0", TABULAR,
              "q[s, a] += args.alpha * (target - q[s, a])",

@@ -73,8 +73,14 @@ PUSHER_VARIANTS = {
     "td3bc2.5": ["--sleep-bc-coef", "2.5"],
     "temperature0.1": ["--sleep-temperature", "0.1"],
     "iqlearn_offline": ["--sleep-loss-rows", "expert", "--sleep-actor-states", "expert", "--sleep-policy-lr", "3e-5"],
-    "dwbc": ["--sleep-method", "dwbc"],  # nights of other methods, built for a night's data
-    "oril": ["--sleep-method", "oril"],
+    # nights of other methods, built for a night's data, and the cloning control at each one's step size
+    "dwbc": ["--sleep-method", "dwbc"],  # DWBC at its release's settings (policy lr 1e-4)
+    "pu_td3bc": ["--sleep-method", "pu_td3bc"],  # a PU reward learned first, then TD3+BC (lr 3e-4)
+    "bc_lr1e-4": ["--sleep-control", "bc", "--sleep-policy-lr", "1e-4"],  # cloning the success set at DWBC's rate
+    "bc_lr3e-4": ["--sleep-control", "bc", "--sleep-policy-lr", "3e-4"],  # at pu_td3bc's and the drafts' rate
+    # the drafts that the nights committed as `dwbc` and `oril` before 2026-12-05 ran (their folders renamed so)
+    "dwbc_draft": ["--sleep-method", "dwbc_draft"],
+    "oril_draft": ["--sleep-method", "oril_draft"],
     "authors": ["--sleep-protocol", "authors"],  # last: 100k gradient steps, 20 times the others
 }
 MAZE_VARIANTS = {
@@ -85,6 +91,8 @@ MAZE_VARIANTS = {
     "temperature0.01": ["--sleep-temperature", "0.01"],
 }
 CONTROLS = ("sham", "bc")
+# cloning the success set at other step sizes: controls for the methods that share them (never candidates)
+CLONING = ("bc_lr1e-4", "bc_lr3e-4")
 # the rule for a new default (fixed before the study): on the days of these seeds, with the boxes closer than TAMER
 # at p < RULE_P on at least RULE_CLOSER_DAYS of them, and within RULE_ORACLE_GAP of the oracle on the plain task
 RULE_SEEDS, RULE_P, RULE_CLOSER_DAYS, RULE_ORACLE_GAP = (1, 2, 3, 4, 5), 0.01, 4, 0.15
@@ -93,7 +101,9 @@ CONFIRM_SEEDS, CONFIRM_CLOSER_DAYS = (6, 7, 8), 2
 # the rule for a night built for INFORM's data (docs/results.md, fixed before any of its nights ran): per task, over
 # its five days, with the boxes closer than each control (a two-sided paired t-test over the days, p < METHOD_P), and
 # on the plain task a sampled return not below TAMER's by more than TAMER's own sampling spread
-METHODS, METHOD_P, METHOD_DAYS = ("dwbc", "oril"), 0.05, 5
+METHODS, METHOD_P, METHOD_DAYS = ("dwbc", "pu_td3bc", "dwbc_draft", "oril_draft"), 0.05, 5
+# the deterministic test beside the rule's (sampled) one: the same boxes and start, the mean action (not the rule's)
+OBSTACLE_DETERMINISTIC = "eval/obstacle/{p}_final_distance_deterministic"
 # TAMER's own sampling spread on the plain task: its sampled test again in these other streams of sampled actions
 STREAMS = (1, 2, 3, 4, 5)
 OBSTACLE, SAMPLED = "eval/obstacle/{p}_final_distance", "eval/{p}_return_sampled"
@@ -128,7 +138,7 @@ STUDIES = {
         "inform_utils.sleep_variants_pusher",
         PUSHER_VARIANTS,
         ("--sleep-holdout-fraction", "0.15"),  # every night logs the offline criterion on the same held-out episodes
-        ("default", "sham", "bc", "authors", "dwbc", "oril"),
+        ("default", "sham", "bc", "authors", *CLONING, *METHODS),
         (
             ("fixed-start return", "eval/{p}_return", 1),
             ("authors' test distance", "eval/authors_test/{p}_final_distance", -1),
@@ -166,8 +176,11 @@ class Args:
     variants: list[str] | None = None
     """the variants to run, in this order (names of the script's variants; None: all)"""
     sleep_seeds: list[int] = field(default_factory=lambda: [1, 2])
-    """the sleep seeds of the default and the controls (on the Pusher also of the methods, dwbc and oril, and of the
-    authors' protocol); the other variants use the first"""
+    """the sleep seeds of the default and the controls (on the Pusher also of the methods, their cloning controls and
+    the authors' protocol); the other variants use the first"""
+    gradient_steps: int | None = None
+    """the budget: every night of the campaign runs this many gradient steps (--sleep-gradient-steps; None: each
+    night's own, 5,000, the authors' 100,000). A budget is a variant judged on its own: one campaign per budget"""
     random_start_episodes: int = 50
     """episodes of the random-start test of each night's policies"""
     table: bool = False
@@ -258,11 +271,12 @@ def identity(args: Args, extra: list[str], day_sha: str, night_flags: list[str])
     random-start test's episodes (Pusher), its day by content (day.pt's sha256, whatever its folder is called) and
     every flag it ran with. Kept beside the night as night.json."""
     pusher = STUDIES[args.script].pusher
-    return {"script": args.script, "flags": list(extra), "random_start_episodes": args.random_start_episodes
-            if pusher else None, "day_sha256": day_sha, "night_flags": night_flags}  # fmt: skip
+    record = {"script": args.script, "flags": list(extra), "random_start_episodes": args.random_start_episodes
+              if pusher else None, "day_sha256": day_sha, "night_flags": night_flags}  # fmt: skip
+    return record | ({"gradient_steps": args.gradient_steps} if args.gradient_steps is not None else {})
 
 
-CAMPAIGN_KEYS = ("script", "flags", "random_start_episodes")  # what every night of one campaign shares
+CAMPAIGN_KEYS = ("script", "flags", "random_start_episodes", "gradient_steps")  # what every night of a campaign shares
 
 
 def conflicts(args: Args, planned: dict[str, dict]) -> list[str]:
@@ -278,7 +292,7 @@ def conflicts(args: Args, planned: dict[str, dict]) -> list[str]:
         except BadFile as e:
             found.append(f"{path} has no readable record of its day and flags ({str(e).rsplit('(', 1)[-1]}")
             continue
-        if mine is not None and any(record.get(k) != mine[k] for k in CAMPAIGN_KEYS):
+        if mine is not None and any(record.get(k) != mine.get(k) for k in CAMPAIGN_KEYS):
             ran = " ".join(record.get("flags") or []) or "none"
             found.append(f"{path} ran with other flags after -- ({ran}) or another script or --random-start-episodes")
         elif os.path.dirname(path) in days and record.get("day_sha256") != days[os.path.dirname(path)]:
@@ -329,6 +343,7 @@ def random_starts(run_dir: str, seed: int, env_id: str, episodes: int, stop: Sto
 def night_command(args: Args, day: str, variant: str, seed: int, extra: list[str]) -> list[str]:
     study = STUDIES[args.script]
     flags = ["--exp-name", f"night_{variant}", "--sleep-seed", str(seed), *study.common, *extra]
+    flags += ["--sleep-gradient-steps", str(args.gradient_steps)] if args.gradient_steps is not None else []
     return [sys.executable, "-m", study.runner, "--sleep-from", day, *flags, *study.variants[variant]]
 
 
@@ -586,7 +601,7 @@ def table(args: Args) -> str:
                 continue  # a policy none of its nights has (tiny nights: the offline criterion picked none)
             cells = [mean_sd([r.get(key.format(p=p)) for r in mine]) for _, key, _ in columns]
             beats = "-"
-            if variant not in CONTROLS:
+            if variant not in CONTROLS + CLONING:
                 wins = [name for name, key, sign in columns if helps(rows, variant, key, sign, spread[name], p)]
                 beats = ", ".join(wins) or "none"
             name = variant if p == "inform" else f"{variant}, offline pick"
@@ -638,7 +653,7 @@ def verdict(rows: list[dict], variants: list[str], columns: tuple, bar: dict, po
     head += [f"vs {c} (days above the bar)" for c in CONTROLS] + ["bar (seed spread, at least one unit)", "helps"]
     lines = ["verdict (paired by day; gains are in the measure's own direction: positive = better)", ""]
     lines += table_head(head)
-    for variant in [v for v in variants if v not in CONTROLS]:
+    for variant in [v for v in variants if v not in CONTROLS + CLONING]:
         for policy in policies:
             for name, key, sign in columns:
                 tamer = paired(rows, variant, "tamer", key, sign, policy)
@@ -705,7 +720,7 @@ def default_rule(args: Args, rows: list[dict], variants: list[str], noise: float
     first = f"seeds {RULE_SEEDS[0]}-{RULE_SEEDS[-1]}"
     if not any(r.get("seed") in RULE_SEEDS for r in rows):
         return f"the rule for a new default: no day of {first} in this campaign"
-    candidates = [v for v in variants if v not in CONTROLS]
+    candidates = [v for v in variants if v not in CONTROLS + CLONING]
     head = ["variant", "days", "with the boxes vs TAMER", f"within {RULE_ORACLE_GAP:.0%} of the oracle"]
     then = f"seeds {CONFIRM_SEEDS[0]}-{CONFIRM_SEEDS[-1]}"
     lines = [f"the rule for a new default (days of {first}; then {then}; p < {RULE_P} by each test)", ""]
@@ -796,44 +811,95 @@ def versus(mine: dict, theirs: dict, days: list[str]) -> tuple[str, bool]:
     return text, p is not None and p < METHOD_P and diff < 0
 
 
+def step_size(row: dict) -> str | None:
+    """The actor's learning rate a night ran with, as its summary's sleep_variant records it (a method's own)."""
+    words = dict(w.split("=", 1) for w in row.get("sleep_variant", "").split() if "=" in w)
+    return words.get("policy_lr")
+
+
+def budget(row: dict) -> int | None:  # the night's gradient steps
+    return row.get("args", {}).get("sleep_gradient_steps")
+
+
+def matched_cloning(rows: list[dict], method: str) -> tuple[str, str | None]:
+    """The cloning control that shares the method's step size (rows: one task and budget): (its step size, the
+    control's variant name, None if none of the cloning controls ran at it)."""
+    lr = next((step_size(r) for r in rows if r["variant"] == method), None)
+    for control in ("bc", *CLONING):
+        if any(r["variant"] == control and step_size(r) == lr for r in rows):
+            return lr, control
+    return lr, None
+
+
 def method_rule(args: Args, rows: list[dict], methods: list[str]) -> str:
-    """The rule for a night built for the data, per task (env id) and method, on the days that hold the method and
-    both controls: versus() each control with the boxes, the plain task's sampled return against TAMER's in the same
-    nights with TAMER's sampling spread, and the verdict: yes, no, or open while fewer than METHOD_DAYS days ran."""
+    """The rule for a night built for the data, per task (env id), budget (gradient steps) and method, on the days
+    that hold the method and the controls: versus() each control with the boxes, the plain task's sampled return
+    against TAMER's in the same nights with TAMER's sampling spread, and the verdict: yes, no, or open while fewer than
+    METHOD_DAYS days ran. Twice: as the rule was committed (bc at the night's 5e-6 and the sham), and with the cloning
+    control at the method's own step size in bc's place (issue 56). Then the same comparisons in the deterministic
+    test (the mean action; not the rule's)."""
     if not methods:
         return "the rule for a night built for the data: no night of a method (--sleep-method) in this campaign"
     rule = (
-        f"the rule for a night built for the data (per task: with the boxes closer than each control, paired "
-        f"t-test over the days p < {METHOD_P}; on the plain task not below TAMER by more than its spread)"
+        f"the rule for a night built for the data (per task and budget: with the boxes closer than each control, "
+        f"paired t-test over the days p < {METHOD_P}; on the plain task not below TAMER by more than its spread); "
+        "'as committed' against bc (cloning at 5e-6) and the sham, 'matched' against cloning at the method's own "
+        "step size and the sham"
     )
     lines = [rule, ""]
-    head = ["task", "method", "days", "with the boxes vs bc", "vs sham", "plain task vs TAMER", "consolidates?"]
+    head = ["task", "budget", "method (step size)", "days", "with the boxes vs bc", "vs bc at its step size",
+            "vs sham", "plain task vs TAMER", "consolidates? as committed", "matched"]  # fmt: skip
     lines += table_head(head)
+    deterministic = table_head(["task", "budget", "method", "days", "vs bc", "vs bc at its step size", "vs sham"])
     task_of = lambda r: r.get("args", {}).get("env_id", "?")  # noqa: E731
-    rule_days = {}  # task: the days every method shares with both controls
-    for task in sorted({task_of(r) for r in rows}):
-        on_task = [r for r in rows if task_of(r) == task]
+    rule_days = {}  # (task, budget): the days every method shares with bc and the sham
+    for task, steps in sorted({(task_of(r), budget(r)) for r in rows}, key=str):
+        on_task = [r for r in rows if task_of(r) == task and budget(r) == steps]
         for method in methods:
+            lr, matched = matched_cloning(on_task, method)
             mine = day_means(on_task, method, OBSTACLE)
-            controls = [day_means(on_task, control, OBSTACLE) for control in ("bc", "sham")]
-            days = [d for d in mine if all(d in c for c in controls)]
+            controls = {c: day_means(on_task, c, OBSTACLE) for c in ("bc", "sham") + ((matched,) if matched else ())}
+            days = [d for d in mine if all(d in controls[c] for c in ("bc", "sham"))]
             if not days:
                 continue
-            tests = [versus(mine, theirs, days) for theirs in controls]
+            tests = {c: versus(mine, controls[c], days) for c in ("bc", "sham")}
+            matched_days = [d for d in days if matched and d in controls[matched]]
+            tests["matched"] = versus(mine, controls[matched], matched_days) if matched_days else ("not run", False)
             spread = return_spread(args, [r for r in on_task if r["day"] in days])  # over the rule's days only
             ret, tamer = day_means(on_task, method, SAMPLED), day_means(on_task, method, SAMPLED, "tamer")
             gap = statistics.mean(ret[d] - tamer[d] for d in days)
             spread_text = "no tamer_streams.json" if spread is None else f"{spread:.2f}"
-            tests.append((f"{gap:+.2f} (spread {spread_text})", spread is not None and gap >= -spread - TOLERANCE))
-            answer = "yes" if all(ok for _, ok in tests) else "no"
-            answer = answer if len(days) >= METHOD_DAYS else f"open: {len(days)} of {METHOD_DAYS} days"
-            answer = answer if spread is not None else "open: TAMER's streams not run"
-            lines.append(table_row([task, method, str(len(days)), *(text for text, _ in tests), answer]))
-            rule_days[task] = rule_days.get(task, set(days)) & set(days)
-    for task, days in sorted(rule_days.items()):
-        on_days = [r for r in rows if task_of(r) == task and r["day"] in days]
-        lines += ["", f"{task}, the means over the {len(days)} days the methods and both controls share:", ""]
-        lines += rule_means(on_days, [*methods, "bc", "sham", "default"])
+            plain = (f"{gap:+.2f} (spread {spread_text})", spread is not None and gap >= -spread - TOLERANCE)
+            answers = []
+            for against, n in ((("bc", "sham"), len(days)), (("matched", "sham"), len(matched_days))):
+                answer = "yes" if all(tests[c][1] for c in against) and plain[1] else "no"
+                answer = answer if n >= METHOD_DAYS else f"open: {n} of {METHOD_DAYS} days"
+                answers.append(answer if spread is not None else "open: TAMER's streams not run")
+            if not matched:
+                answers[1] = f"open: no cloning control at {lr}"
+            lines.append(table_row([task, str(steps), f"{method} ({lr})", str(len(days)), tests["bc"][0],
+                                    f"{matched or '-'}: {tests['matched'][0]}" if matched else "not run",
+                                    tests["sham"][0], plain[0], *answers]))  # fmt: skip
+            cells = []
+            for control in ("bc", matched, "sham"):
+                mine_det = day_means(on_task, method, OBSTACLE_DETERMINISTIC)
+                theirs = day_means(on_task, control, OBSTACLE_DETERMINISTIC) if control else {}
+                both = [d for d in days if d in mine_det and d in theirs]
+                cells.append(versus(mine_det, theirs, both)[0] if both else "-")
+            deterministic.append(table_row([task, str(steps), method, str(len(days)), *cells]))
+            rule_days[(task, steps)] = rule_days.get((task, steps), set(days)) & set(days)
+    lines += [
+        "",
+        "the deterministic test beside it (not the rule's: the mean action, one episode a night from the "
+        "same start with the same boxes, eval/obstacle/inform_final_distance_deterministic):",
+        "",
+        *deterministic,
+    ]
+    for (task, steps), days in sorted(rule_days.items(), key=str):
+        on_days = [r for r in rows if task_of(r) == task and budget(r) == steps and r["day"] in days]
+        lines += ["", f"{task}, {steps} gradient steps, the means over the {len(days)} days the methods and both "
+                  "controls share:", ""]  # fmt: skip
+        lines += rule_means(on_days, [*methods, "bc", *CLONING, "sham", "default"])
     return "\n".join(lines)
 
 
@@ -870,8 +936,9 @@ def validate(args: Args) -> dict[str, str]:
         raise ValueError(f"unknown variant(s) {', '.join(unknown)}; choose from {', '.join(study.variants)}")
     if args.table:
         return {}
-    if not args.sleep_seeds or args.random_start_episodes < 1:
-        raise ValueError("--sleep-seeds must name at least one seed, and --random-start-episodes be >= 1")
+    if not args.sleep_seeds or args.random_start_episodes < 1 or (args.gradient_steps or 1) < 1:
+        raise ValueError("--sleep-seeds must name at least one seed, --random-start-episodes and --gradient-steps "
+                         "be >= 1")  # fmt: skip
     days = {}
     for day in args.days:
         if not os.path.isfile(os.path.join(day, "day.pt")):

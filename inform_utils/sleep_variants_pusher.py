@@ -2,7 +2,8 @@
 helpers import a script's agent): the actor's start and its states, its schedule, the rows of Eq. 2's value and
 chi-squared terms, twin critics, a behaviour-cloning term, the sham and cloning controls, the hold-out offline
 criterion that picks a checkpoint without the environment, and nights of other methods built for a night's data
-(--sleep-method: DWBC, ORIL).
+(--sleep-method: DWBC at its release's settings, a PU reward + TD3+BC staged as ORIL stages it, and the drafts the
+first committed nights of these methods ran).
 
 It runs like the core script, normally on a saved day, with the study's switches on top, and writes the same run
 directory, files and summary.json (`sleep_variant` and the study's flags in `args`). With no study flag it gives the
@@ -53,11 +54,13 @@ class Args(core.Args):
     """a control in place of the INFORM actor's update, same steps: bc = behaviour cloning on the success set (the
     mean action's squared error on the expert rows); sham = TAMER's own update (H on the feedback, the actor on H),
     no consolidation. The soft Q network sleeps as usual"""
-    sleep_method: Literal["iq", "dwbc", "oril"] = "iq"
-    """the night's method (docs/results.md, "A night built for INFORM's data"): iq = the core's IQ-Learn night; dwbc =
-    discriminator-weighted behaviour cloning (Xu et al., ICML 2022): a discriminator tells the success set from the
-    rest of the day, and its output weights the cloning of both; oril = a positive-unlabelled reward of observations
-    (Zolna et al. 2020), then TD3+BC on the day relabelled with it"""
+    sleep_method: Literal["iq", "dwbc", "pu_td3bc", "dwbc_draft", "oril_draft"] = "iq"
+    """the night's method (docs/protocol.md, "Nights of other methods"): iq = the core's IQ-Learn night; dwbc =
+    discriminator-weighted behaviour cloning (Xu et al., ICML 2022) at its release's settings: a discriminator tells
+    the success set from the day's other rows, and its output weights the cloning of both; pu_td3bc = a
+    positive-unlabelled reward of observations learned first (ORIL's stage, Zolna et al. 2020), then TD3+BC on the day
+    relabelled with it, states normalised; dwbc_draft and oril_draft = the drafts the nights committed as `dwbc` and
+    `oril` before 2026-12-05 ran (the draft's DWBC settings; a PU reward learned alongside TD3+BC)"""
     sleep_init_actor_from_tamer: bool = True
     """start the INFORM actor from the TAMER actor (consolidation); False starts it from scratch (unset: the
     protocol's)"""
@@ -298,11 +301,18 @@ class ShamControl(StudyNight):
                           self.ent_coef_optimizer)  # fmt: skip
 
 
-# DWBC's settings (Xu et al., ICML 2022) as the authors' release runs its experiments (its run script and optimisers,
-# read 2026-12-04; the paper's appendix could not be read here): the weight of the expert cloning term, the class prior
-# of the positive-unlabelled discriminator, the learning rate of both networks, the policy's weight decay, and the range
-# d is clipped to, which keeps every expert weight positive (alpha - 1 - eta / (d (1 - d)) > 0)
-DWBC = {"alpha": 10.0, "eta": 0.5, "lr": 3e-4, "weight_decay": 1e-3, "d_range": (0.1, 0.9)}
+# DWBC (Xu et al., ICML 2022) as its authors' latest public code runs it: github.com/ryanxhr/DWBC at a1e9d8a
+# (2023-01-05; algos/DWBC.py unchanged since b8f8917, 2022-07-21), read 2026-12-05; docs/protocol.md names the line of
+# each: the weight of the expert cloning term, the class prior of the positive-unlabelled discriminator, the learning
+# rate of both networks, the policy's weight decay, one discriminator update every `d_every` policy steps, the range d
+# is clipped to, the range log pi is clipped to before the discriminator sees it (scaled to [0, 1]), the width of the
+# discriminator's two input branches and of its hidden layer, and the release's own budget (--sleep-gradient-steps
+# sets the night's)
+DWBC = {"alpha": 7.5, "eta": 0.5, "lr": 1e-4, "weight_decay": 5e-3, "d_every": 100, "d_range": (0.1, 0.9),
+        "log_pi_range": (-20.0, 10.0), "branch": 128, "hidden": 256, "steps": 500_000}  # fmt: skip
+# the draft's settings (an early commit of that repository, 1da7f92, with the later log-pi clip): the committed
+# nights named `dwbc` before 2026-12-05 ran these; `--sleep-method dwbc_draft` runs them again, number for number
+DWBC_DRAFT = {"alpha": 10.0, "eta": 0.5, "lr": 3e-4, "weight_decay": 1e-3, "d_range": (0.1, 0.9)}
 
 
 def pu_loss(d_expert: torch.Tensor, d_other: torch.Tensor, eta: float) -> torch.Tensor:
@@ -320,10 +330,100 @@ def dwbc_policy_loss(nll_expert, nll_other, d_expert, d_other, alpha: float, eta
     return expert.mean() + other.mean()
 
 
+def unit_log_pi(actor, obs, actions) -> torch.Tensor:
+    """log pi(a|s) per action dimension, of the action in [-1, 1] (as the release's tasks scale them): the core
+    actor's density on the env's bounds plus log(action_scale)."""
+    return actor.log_prob(obs, actions, per_dimension=True) + actor.action_scale.log()
+
+
+class DWBCDiscriminator(torch.nn.Module):
+    """DWBC's d(s, a, log pi(a|s)) in [0.1, 0.9], shaped as the release's: (s, a) and log pi (per action dimension,
+    clipped to [-20, 10], scaled to [0, 1], no gradient into the policy) each through a layer of 128, then together
+    through one of 256."""
+
+    def __init__(self, obs_dim: int, act_dim: int):
+        super().__init__()
+        self.sa = torch.nn.Linear(obs_dim + act_dim, DWBC["branch"])
+        self.log_pi = torch.nn.Linear(act_dim, DWBC["branch"])
+        self.hidden = torch.nn.Linear(2 * DWBC["branch"], DWBC["hidden"])
+        self.out = torch.nn.Linear(DWBC["hidden"], 1)
+
+    def forward(self, obs, actions, log_pi) -> torch.Tensor:
+        low, high = DWBC["log_pi_range"]
+        seen = (log_pi.detach().clamp(low, high) - low) / (high - low)
+        x = torch.cat([F.relu(self.sa(torch.cat([obs, actions], -1))), F.relu(self.log_pi(seen))], -1)
+        d = torch.sigmoid(self.out(F.relu(self.hidden(x)))).squeeze(-1)
+        return d.clamp(*DWBC["d_range"])
+
+
+def failures_only(replay_idx, expert_idx: torch.Tensor, size: int) -> torch.Tensor:
+    """The night's rows that are not in the success set (DWBC's unlabelled set, which leaves its expert set out);
+    the whole night if every row is a success."""
+    rows = torch.arange(size, device=expert_idx.device) if replay_idx is None else replay_idx
+    others = rows[~torch.isin(rows, expert_idx)]
+    if others.numel() == 0:
+        print("[sleep] warning: every episode of the night is a success; DWBC's unlabelled set is the whole night")
+        return rows
+    return others
+
+
+class DWBCNight(StudyNight):
+    """Discriminator-weighted behaviour cloning (Xu et al., ICML 2022) as the night, at its release's settings (DWBC):
+    the unlabelled set is the night's rows outside the success set (the batch's replay rows); every step the
+    discriminator's positive-unlabelled loss is taken on the batch, and every 100th step it updates d; the actor
+    clones the success set and the unlabelled rows that look like it, weighted by d before that update
+    (dwbc_policy_loss). The actor starts from TAMER's, on raw observations; the soft Q sleeps as usual (on these
+    rows) and only gives the recovered reward."""
+
+    # not the actor's learning rate (its own), its schedule (one step a night step), its states or the bc term
+    hears = {"batch_size", "q_lr", "temperature", "chi2_coef", "init_actor_from_tamer", "loss_rows", "twin_critics",
+             "holdout_fraction"}  # fmt: skip
+    fixed = {"policy_lr": DWBC["lr"], "policy_frequency": 1}
+
+    def __init__(self, tamer_actor, device, **settings):
+        super().__init__(tamer_actor, device, **settings)
+        obs_dim, act_dim = tamer_actor.fc1.in_features, tamer_actor.fc_mean.out_features
+        self.discriminator = DWBCDiscriminator(obs_dim, act_dim).to(device)
+        self.d_optimizer = torch.optim.Adam(self.discriminator.parameters(), lr=DWBC["lr"], foreach=True)
+        self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=settings["policy_lr"],
+                                                weight_decay=DWBC["weight_decay"], foreach=True)  # fmt: skip
+        self.d_every, self.calls = DWBC["d_every"], 0
+        self.d_terms = {}
+
+    def memories(self, buffer):
+        replay_idx, expert_idx, fallback = super().memories(buffer)
+        return failures_only(replay_idx, expert_idx, buffer.size), expert_idx, fallback
+
+    def update_actor(self, batch):
+        obs, actions, *_ = batch
+        expert, other = self.is_expert, ~self.is_expert
+        log_pi = unit_log_pi(self.actor, obs, actions)
+        d = self.discriminator(obs, actions, log_pi)
+        d_loss = pu_loss(d[expert], d[other], DWBC["eta"]) / DWBC["eta"]  # the release's scale: L_d / eta
+        self.calls += 1
+        if self.calls % self.d_every == 0:
+            self.d_optimizer.zero_grad(set_to_none=True)
+            d_loss.backward()
+            self.d_optimizer.step()
+        d, nll = d.detach(), -log_pi.sum(-1)  # the weights of this step: d before its update
+        self.pi_loss = dwbc_policy_loss(nll[expert], nll[other], d[expert], d[other], DWBC["alpha"], DWBC["eta"])
+        self.actor_optimizer.zero_grad(set_to_none=True)
+        self.pi_loss.backward()
+        self.actor_optimizer.step()
+        self.d_terms = {
+            "dwbc_d_loss": d_loss.detach(),
+            "dwbc_d_expert": d[expert].mean(),
+            "dwbc_d_other": d[other].mean(),
+        }
+
+    def update(self, step, batch):
+        loss, terms = super().update(step, batch)
+        return loss, {**terms, **self.d_terms}
+
+
 class Discriminator(torch.nn.Module):
-    """DWBC's d(s, a, log pi(a|s)) in (0, 1): it sees how likely the policy finds the action, per action dimension
-    (clipped to [-20, 10] and scaled to [0, 1], our guard: a day's action can lie where TAMER's actor gives it a
-    density of e^-1000; no gradient flows back into the policy through it)."""
+    """The draft DWBC's d(s, a, log pi(a|s)): one network on the three, log pi per action dimension clipped to
+    [-20, 10] and scaled to [0, 1], no gradient into the policy."""
 
     def __init__(self, obs_dim: int, act_dim: int, hidden: int = core.HIDDEN_SIZE):
         super().__init__()
@@ -334,28 +434,25 @@ class Discriminator(torch.nn.Module):
     def forward(self, obs, actions, log_pi) -> torch.Tensor:
         seen = (log_pi.detach().clamp(-20, 10) + 20) / 30
         d = torch.sigmoid(self.net(torch.cat([obs, actions, seen], -1))).squeeze(-1)
-        return d.clamp(*DWBC["d_range"])
+        return d.clamp(*DWBC_DRAFT["d_range"])
 
 
-class DWBCNight(StudyNight):
-    """Discriminator-weighted behaviour cloning (Xu et al., ICML 2022) as the night: each step the discriminator
-    learns, positive-unlabelled, to tell the success set (expert rows) from the whole day (the replay rows, which hold
-    successes too, as DWBC's unlabelled set does), then the actor clones the success set and the day's rows that look
-    like it, weighted by d (dwbc_policy_loss). The actor starts from TAMER's (consolidation, as every night here), on
-    raw observations (the release normalises them); the soft Q sleeps as usual and only gives the recovered reward."""
+class DraftDWBCNight(StudyNight):
+    """The draft of the DWBC night (`dwbc_draft`; the committed nights named `dwbc` before 2026-12-05), kept to re-run
+    them: DWBC_DRAFT's settings, the whole day as the unlabelled set (successes included), the discriminator (one
+    network, the draft's loss scale) updated every step. Not DWBC as its release runs it (DWBCNight)."""
 
-    # not the actor's learning rate (its own), the actor's states (it clones the rows it needs) or the bc term
     hears = {"batch_size", "q_lr", "temperature", "chi2_coef", "init_actor_from_tamer", "policy_frequency", "loss_rows",
              "twin_critics", "holdout_fraction"}  # fmt: skip
-    fixed = {"policy_lr": DWBC["lr"]}
+    fixed = {"policy_lr": DWBC_DRAFT["lr"]}
 
     def __init__(self, tamer_actor, device, **settings):
         super().__init__(tamer_actor, device, **settings)
         obs_dim, act_dim = tamer_actor.fc1.in_features, tamer_actor.fc_mean.out_features
         self.discriminator = Discriminator(obs_dim, act_dim).to(device)
-        self.d_optimizer = torch.optim.Adam(self.discriminator.parameters(), lr=DWBC["lr"], foreach=True)
+        self.d_optimizer = torch.optim.Adam(self.discriminator.parameters(), lr=DWBC_DRAFT["lr"], foreach=True)
         self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=settings["policy_lr"],
-                                                weight_decay=DWBC["weight_decay"], foreach=True)  # fmt: skip
+                                                weight_decay=DWBC_DRAFT["weight_decay"], foreach=True)  # fmt: skip
         self.d_terms = {"dwbc_d_loss": torch.zeros((), device=device)}
 
     def update_actor(self, batch):
@@ -363,14 +460,14 @@ class DWBCNight(StudyNight):
         expert, other = self.is_expert, ~self.is_expert
         log_pi = self.actor.log_prob(obs, actions, per_dimension=True)
         d = self.discriminator(obs, actions, log_pi)
-        d_loss = pu_loss(d[expert], d[other], DWBC["eta"])
+        d_loss = pu_loss(d[expert], d[other], DWBC_DRAFT["eta"])
         log_pi = log_pi.sum(-1)
         self.d_optimizer.zero_grad(set_to_none=True)
         d_loss.backward()
         self.d_optimizer.step()
         d = d.detach()  # the weights of this step: d before its update
         self.pi_loss = dwbc_policy_loss(
-            -log_pi[expert], -log_pi[other], d[expert], d[other], DWBC["alpha"], DWBC["eta"]
+            -log_pi[expert], -log_pi[other], d[expert], d[other], DWBC_DRAFT["alpha"], DWBC_DRAFT["eta"]
         )
         self.actor_optimizer.zero_grad(set_to_none=True)
         self.pi_loss.backward()
@@ -386,12 +483,21 @@ class DWBCNight(StudyNight):
         return loss, {**terms, **self.d_terms}
 
 
-# ORIL (Zolna et al. 2020): a reward from a positive-unlabelled classifier of observations (the success set against
-# the whole day, prior eta), then offline RL on it; the offline learner here is TD3+BC (Fujimoto & Gu 2021) at its
-# published settings: the BC weight alpha, target policy noise and its clip (times the action scale), the actor's
-# delay, the target networks' rate, the discount and the learning rate of every network
-ORIL = {"eta": 0.5, "alpha": 2.5, "policy_noise": 0.2, "noise_clip": 0.5, "delay": 2, "tau": 0.005, "gamma": 0.99,
-        "lr": 3e-4}  # fmt: skip
+# TD3+BC (Fujimoto & Gu 2021) at its published settings (github.com/sfujim/TD3_BC, main.py): the BC weight alpha,
+# target policy noise and its clip (times the action scale), the actor's delay, the target networks' rate, the
+# discount, the learning rate of every network, and the constant added to the states' std where they are normalised
+# (utils.py, normalize_states; on by default, --normalize)
+TD3BC = {"alpha": 2.5, "policy_noise": 0.2, "noise_clip": 0.5, "delay": 2, "tau": 0.005, "gamma": 0.99, "lr": 3e-4,
+         "std_eps": 1e-3}  # fmt: skip
+# ORIL's positive-unlabelled reward (Zolna et al. 2020), learned first, to convergence on the day: eta the class
+# prior; the stopping rule (ours): 10% of the night's success episodes and of its other episodes held out (at least
+# one of each), the held-out PU loss read every `every` steps, stop when it has not fallen by more than `min_delta`
+# for `patience` reads, or at `max_steps`; the reward of the best read is kept
+PU_REWARD = {"eta": 0.5, "lr": 3e-4, "valid_fraction": 0.1, "every": 250, "patience": 4, "min_delta": 1e-4,
+             "max_steps": 20_000}  # fmt: skip
+# the draft's PU reward + TD3+BC (the committed nights named `oril` before 2026-12-05): TD3+BC's settings, eta 0.5
+ORIL_DRAFT = {"eta": 0.5, "alpha": 2.5, "policy_noise": 0.2, "noise_clip": 0.5, "delay": 2, "tau": 0.005,
+              "gamma": 0.99, "lr": 3e-4}  # fmt: skip
 
 
 def nn_pu_loss(f_expert: torch.Tensor, f_other: torch.Tensor, eta: float) -> torch.Tensor:
@@ -411,16 +517,179 @@ def mean_action(actor, obs: torch.Tensor) -> torch.Tensor:  # the actor as a det
     return torch.tanh(actor(obs)[0]) * actor.action_scale + actor.action_bias
 
 
-class ORILNight(StudyNight):
-    """ORIL as the night: each step its reward R(s) = sigmoid(f(s)) learns, by the positive-unlabelled loss (its
-    non-negative form, nn_pu_loss), to tell the success set's observations from the whole day's (the replay rows),
-    and TD3+BC learns on the day relabelled with R: twin critics towards R(s) + gamma min Q'(s', pi'(s') + clipped
-    noise), the actor (its mean action) every 2nd step on lambda Q plus cloning the day's actions. The actor starts
-    from TAMER's; the soft Q sleeps as usual."""
+def reward_network(obs_dim: int) -> torch.nn.Module:  # R(s) = sigmoid(f(s))
+    nn, hidden = torch.nn, core.HIDDEN_SIZE
+    return nn.Sequential(
+        nn.Linear(obs_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, 1)
+    )
+
+
+def episode_split(buffer, rows: torch.Tensor, positive: torch.Tensor, fraction: float, seed: int):
+    """(training rows, held-out rows) of the night's rows, by episode: `fraction` of its success episodes and of its
+    other episodes (at least one of each), drawn by the seed; a kind with a single episode keeps it in both."""
+    g = torch.Generator().manual_seed(seed + 16)
+    night, good = torch.zeros(buffer.size, dtype=torch.bool), torch.zeros(buffer.size, dtype=torch.bool)
+    night[rows.cpu()], good[positive.cpu()] = True, True
+    train, held = night.clone(), torch.zeros(buffer.size, dtype=torch.bool)
+    for kind in (True, False):
+        episodes = [(s, e) for s, e, _ in buffer.episodes if night[s] and bool(good[s]) == kind]
+        k = max(1, round(fraction * len(episodes))) if episodes else 0
+        for i in torch.randperm(len(episodes), generator=g)[:k].tolist():
+            start, end = episodes[i]
+            held[start:end], train[start:end] = True, len(episodes) == 1
+    return train.nonzero().squeeze(-1).to(rows.device), held.nonzero().squeeze(-1).to(rows.device)
+
+
+def learn_pu_reward(reward, obs: torch.Tensor, positive: torch.Tensor, unlabelled: torch.Tensor, held: tuple,
+                    batch_size: int) -> dict:  # fmt: skip
+    """ORIL's first stage: R(s) = sigmoid(f(s)) learns, by the non-negative PU loss, the success set's observations
+    (`positive`) against the whole night's (`unlabelled`), until the held-out loss (on `held`: its positive and
+    unlabelled rows) stops falling (PU_REWARD's rule); the best read's weights are kept, then frozen. Its record."""
+    optimizer = torch.optim.Adam(reward.parameters(), lr=PU_REWARD["lr"], foreach=True)
+    device, eta = obs.device, PU_REWARD["eta"]
+    best, best_step, state, waited, step = math.inf, 0, None, 0, 0
+    while step < PU_REWARD["max_steps"] and waited < PU_REWARD["patience"]:
+        for _ in range(PU_REWARD["every"]):
+            p = positive[torch.randint(0, positive.numel(), (batch_size,), device=device)]
+            u = unlabelled[torch.randint(0, unlabelled.numel(), (batch_size,), device=device)]
+            loss = nn_pu_loss(reward(obs[p]).squeeze(-1), reward(obs[u]).squeeze(-1), eta)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+        step += PU_REWARD["every"]
+        with torch.no_grad():
+            held_loss = nn_pu_loss(reward(obs[held[0]]).squeeze(-1), reward(obs[held[1]]).squeeze(-1), eta).item()
+        if held_loss < best - PU_REWARD["min_delta"]:
+            best, best_step, state, waited = held_loss, step, copy.deepcopy(reward.state_dict()), 0
+        else:
+            waited += 1
+    reward.load_state_dict(state)
+    reward.requires_grad_(False)
+    return {"pu_reward/steps": step, "pu_reward/best_step": best_step, "pu_reward/held_out_loss": best,
+            "pu_reward/converged": int(waited >= PU_REWARD["patience"])}  # fmt: skip
+
+
+class NormalisedActor(core.Actor):
+    """The core's actor on states normalised by the day's mean and std (TD3+BC's normalisation): built from an actor
+    on raw states with the normalisation folded into its first layer, so that it starts as the same policy;
+    `raw()` folds it back into a core Actor on raw states (what is saved and tested)."""
+
+    def __init__(self, actor: core.Actor, mean: torch.Tensor, std: torch.Tensor):
+        scale, bias = actor.action_scale, actor.action_bias
+        super().__init__(actor.fc1.in_features, actor.fc_mean.out_features, actor.fc1.out_features, bias - scale,
+                         bias + scale)  # fmt: skip
+        self.to(mean.device)
+        self.load_state_dict(actor.state_dict())
+        self.mean, self.std = mean, std  # not in the state_dict: raw() is what is saved
+        with torch.no_grad():  # W s + b = (W std) z + (b + W mean), z = (s - mean) / std
+            self.fc1.bias += self.fc1.weight @ mean
+            self.fc1.weight *= std
+
+    def forward(self, obs):
+        return super().forward((obs - self.mean) / self.std)
+
+    def raw(self) -> core.Actor:
+        scale, bias = self.action_scale, self.action_bias
+        actor = core.Actor(self.fc1.in_features, self.fc_mean.out_features, self.fc1.out_features, bias - scale,
+                           bias + scale).to(self.mean.device)  # fmt: skip
+        actor.load_state_dict(self.state_dict())
+        with torch.no_grad():
+            actor.fc1.weight /= self.std
+            actor.fc1.bias -= actor.fc1.weight @ self.mean
+        return actor
+
+
+class PUTD3BCNight(StudyNight):
+    """A PU reward + TD3+BC as the night (`pu_td3bc`), staged as ORIL stages its method (Zolna et al. 2020): first the
+    reward R(s) is learned on the night's rows to convergence (learn_pu_reward), then frozen: the day relabelled with
+    it; then TD3+BC learns on the relabelled day, its states normalised by the night's mean and std (TD3+BC's default):
+    twin critics towards R(s) + gamma min Q'(s', pi'(s') + clipped noise), the actor (its mean action) every 2nd step on
+    lambda Q plus cloning the day's actions. ORIL's offline learner was CRR; this is TD3+BC, so it is not named ORIL.
+    The actor starts from TAMER's (the normalisation folded into its first layer); the soft Q sleeps as usual."""
 
     hears = {"batch_size", "q_lr", "temperature", "chi2_coef", "init_actor_from_tamer", "loss_rows", "twin_critics",
              "holdout_fraction"}  # fmt: skip
-    fixed = {"policy_lr": ORIL["lr"], "policy_frequency": 1}  # one TD3+BC step per night step; the actor's own delay
+    fixed = {"policy_lr": TD3BC["lr"], "policy_frequency": 1}  # one TD3+BC step per night step; the actor's own delay
+
+    def __init__(self, tamer_actor, device, **settings):
+        super().__init__(tamer_actor, device, **settings)
+        obs_dim, act_dim = tamer_actor.fc1.in_features, tamer_actor.fc_mean.out_features
+        self.reward = reward_network(obs_dim).to(device)
+        self.critic = core.QEnsemble(obs_dim, act_dim, core.HIDDEN_SIZE, n=2).to(device)
+        self.critic_target = copy.deepcopy(self.critic)
+        self.critic_optimizer = torch.optim.Adam(self.critic.parameters(), lr=TD3BC["lr"], foreach=True)
+        self.batch_size, self.seed = settings["batch_size"], self.holdout[1]
+        self.calls, self.reward_record, self.terms = 0, {}, {}
+        self.obs_mean = self.obs_std = None
+
+    def memories(self, buffer):
+        replay_idx, expert_idx, fallback = super().memories(buffer)
+        rows = torch.arange(buffer.size, device=expert_idx.device) if replay_idx is None else replay_idx
+        train, held = episode_split(buffer, rows, expert_idx, PU_REWARD["valid_fraction"], self.seed)
+        good = torch.isin(train, expert_idx)
+        self.reward_record = learn_pu_reward(self.reward, buffer.obs, train[good], train,
+                                             (held[torch.isin(held, expert_idx)], held), self.batch_size)  # fmt: skip
+        states = buffer.obs[rows]
+        self.obs_mean, self.obs_std = states.mean(0), states.std(0, unbiased=False) + TD3BC["std_eps"]
+        self.actor = NormalisedActor(self.actor, self.obs_mean, self.obs_std)
+        self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=TD3BC["lr"], foreach=True)
+        self.actor_target = copy.deepcopy(self.actor)
+        return replay_idx, expert_idx, fallback
+
+    def relabelled(self, obs: torch.Tensor) -> torch.Tensor:  # the frozen reward: the day relabelled
+        return torch.sigmoid(self.reward(obs).squeeze(-1))
+
+    def update_actor(self, batch):
+        obs, actions, next_obs, _, terminated = batch
+        scale, bias = self.actor.action_scale, self.actor.action_bias
+        z, next_z = (obs - self.obs_mean) / self.obs_std, (next_obs - self.obs_mean) / self.obs_std
+        with torch.no_grad():  # TD3's target: clipped noise on the target actor's action, the twins' minimum
+            noise = (torch.randn_like(actions) * TD3BC["policy_noise"]).clamp(-TD3BC["noise_clip"], TD3BC["noise_clip"])
+            next_action = (mean_action(self.actor_target, next_obs) + noise * scale).clamp(bias - scale, bias + scale)
+            r = self.relabelled(obs)
+            y = r + (1.0 - terminated) * TD3BC["gamma"] * self.critic_target(next_z, next_action).min(0).values
+        critic_loss = (self.critic(z, actions) - y).pow(2).mean(-1).sum()
+        self.critic_optimizer.zero_grad(set_to_none=True)
+        critic_loss.backward()
+        self.critic_optimizer.step()
+        self.calls += 1
+        if self.calls % TD3BC["delay"] == 0:
+            self.critic.requires_grad_(False)  # the actor's gradient flows through Q1, but none is kept on it
+            pi = mean_action(self.actor, obs)
+            self.pi_loss = td3bc_actor_loss(self.critic(z, pi)[0], pi, actions, TD3BC["alpha"])
+            self.actor_optimizer.zero_grad(set_to_none=True)
+            self.pi_loss.backward()
+            self.critic.requires_grad_(True)
+            self.actor_optimizer.step()
+            core.soft_update(self.critic_target, self.critic, TD3BC["tau"])
+            core.soft_update(self.actor_target, self.actor, TD3BC["tau"])
+        self.terms = {"pu_td3bc_critic_loss": critic_loss.detach(), "pu_reward_expert": r[self.is_expert].mean(),
+                      "pu_reward_other": r[~self.is_expert].mean()}  # fmt: skip
+
+    def update(self, step, batch):
+        loss, terms = super().update(step, batch)
+        return loss, {**terms, **self.terms}
+
+    def stats(self):  # the actor back on raw states (saved, tested), and what the reward's stage did
+        stats = super().stats()
+        if isinstance(self.actor, NormalisedActor):
+            self.actor = self.actor.raw()
+        if self.selected is not None and isinstance(self.selected["actor"], NormalisedActor):
+            self.selected = {**self.selected, "actor": self.selected["actor"].raw()}
+        return {**stats, **self.reward_record}
+
+
+class DraftORILNight(StudyNight):
+    """The draft of the ORIL night (`oril_draft`; the committed nights named `oril` before 2026-12-05), kept to re-run
+    them: a PU reward and TD3+BC learned together, not ORIL (which learns its reward first, then CRR). Each step the
+    reward R(s) = sigmoid(f(s)) learns, by nn_pu_loss, the success set's observations against the whole day's (the
+    replay rows), and TD3+BC learns on the batch labelled with R as it is at that step, on raw states: twin critics
+    towards R(s) + gamma min Q'(s', pi'(s') + clipped noise), the actor (its mean action) every 2nd step on lambda Q
+    plus cloning the day's actions. The actor starts from TAMER's; the soft Q sleeps as usual."""
+
+    hears = {"batch_size", "q_lr", "temperature", "chi2_coef", "init_actor_from_tamer", "loss_rows", "twin_critics",
+             "holdout_fraction"}  # fmt: skip
+    fixed = {"policy_lr": ORIL_DRAFT["lr"], "policy_frequency": 1}  # one TD3+BC step a night step; its own delay
 
     def __init__(self, tamer_actor, device, **settings):
         super().__init__(tamer_actor, device, **settings)
@@ -430,8 +699,8 @@ class ORILNight(StudyNight):
                                     nn.Linear(core.HIDDEN_SIZE, 1)).to(device)  # fmt: skip
         self.critic = core.QEnsemble(obs_dim, act_dim, core.HIDDEN_SIZE, n=2).to(device)
         self.critic_target, self.actor_target = copy.deepcopy(self.critic), copy.deepcopy(self.actor)
-        self.r_optimizer = torch.optim.Adam(self.reward.parameters(), lr=ORIL["lr"], foreach=True)
-        self.critic_optimizer = torch.optim.Adam(self.critic.parameters(), lr=ORIL["lr"], foreach=True)
+        self.r_optimizer = torch.optim.Adam(self.reward.parameters(), lr=ORIL_DRAFT["lr"], foreach=True)
+        self.critic_optimizer = torch.optim.Adam(self.critic.parameters(), lr=ORIL_DRAFT["lr"], foreach=True)
         self.calls = 0
         self.oril_terms = {}
 
@@ -439,31 +708,32 @@ class ORILNight(StudyNight):
         obs, actions, next_obs, _, terminated = batch
         scale, bias = self.actor.action_scale, self.actor.action_bias
         f = self.reward(obs).squeeze(-1)  # R(s) = sigmoid(f(s))
-        r_loss = nn_pu_loss(f[self.is_expert], f[~self.is_expert], ORIL["eta"])
+        r_loss = nn_pu_loss(f[self.is_expert], f[~self.is_expert], ORIL_DRAFT["eta"])
         self.r_optimizer.zero_grad(set_to_none=True)
         r_loss.backward()
         self.r_optimizer.step()
         with torch.no_grad():  # TD3's target: clipped noise on the target actor's action, the twins' minimum
-            noise = (torch.randn_like(actions) * ORIL["policy_noise"]).clamp(-ORIL["noise_clip"], ORIL["noise_clip"])
+            clip = ORIL_DRAFT["noise_clip"]
+            noise = (torch.randn_like(actions) * ORIL_DRAFT["policy_noise"]).clamp(-clip, clip)
             next_action = (mean_action(self.actor_target, next_obs) + noise * scale).clamp(bias - scale, bias + scale)
             next_q = self.critic_target(next_obs, next_action).min(0).values
             r = torch.sigmoid(f)
-            y = r + (1.0 - terminated) * ORIL["gamma"] * next_q
+            y = r + (1.0 - terminated) * ORIL_DRAFT["gamma"] * next_q
         critic_loss = (self.critic(obs, actions) - y).pow(2).mean(-1).sum()
         self.critic_optimizer.zero_grad(set_to_none=True)
         critic_loss.backward()
         self.critic_optimizer.step()
         self.calls += 1
-        if self.calls % ORIL["delay"] == 0:
+        if self.calls % ORIL_DRAFT["delay"] == 0:
             self.critic.requires_grad_(False)  # the actor's gradient flows through Q1, but none is kept on it
             pi = mean_action(self.actor, obs)
-            self.pi_loss = td3bc_actor_loss(self.critic(obs, pi)[0], pi, actions, ORIL["alpha"])
+            self.pi_loss = td3bc_actor_loss(self.critic(obs, pi)[0], pi, actions, ORIL_DRAFT["alpha"])
             self.actor_optimizer.zero_grad(set_to_none=True)
             self.pi_loss.backward()
             self.critic.requires_grad_(True)
             self.actor_optimizer.step()
-            core.soft_update(self.critic_target, self.critic, ORIL["tau"])
-            core.soft_update(self.actor_target, self.actor, ORIL["tau"])
+            core.soft_update(self.critic_target, self.critic, ORIL_DRAFT["tau"])
+            core.soft_update(self.actor_target, self.actor, ORIL_DRAFT["tau"])
         self.oril_terms = {"oril_reward_loss": r_loss.detach(), "oril_critic_loss": critic_loss.detach(),
                            "oril_reward_expert": r[self.is_expert].mean(),
                            "oril_reward_other": r[~self.is_expert].mean()}  # fmt: skip
@@ -474,7 +744,13 @@ class ORILNight(StudyNight):
 
 
 CONTROLS = {"bc": CloningControl, "sham": ShamControl}  # by --sleep-control
-METHODS = {"iq": StudyNight, "dwbc": DWBCNight, "oril": ORILNight}  # by --sleep-method
+METHODS = {
+    "iq": StudyNight,
+    "dwbc": DWBCNight,
+    "pu_td3bc": PUTD3BCNight,
+    "dwbc_draft": DraftDWBCNight,
+    "oril_draft": DraftORILNight,
+}  # by --sleep-method
 
 
 def run(argv: list[str]) -> int:

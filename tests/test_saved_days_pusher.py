@@ -243,11 +243,13 @@ def test_iq_loss_on_expert_rows_only_by_hand():
     assert chi2.item() == pytest.approx(2 * 0.5 * 0.75 / 4) and chi2_e.item() == pytest.approx(2 * 0.5 * 0.25 / 2)
 
 
-@pytest.mark.parametrize(("method", "probability"), [("dwbc", "dwbc_d"), ("oril", "oril_reward")])
+@pytest.mark.parametrize(
+    ("method", "probability"), [("dwbc", "dwbc_d"), ("pu_td3bc", "pu_reward"), ("oril_draft", "oril_reward")]
+)
 def test_a_method_night_runs_on_a_saved_day_and_records_what_ran(day, method, probability):
-    """--sleep-method dwbc / oril: the night completes, its own model's loss and outputs are logged (DWBC's
-    discriminator, ORIL's reward, each a probability on the success rows and on the others), the summary records the
-    method and the learning rate it fixes, and the IQ critic still sleeps (its loss)."""
+    """--sleep-method dwbc / pu_td3bc / oril_draft: the night completes, its own model's loss and outputs are logged
+    (DWBC's discriminator, the PU reward, each a probability on the success rows and on the others), the summary
+    records the method and the learning rate it fixes, and the IQ critic still sleeps (its loss)."""
     summary = night(day, "--sleep-method", method, "--sleep-holdout-fraction", "0.2", study=True)
     assert summary["status"] == "completed"
     assert summary["args"]["sleep_method"] == method and f"method={method}" in summary["sleep_variant"]

@@ -1,6 +1,10 @@
 """The nights of other methods (inform_utils/sleep_variants_pusher.py --sleep-method): each loss on a hand-worked
-case, and each learner learning on a day made by hand, where the same learner broken (learning rate 0) does not."""
+case, and each learner learning on a day made by hand, where the same learner broken (learning rate 0) does not; DWBC
+and the PU reward + TD3+BC on a day whose failures share the success set's states and take other actions, where only
+the method's own mechanism (d's weights, the PU reward, the critic) finds the success set's action (docs/mutations.md:
+each mechanism removed fails these tests)."""
 
+import copy
 import math
 
 import pytest
@@ -9,7 +13,7 @@ import torch
 import inform_sac_pusher as isp
 from inform_utils import sleep_variants_pusher as variants
 
-ALPHA, ETA = variants.DWBC["alpha"], variants.DWBC["eta"]
+ALPHA, ETA = variants.DWBC_DRAFT["alpha"], variants.DWBC_DRAFT["eta"]
 
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # conftest.py
@@ -38,14 +42,26 @@ def test_dwbc_policy_loss_by_hand():
 
 
 def test_dwbc_keeps_every_expert_weight_positive_in_its_d_range():
-    """d is clipped to [0.1, 0.9]; there the expert weight alpha - 1 - eta / (d (1 - d)) is at least 9 - 0.5 / 0.09."""
-    low, high = variants.DWBC["d_range"]
-    d = torch.linspace(low, high, 101)
-    least = ALPHA - 1 - ETA / (low * (1 - low))
-    assert (ALPHA - 1 - ETA / (d * (1 - d))).min().item() == pytest.approx(least, rel=1e-5) and least > 0
-    disc = variants.Discriminator(3, 2)
-    out = disc(torch.randn(64, 3) * 100, torch.randn(64, 2) * 100, torch.randn(64, 2) * 1e3)
-    assert out.min().item() >= low and out.max().item() <= high
+    """d is clipped to [0.1, 0.9]; there the expert weight alpha - 1 - eta / (d (1 - d)) is at least 9 - 0.5 / 0.09
+    (the draft's alpha 10) and 6.5 - 0.5 / 0.09 (the release's 7.5): positive. Both discriminators stay in the range."""
+    for recipe, disc in (
+        (variants.DWBC_DRAFT, variants.Discriminator(3, 2)),
+        (variants.DWBC, variants.DWBCDiscriminator(3, 2)),
+    ):
+        (low, high), alpha, eta = recipe["d_range"], recipe["alpha"], recipe["eta"]
+        d = torch.linspace(low, high, 101)
+        least = alpha - 1 - eta / (low * (1 - low))
+        assert (alpha - 1 - eta / (d * (1 - d))).min().item() == pytest.approx(least, rel=1e-5) and least > 0
+        out = disc(torch.randn(64, 3) * 100, torch.randn(64, 2) * 100, torch.randn(64, 2) * 1e3)
+        assert out.min().item() >= low and out.max().item() <= high
+
+
+def test_dwbc_runs_at_its_releases_settings():
+    """The settings of ryanxhr/DWBC at a1e9d8a (docs/protocol.md names each line); the draft's kept apart."""
+    assert {k: variants.DWBC[k] for k in ("alpha", "eta", "lr", "weight_decay", "d_every", "steps")} == {
+        "alpha": 7.5, "eta": 0.5, "lr": 1e-4, "weight_decay": 5e-3, "d_every": 100, "steps": 500_000}  # fmt: skip
+    assert variants.DWBC["log_pi_range"] == (-20.0, 10.0) and variants.DWBC["d_range"] == (0.1, 0.9)
+    assert (variants.DWBC_DRAFT["alpha"], variants.DWBC_DRAFT["lr"]) == (10.0, 3e-4)
 
 
 def hand_made_day(n: int = 2000, obs_dim: int = 4, act_dim: int = 2) -> isp.ReplayBuffer:
@@ -70,6 +86,85 @@ def sleep(night, buffer: isp.ReplayBuffer, steps: int, batch_size: int = 64) -> 
         night.update(step, isp.sleep_batch(buffer, batch_size, expert_idx, replay_idx))
 
 
+def shared_states_day(n: int = 2000, obs_dim: int = 4, act_dim: int = 2) -> isp.ReplayBuffer:
+    """Episodes of 10 steps, half of them a success: 5 steps in states shared by all (around 0), then 5 in the
+    episode's own region (around +1 a success, -1 a failure), the last step terminal; a success acts +0.5 on every
+    dimension, a failure -0.5, in the shared states too. Only what sets the two apart in the shared states (an action's
+    weight, where it leads) can find +0.5 there: cloning every row gives 0."""
+    torch.manual_seed(0)
+    buffer = isp.ReplayBuffer(n, obs_dim, act_dim, torch.device("cpu"))
+    for episode in range(n // 10):
+        sign = 1.0 if episode % 2 == 0 else -1.0
+        start = buffer.size
+        obs = [0.3 * torch.randn(obs_dim) for _ in range(5)] + [sign + 0.3 * torch.randn(obs_dim) for _ in range(6)]
+        for t in range(10):
+            action = torch.full((act_dim,), 0.5 * sign) + 0.05 * torch.randn(act_dim)
+            buffer.add(obs[t], action, obs[t + 1], t == 9)
+        buffer.tag_episode(start, 0.0 if sign > 0 else 1.0, sign > 0)
+    return buffer
+
+
+def shared_rows(buffer: isp.ReplayBuffer) -> torch.Tensor:
+    shared = torch.zeros(buffer.size, dtype=torch.bool)
+    for start, _, _ in buffer.episodes:
+        shared[start : start + 5] = True
+    return shared
+
+
+def test_dwbc_finds_the_success_sets_action_where_failures_share_its_states():
+    """The release's DWBC on shared_states_day, 300 steps, its discriminator updated every step (the release's 1 in
+    100 would need 30,000 steps here; the loss and the weights are the release's): on the shared states d tells the
+    success rows from the failures by more than 0.5, and the actor's mean action there comes within 0.1 of the
+    successes' +0.5. Measured: d 0.90 against 0.10, an error of 0.009. Without d's weights (cloning every row alike):
+    0.49; with d fixed at 0.5 (weights 4.5 and 1): 0.17 and no gap."""
+    buffer = shared_states_day()
+    torch.manual_seed(1)
+    night = variants.Args(sleep_method="dwbc", sleep_batch_size=64).night(isp.Actor(4, 2), torch.device("cpu"), {})
+    assert isinstance(night, variants.DWBCNight)
+    night.d_every = 1
+    replay_idx, _, _ = night.memories(buffer)
+    assert not buffer.success[replay_idx].any()  # the unlabelled set leaves the success set out, as the release's
+    sleep(night, buffer, 300)
+    success, shared = buffer.success[: buffer.size], shared_rows(buffer)
+    with torch.no_grad():
+        obs, actions = buffer.obs[: buffer.size], buffer.actions[: buffer.size]
+        d = night.discriminator(obs, actions, variants.unit_log_pi(night.actor, obs, actions))
+        error = (variants.mean_action(night.actor, obs[shared & success]) - 0.5).abs().mean().item()
+    gap = (d[shared & success].mean() - d[shared & ~success].mean()).item()
+    assert gap > 0.5 and error < 0.1, (gap, error)
+
+
+def test_pu_td3bc_learns_its_reward_first_then_acts_on_where_an_action_leads(monkeypatch):
+    """The PU reward + TD3+BC on shared_states_day (the reward's stage read every 100 steps, at most 1,500), then 600
+    TD3+BC steps. The reward, learned first and frozen: above 0.85 on the successes' own states, below 0.1 on the
+    failures'; the actor's mean action on the shared states above 0.4, where cloning the batch's actions alone gives
+    0.25 (its success rows, then the day's). Measured: 0.96 and 0.001, 0.70. With plain cross-entropy for the PU loss
+    (the success rows among the day's counted as negatives) the reward on the successes' states is 0.65; with the
+    critic's weight at 0 the action is 0.29."""
+    monkeypatch.setitem(variants.PU_REWARD, "every", 100)
+    monkeypatch.setitem(variants.PU_REWARD, "max_steps", 1500)
+    buffer = shared_states_day()
+    torch.manual_seed(1)
+    night = variants.Args(sleep_method="pu_td3bc", sleep_batch_size=64).night(isp.Actor(4, 2), torch.device("cpu"), {})
+    assert isinstance(night, variants.PUTD3BCNight)
+    tamer = copy.deepcopy(night.actor)
+    sleep(night, buffer, 600)
+    assert not any(p.requires_grad for p in night.reward.parameters())  # frozen before TD3+BC's first step
+    record = night.stats()
+    assert 0 < record["pu_reward/best_step"] <= record["pu_reward/steps"] <= 1500
+    success, shared = buffer.success[: buffer.size], shared_rows(buffer)
+    obs = buffer.obs[: buffer.size]
+    with torch.no_grad():
+        r = night.relabelled(obs)
+        action = variants.mean_action(night.actor, obs[shared & success]).mean().item()
+        folded = variants.NormalisedActor(tamer, night.obs_mean, night.obs_std)  # as the night started
+        starts = [variants.mean_action(actor, obs[:50]) for actor in (tamer, folded, folded.raw())]
+    assert type(night.actor) is isp.Actor  # folded back onto raw states: what is saved and tested
+    assert torch.allclose(starts[0], starts[1], atol=1e-5) and torch.allclose(starts[0], starts[2], atol=1e-5)
+    good, bad = r[success & ~shared].mean().item(), r[~success & ~shared].mean().item()
+    assert good > 0.85 and bad < 0.1 and action > 0.4, (good, bad, action)
+
+
 def night_of(method: str, broken: bool):
     """A method's night from TAMER's (random) actor; `broken`: every optimizer at learning rate 0, nothing moves."""
     torch.manual_seed(1)
@@ -82,13 +177,14 @@ def night_of(method: str, broken: bool):
 
 
 @pytest.mark.parametrize("broken", [False, True], ids=["learns", "lr0_does_not"])
-def test_dwbc_night_learns_the_success_sets_actions_and_tells_them_apart(broken):
-    """On the hand-made day, 300 DWBC steps: the discriminator scores the success rows above the others by more than
+def test_draft_dwbc_night_learns_the_success_sets_actions_and_tells_them_apart(broken):
+    """The draft DWBC (the committed `dwbc` nights): on the hand-made day, 300 steps: the discriminator scores the
+    success rows above the others by more than
     0.3, and the actor's mean action on success states comes within 0.15 of the successes' +0.5. Measured: a gap of
     0.80 and an error of 0.014 (0.456 at the start); at learning rate 0, -0.03 and 0.456: each check can fail."""
     buffer = hand_made_day()
-    night = night_of("dwbc", broken)
-    assert isinstance(night, variants.DWBCNight)
+    night = night_of("dwbc_draft", broken)
+    assert isinstance(night, variants.DraftDWBCNight)
     sleep(night, buffer, 300)
     success = buffer.success[: buffer.size]
     with torch.no_grad():
@@ -120,14 +216,15 @@ def test_td3bc_actor_loss_by_hand():
 
 
 @pytest.mark.parametrize("broken", [False, True], ids=["learns", "lr0_does_not"])
-def test_oril_night_learns_a_reward_that_tells_success_apart_and_a_critic_that_values_it(broken):
-    """On the hand-made day, 1,000 ORIL steps: the reward scores success observations above the others by more than
+def test_draft_oril_night_learns_a_reward_that_tells_success_apart_and_a_critic_that_values_it(broken):
+    """The draft ORIL (the committed `oril` nights): on the hand-made day, 1,000 steps: the reward scores success
+    observations above the others by more than
     0.3, the critic values the success states above the others by more than 0.1, and the actor's mean action on
     success states comes within 0.2 of their +0.5. Measured: 0.93, 3.3 and 0.10 (0.49 after 300 steps; the actor
     moves every 2nd step at 3e-4). At learning rate 0 none of it happens."""
     buffer = hand_made_day()
-    night = night_of("oril", broken)
-    assert isinstance(night, variants.ORILNight)
+    night = night_of("oril_draft", broken)
+    assert isinstance(night, variants.DraftORILNight)
     sleep(night, buffer, 1000)
     success = buffer.success[: buffer.size]
     with torch.no_grad():
@@ -152,6 +249,8 @@ def test_sleep_variant_records_what_the_night_ran_with():
     dwbc = words(variants.Args(sleep_method="dwbc"))
     assert dwbc["method"] == "dwbc" and float(dwbc["policy_lr"]) == variants.DWBC["lr"]
     assert not {"bc_coef", "actor_states"} & set(dwbc)
+    draft = words(variants.Args(sleep_method="dwbc_draft"))
+    assert draft["method"] == "dwbc_draft" and float(draft["policy_lr"]) == variants.DWBC_DRAFT["lr"]
     sham = words(variants.Args(sleep_control="sham"))
     assert float(sham["policy_lr"]) == isp.TAMER_POLICY_LR and float(sham["h_lr"]) == variants.Args().tamer_h_lr
     assert not {"bc_coef", "actor_states"} & set(sham)

@@ -328,9 +328,10 @@ def test_the_per_seed_table_reads_each_runs_summary():
     assert rows[4].startswith("| mean ± std | -20.00 ± 0.00 | -23.00 ± 2.83 | -26.00 ± 5.66 |")
 
 
-def method_night(task, day, variant, seed, distance, ret, tamer_ret):
-    return {"day": day, "variant": variant, "sleep_seed": seed, "args": {"env_id": task},
-            "eval/obstacle/inform_final_distance": distance, "eval/inform_return_sampled": ret,
+def method_night(task, day, variant, seed, distance, ret, tamer_ret, lr=5e-6, steps=5000):
+    return {"day": day, "variant": variant, "sleep_seed": seed, "args": {"env_id": task, "sleep_gradient_steps": steps},
+            "sleep_variant": f"method=x control=x policy_lr={lr}", "eval/obstacle/inform_final_distance": distance,
+            "eval/obstacle/inform_final_distance_deterministic": distance - 0.05, "eval/inform_return_sampled": ret,
             "eval/tamer_return_sampled": tamer_ret}  # fmt: skip
 
 
@@ -340,23 +341,31 @@ def write_streams(results, day, returns):
         json.dump({"eval/tamer_return_sampled": {str(i + 1): r for i, r in enumerate(returns)}}, f)
 
 
-def test_the_rule_for_a_night_built_for_the_data_per_task_against_both_controls(tmp_path):
-    """Five Pusher-v4 days, two sleep seeds a night. bc ends at 0.20 m with the boxes, the sham at 0.19 (0.15 on day
-    5). dwbc: 0.18 (0.181 on day 3), closer than bc on every day (p tiny), but closer than the sham by 0.01 on four
-    days and farther by 0.03 on day 5: mean -0.0018, so no. oril: 0.17 (0.171 on day 2, 0.13 on day 5), closer than
-    both on every day, and on the plain task 0.5 below TAMER, whose own streams differ by up to 1.0 (day 4: -29 in
-    one other stream against the nights' -30): yes; x, as oril but 1.5 below TAMER: no. On Pusher-v5, two days so
-    far: open. Without TAMER's other streams the plain-task part cannot be judged: open."""
+def test_the_rule_for_a_night_built_for_the_data_per_task_and_budget_against_the_controls(tmp_path):
+    """Five Pusher-v4 days, two sleep seeds a night. bc (cloning at 5e-6) ends at 0.20 m with the boxes, the sham at
+    0.19 (0.15 on day 5), cloning at 3e-4 (bc_lr3e-4) at 0.18 (0.14 on day 5). dwbc (its step size 1e-4, no cloning
+    control at it): 0.18 (0.181 on day 3), closer than bc on every day (p tiny), but closer than the sham by 0.01 on
+    four days and farther by 0.03 on day 5: mean -0.0018, so no, and 'matched' open. oril (3e-4): 0.17 (0.171 on day 2,
+    0.13 on day 5), closer than all three on every day, and on the plain task 0.5 below TAMER, whose own streams differ
+    by up to 1.0 (day 4: -29 in one other stream against the nights' -30): yes, as committed and matched; x, as oril but
+    1.5 below TAMER: no. dwbc at a second budget (50,000 steps) on one day, with its controls: its own row, open. On
+    Pusher-v5, two days so far: open. The deterministic test (every night 0.05 closer than its sampled one) sits in a
+    table of its own. Without TAMER's other streams the plain-task part cannot be judged: open."""
     rows = []
     for day in range(1, 6):
         write_streams(tmp_path, f"d{day}", [-30.0, -29.0 if day == 4 else -29.8, -29.9])
         for seed in (1, 2):
             rows.append(method_night("Pusher-v4", f"d{day}", "bc", seed, 0.20, -30.0, -30.0))
+            rows.append(method_night("Pusher-v4", f"d{day}", "bc_lr3e-4", seed, 0.18 if day < 5 else 0.14, -30.0, -30.0,
+                                     lr=3e-4))  # fmt: skip
             rows.append(method_night("Pusher-v4", f"d{day}", "sham", seed, 0.19 if day < 5 else 0.15, -30.0, -30.0))
-            rows.append(method_night("Pusher-v4", f"d{day}", "dwbc", seed, 0.181 if day == 3 else 0.18, -30.0, -30.0))
+            rows.append(method_night("Pusher-v4", f"d{day}", "dwbc", seed, 0.181 if day == 3 else 0.18, -30.0, -30.0,
+                                     lr=1e-4))  # fmt: skip
             oril = {2: 0.171, 5: 0.13}.get(day, 0.17)
-            rows.append(method_night("Pusher-v4", f"d{day}", "oril", seed, oril, -30.5, -30.0))
-            rows.append(method_night("Pusher-v4", f"d{day}", "x", seed, oril, -31.5, -30.0))  # oril, 1.5 below TAMER
+            rows.append(method_night("Pusher-v4", f"d{day}", "oril", seed, oril, -30.5, -30.0, lr=3e-4))
+            rows.append(method_night("Pusher-v4", f"d{day}", "x", seed, oril, -31.5, -30.0, lr=3e-4))  # 1.5 below
+    for variant, lr in (("bc", 5e-6), ("sham", 5e-6), ("dwbc", 1e-4)):  # a second budget: one day so far
+        rows.append(method_night("Pusher-v4", "d1", variant, 1, 0.1, -30.0, -30.0, lr=lr, steps=50000))
     for day in (1, 2):
         write_streams(tmp_path, f"v5d{day}", [-40.0])
         for variant in ("bc", "sham", "dwbc"):
@@ -365,18 +374,26 @@ def test_the_rule_for_a_night_built_for_the_data_per_task_against_both_controls(
         rows.append(method_night("Pusher-v4", "d9", variant, 1, 0.5, -50.0, -30.0))
     args = ss.Args(results_dir=str(tmp_path), campaign="c")
     text = ss.method_rule(args, rows, ["dwbc", "oril", "x"])
-    table = {tuple(c.strip() for c in line.strip("| ").split(" | ")[:2]): line.strip("| ").split(" | ")
-             for line in text.splitlines() if line.startswith("| Pusher")}  # fmt: skip
-    dwbc, oril, v5 = table[("Pusher-v4", "dwbc")], table[("Pusher-v4", "oril")], table[("Pusher-v5", "dwbc")]
-    assert dwbc[3].startswith("-0.0198 m") and "closer on 5 of 5" in dwbc[3]
-    assert dwbc[4].startswith("-0.0018 m") and "closer on 4 of 5" in dwbc[4] and dwbc[6] == "no"
-    assert oril[5] == "-0.50 (spread 1.00)" and oril[6] == "yes"
-    assert table[("Pusher-v4", "x")][5:] == ["-1.50 (spread 1.00)", "no"]  # as oril with the boxes; loses the task
-    assert v5[2] == "2" and v5[6] == "open: 2 of 5 days"
-    assert "Pusher-v4, the means over the 5 days" in text and "Pusher-v5, the means over the 2 days" in text
+    rule, deterministic = text.split("the deterministic test beside it")
+    table = {tuple(c.strip() for c in line.strip("| ").split(" | ")[:3]): line.strip("| ").split(" | ")
+             for line in rule.splitlines() if line.startswith("| Pusher")}  # fmt: skip
+    dwbc, oril = table[("Pusher-v4", "5000", "dwbc (0.0001)")], table[("Pusher-v4", "5000", "oril (0.0003)")]
+    assert dwbc[4].startswith("-0.0198 m") and "closer on 5 of 5" in dwbc[4] and dwbc[5] == "not run"
+    assert dwbc[6].startswith("-0.0018 m") and "closer on 4 of 5" in dwbc[6] and dwbc[8] == "no"
+    assert dwbc[9] == "open: no cloning control at 0.0001"
+    assert oril[5].startswith("bc_lr3e-4: -0.0098 m") and "closer on 5 of 5" in oril[5]
+    assert oril[7] == "-0.50 (spread 1.00)" and oril[8:] == ["yes", "yes"]
+    assert table[("Pusher-v4", "5000", "x (0.0003)")][7:] == ["-1.50 (spread 1.00)", "no", "no"]  # loses the task
+    longer = table[("Pusher-v4", "50000", "dwbc (0.0001)")]
+    assert longer[3] == "1" and longer[8] == "open: 1 of 5 days"
+    v5 = table[("Pusher-v5", "5000", "dwbc (5e-06)")]
+    assert v5[3] == "2" and v5[8] == "open: 2 of 5 days" and v5[5].startswith("bc: ")  # bc shares its step size
+    assert "| Pusher-v4 | 5000 | oril | 5 | -0.0378 m, p = 0.0093, closer on 5 of 5 | -0.0098 m" in deterministic
+    assert "Pusher-v4, 5000 gradient steps, the means over the 5 days" in text
+    assert "Pusher-v5, 5000 gradient steps, the means over the 2 days" in text
     os.remove(tmp_path / "c" / "d3" / "tamer_streams.json")
     without = ss.method_rule(args, rows, ["oril"])
-    assert "(spread no tamer_streams.json) | open: TAMER's streams not run |" in without
+    assert "(spread no tamer_streams.json) | open: TAMER's streams not run | open: TAMER's streams not run |" in without
     assert "no night of a method" in ss.method_rule(args, rows, [])
 
 
