@@ -10,6 +10,15 @@ mean: the answers (yes, no), and TAMER, INFORM and both controls: the final dist
 
     python -m inform_utils.scripted_person_pusher --seeds 1 2 3 4 5 --out-dir results/browser_pusher
 
+With --drive the scripted person also takes the arm (issue 53): at each episode's start, seen on the page's map, it
+clicks the map to take the arm and pushes the object to the goal with the target (clicks for big moves, arrow keys for
+small ones), a reaction time from each look at the map to what it does, its aim off by --aim-noise; it gives the arm
+back when the object is at the goal, and answers y/n as above while the agent drives (DrivingPerson says its rules).
+Its rules are a script's: its numbers are the page's reference numbers, not a person's. The table adds its takes, the
+steps it drove and the day's episodes and successful ones.
+
+    python -m inform_utils.scripted_person_pusher --seeds 1 --drive --steps 1200 --out-dir /tmp/drive
+
 {out_dir}/table.md and table.json, and each seed's summary.json (the day's, and each night's as
 summary_{bc,sham,core}.json) and answers.jsonl under {out_dir}/seed{S}/; the runs themselves in a temporary directory,
 removed, or kept in --work-dir. Neither directory may exist: nothing is overwritten.
