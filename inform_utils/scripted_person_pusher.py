@@ -10,6 +10,15 @@ mean: the answers (yes, no), and TAMER, INFORM and both controls: the final dist
 
     python -m inform_utils.scripted_person_pusher --seeds 1 2 3 4 5 --out-dir results/browser_pusher
 
+With --drive the scripted person also takes the arm (issue 53): at each episode's start, seen on the page's map, it
+clicks the map to take the arm and pushes the object to the goal with the target (clicks for big moves, arrow keys for
+small ones), a reaction time from each look at the map to what it does, its aim off by --aim-noise; it gives the arm
+back when the object is at the goal, and answers y/n as above while the agent drives (DrivingPerson says its rules).
+Its rules are a script's: its numbers are the page's reference numbers, not a person's. The table adds its takes, the
+steps it drove and the day's episodes and successful ones.
+
+    python -m inform_utils.scripted_person_pusher --seeds 1 --drive --steps 1200 --out-dir /tmp/drive
+
 {out_dir}/table.md and table.json, and each seed's summary.json (the day's, and each night's as
 summary_{bc,sham,core}.json) and answers.jsonl under {out_dir}/seed{S}/; the runs themselves in a temporary directory,
 removed, or kept in --work-dir. Neither directory may exist: nothing is overwritten.
@@ -26,6 +35,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 
+import numpy as np
 import tyro
 
 from inform_utils.scripted_person_browser import REPO, Child, check_before_writing, each_seed, new_run, runs_in
@@ -55,6 +65,17 @@ class Args:
     """extra flags for the day's run and the nights, as one string (e.g. --flags "--obstacle-episodes 20")"""
     timeout: float = 3600.0
     """seconds a seed may take, day and nights"""
+    drive: bool = False
+    """the person also takes the arm at an episode's start and pushes the object to the goal through the page's map
+    (DrivingPerson), answering y/n while the agent drives; without it, answers only"""
+    drive_every: int = 1
+    """with --drive: the person drives every N-th episode it sees start and watches the others (1: every one)"""
+    aim_noise: float = 0.01
+    """with --drive: metres, the standard deviation (per axis) of where the person puts the target from the point
+    it means"""
+    push_lead: float = 0.05
+    """with --drive: metres ahead of the object's centre, on its line to the goal, that the person keeps the target
+    while pushing"""
 
 
 def judge(oracle, state: dict, alpha: tuple[float, float], steps: int) -> bool:
@@ -70,15 +91,21 @@ def judge(oracle, state: dict, alpha: tuple[float, float], steps: int) -> bool:
     return bool(isp.oracle_feedback(q_sa, q_best, isp.linear_schedule(*alpha, steps - 1, state["step"])))
 
 
-def teach_day(page, oracle, seed: int, args: Args, say) -> dict:
-    """Look and answer until the page says the day is over; the answers given."""
-    rng, given = random.Random(seed), {"yes": 0, "no": 0}
+def wait_for_stream(page) -> dict:
+    """The page's state once the day has started."""
     state, deadline = None, time.monotonic() + 300
     while state is None or state["mode"] not in ("stream", "ended", "outcome", "closed"):  # the day starts
         if time.monotonic() > deadline:
             raise RuntimeError(f"the page did not start streaming within 300 s (its state: {state})")
         time.sleep(0.2)
         state = page.evaluate("typeof state === 'undefined' ? null : state")  # (the page's CSP forbids polling JS)
+    return state
+
+
+def teach_day(page, oracle, seed: int, args: Args, say) -> dict:
+    """Look and answer until the page says the day is over; the answers given."""
+    rng, given = random.Random(seed), {"yes": 0, "no": 0}
+    state = wait_for_stream(page)
     while True:
         state = page.evaluate("state")
         if state["ended"] or state["mode"] != "stream":
@@ -93,6 +120,185 @@ def teach_day(page, oracle, seed: int, args: Args, say) -> dict:
         time.sleep(max(0.0, args.period - args.reaction[1]))
     say(f"[seed {seed}] the day is over ({state['ended'] or state['mode']}): yes {given['yes']}, no {given['no']}")
     return given
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# ALGO LOGIC: the driving person (--drive): what it sees on the map, and what it does about it
+MAP_VIEW = ((-0.1, 0.9), (-0.8, 0.2), 240)  # the page's map: x left to right, y bottom to top (metres), pixels a side
+ARROW = 0.02  # metres an arrow key moves the target (the page's)
+
+
+class DrivingPerson:
+    """A person's push, decided from the page's map alone (the fingertip, the object and the goal, in the table's
+    plane) and the target it set itself. At an episode's start (seen on the map: the fingertip back at its start
+    pose, or the object back where the last episode began) it takes the arm with a click on the map, moves the target
+    round behind the object on the goal's line (a waypoint beside the object first if the straight way there would
+    knock it), waits a look there for the arm to settle, then pushes: the target `lead` ahead of the object on its
+    line to the goal (a little past the goal at the end), re-aimed at every decision as the object drifts and steered
+    back onto the line; round again if the fingertip leaves the line or goes through the object. It gives the arm
+    back (g) when the object is at the goal, or at the start of an episode it will not drive. Every point it aims at
+    is off by `aim_noise` (metres, Gaussian, per axis) and lands on the map's pixel; a move of less than `small` is
+    made by arrow presses (2 cm each, as many as the noisy difference rounds to), a bigger one by a click. It drives
+    every `every`-th episode it sees start (1: every one) and watches the others. Its rules are a script's, tuned by
+    nobody: its numbers are the page's reference numbers, not a person's."""
+
+    STANDOFF = 0.11  # metres behind the object's centre where the push starts (0.15 is out of the arm's reach at
+    # the table's height at seed 1's fixed start, 0.76 m from the shoulder)
+    CLEARANCE = 0.18  # sideways from the object's centre when going round it (the crossbar's half-length + 6 cm)
+    KNOCK = 0.12  # a straight way from ahead of the object passing its centre closer than this would knock it
+    ON_LINE = 0.07  # the push goes on while the fingertip is this close to the object's line to the goal
+    READY = 0.04  # the fingertip this close to the point behind on two looks in a row: push
+    AT_GOAL = 0.05  # the object's centre this close to the goal's: done, give the arm back
+    PAST = 0.03  # the last aim: this far past the goal
+    JUMP = 0.2  # the fingertip this much nearer its start pose than a look before: a reset (no drive is so fast)
+
+    def __init__(self, rng, aim_noise: float = 0.01, lead: float = 0.05, small: float = 0.05, every: int = 1):
+        self.rng, self.aim_noise, self.lead, self.small, self.every = rng, aim_noise, lead, small, every
+        self.tip_start = self.object_start = self.last = None
+        self.episodes = 0  # the episodes seen start
+        self.mine = self.pushing = False  # this episode is one it drives (until done); it is pushing now
+        self.arrived = False  # the fingertip was behind the object at the last look
+
+    def new_episode(self, view: dict) -> bool:
+        """Whether the map shows an episode's start: the first look of the day, the fingertip back at its start pose,
+        or the object back where the last episode began (from somewhere else)."""
+        tip, obj = np.array(view["tip"]), np.array(view["object"])
+        if self.last is None:
+            self.tip_start, started = tip, True
+        else:
+            tip_back = np.linalg.norm(self.last[0] - self.tip_start) - np.linalg.norm(tip - self.tip_start) > self.JUMP
+            was_away = np.linalg.norm(self.last[1] - self.object_start) > 0.03
+            started = tip_back or (was_away and np.linalg.norm(obj - self.object_start) < 0.01)
+        self.last = (tip, obj)
+        if started:
+            self.object_start = obj
+        return started
+
+    def decide(self, view: dict, driving: bool, target) -> list:
+        """What to do about one look at the map: [] (nothing), [("release",)], or a move: [("click", x, y)] (which
+        also takes the arm) or [("arrows", key, presses), ...]."""
+        if self.new_episode(view):
+            self.episodes += 1
+            self.mine, self.pushing = (self.episodes - 1) % self.every == 0, False
+            if not self.mine:
+                return [("release",)] if driving else []
+        if not self.mine:
+            return []
+        tip, obj, goal = (np.array(view[k]) for k in ("tip", "object", "goal"))
+        distance = np.linalg.norm(goal - obj)
+        if distance < self.AT_GOAL:
+            self.mine = False
+            return [("release",)] if driving else []
+        wanted = self.aim(tip, obj, goal, distance)
+        return self.move(wanted, target if driving else None)
+
+    def aim(self, tip, obj, goal, distance) -> np.ndarray:
+        """The point the person wants the target at: behind the object, round it, or ahead of it on the push."""
+        u = (goal - obj) / distance
+        n = np.array([-u[1], u[0]])
+        along, lateral = (tip - obj) @ u, (tip - obj) @ n
+        behind = obj - self.STANDOFF * u
+        if self.pushing and (abs(lateral) > self.ON_LINE or along > 0.0):
+            self.pushing = False  # off the line, or through the object: round again
+        arrived = np.linalg.norm(tip - behind) < self.READY
+        if not self.pushing and arrived and self.arrived:  # there on two looks: settled (and down at the table)
+            self.pushing = True
+        self.arrived = arrived
+        if self.pushing:
+            return obj + min(self.lead, distance + self.PAST) * u - lateral * n  # and steer back onto the line
+        knocks = along > -self.STANDOFF + 0.03 and distance_to_segment(obj, tip, behind) < self.KNOCK
+        if knocks:  # the straight way would knock it: beside it first
+            return behind + (np.sign(lateral) or 1.0) * self.CLEARANCE * n
+        return behind
+
+    def move(self, wanted: np.ndarray, target) -> list:
+        aimed = wanted + self.rng.normal(0.0, self.aim_noise, 2)
+        if target is not None and np.linalg.norm(aimed - np.array(target)) < self.small:
+            presses = np.rint((aimed - np.array(target)) / ARROW).astype(int)
+            keys = [("ArrowRight" if presses[0] > 0 else "ArrowLeft", abs(presses[0])),
+                    ("ArrowUp" if presses[1] > 0 else "ArrowDown", abs(presses[1]))]  # fmt: skip
+            return [("arrows", key, count) for key, count in keys if count]
+        px, py = to_pixel(aimed)
+        return [("click", px, py)]
+
+
+def to_pixel(point) -> tuple[int, int]:
+    """The map's pixel of a point in the table's plane (as the page's toMap, rounded)."""
+    (x0, x1), (y0, y1), size = MAP_VIEW
+    return int(np.clip(round((point[0] - x0) / (x1 - x0) * size), 0, size - 1)), int(
+        np.clip(round((y1 - point[1]) / (y1 - y0) * size), 0, size - 1)
+    )
+
+
+def from_pixel(px: int, py: int) -> np.ndarray:
+    """The point a click on the map's pixel sets (as the page's fromMap)."""
+    (x0, x1), (y0, y1), size = MAP_VIEW
+    return np.array([x0 + px / size * (x1 - x0), y1 - py / size * (y1 - y0)])
+
+
+def distance_to_segment(p, a, b) -> float:
+    ab = b - a
+    t = np.clip((p - a) @ ab / max(ab @ ab, 1e-12), 0.0, 1.0)
+    return float(np.linalg.norm(p - (a + t * ab)))
+
+
+# what the person sees: the page's state, and the target the page draws (its own last one, or the server's)
+LOOK = "[state, state && state.driving ? ((typeof myTarget !== 'undefined' && myTarget) || state.target) : null]"
+MAP_BOX = (
+    "(() => { const r = document.getElementById('map').getBoundingClientRect(); return [r.left, r.top, r.width]; })()"
+)
+
+
+def drive_day(page, oracle, seed: int, args: Args, say) -> dict:
+    """Look at the map and act as DrivingPerson decides, a reaction time after each look, until the page says the day
+    is over; while the agent drives, answer y/n as teach_day does. What was given: answers, takes, clicks, arrow
+    presses, releases."""
+    rng = random.Random(seed)
+    person = DrivingPerson(np.random.default_rng(seed), args.aim_noise, args.push_lead, every=args.drive_every)
+    given = dict.fromkeys(("yes", "no", "takes", "clicks", "arrow presses", "releases"), 0)
+    state = wait_for_stream(page)
+    while True:
+        state, target = page.evaluate(LOOK)
+        if state["ended"] or state["mode"] != "stream":
+            break
+        view = state["info"].get("_map")
+        acts = [] if view is None else person.decide(view, state["driving"], target)
+        if acts or (state["driving"] and person.mine):  # the person drives: one decision each reaction time
+            time.sleep(rng.uniform(*args.reaction))
+            act(page, acts, state["driving"], given)
+            continue
+        if state["info"].get("_action") is not None and not state["driving"]:  # the agent drives: judge it
+            yes = judge(oracle, state, (0.99, 0.992), args.steps)
+            time.sleep(rng.uniform(*args.reaction))
+            page.keyboard.press("y" if yes else "n")
+            given["yes" if yes else "no"] += 1
+            if (given["yes"] + given["no"]) % 60 == 0:
+                say(f"[seed {seed}] day: step {state['step']}, " + ", ".join(f"{k} {v}" for k, v in given.items()))
+        time.sleep(max(0.0, args.period - args.reaction[1]))
+    say(f"[seed {seed}] the day is over ({state['ended'] or state['mode']}): "
+        + ", ".join(f"{k} {v}" for k, v in given.items()))  # fmt: skip
+    return given
+
+
+def act(page, acts: list, driving: bool, given: dict) -> None:
+    """Do what the person decided, with the page's own inputs: a click on the map's pixel, arrow keys, g."""
+    for what, *how in acts:
+        if what == "release":
+            page.keyboard.press("g")
+            given["releases"] += 1
+        elif what == "arrows":
+            key, presses = how
+            for _ in range(presses):
+                page.keyboard.press(key)
+                time.sleep(0.08)  # a person's presses, about 12 a second
+            given["arrow presses"] += presses
+        else:  # a click on the map at the pixel (the page's own mapping from the canvas's box to its pixels)
+            page.locator("#map").scroll_into_view_if_needed()
+            left, top, width = page.evaluate(MAP_BOX)
+            px, py = how
+            page.mouse.click(left + px * width / MAP_VIEW[2], top + py * width / MAP_VIEW[2])
+            given["takes" if not driving else "clicks"] += 1
+            driving = True
 
 
 def load_oracle(run_flags: list[str]):
@@ -119,7 +325,7 @@ def run_seed(seed: int, args: Args, browser, oracle, work: str, out: str, say) -
         context = browser.new_context(viewport={"width": 900, "height": 900})
         page = context.new_page()
         page.goto(url)
-        given = teach_day(page, oracle, seed, args, say)
+        given = (drive_day if args.drive else teach_day)(page, oracle, seed, args, say)
         page.wait_for_selector("#outcome:visible", timeout=max(deadline - time.monotonic(), 1) * 1000)
         code = child.finish(deadline - time.monotonic())
     except BaseException:
@@ -160,6 +366,9 @@ def seed_row(seed: int, given: dict, summaries: dict) -> dict:
     day = summaries["day"]
     row = {"seed": seed, "answers": given["yes"] + given["no"], "yes": given["yes"]}
     row.update({"steps": day["feedback/steps"], "yes labels reaching TAMER": day["feedback/positive"]})
+    if "takes" in given:  # the driving person (--drive)
+        row.update({"takes": given["takes"], "driven steps": day["feedback/driven_steps"]})
+        row.update({"day's episodes": day["sleep/episodes"], "day's success episodes": day["sleep/success_episodes"]})
     for p in POLICIES:
         s, slot = (day, p) if p in ("tamer", "inform") else (summaries[p], "inform")
         row[f"{p} distance"] = round(s[f"eval/{slot}_final_distance"], 4)

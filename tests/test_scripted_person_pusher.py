@@ -1,0 +1,67 @@
+"""inform_utils/scripted_person_pusher.py --drive (issue 53): the scripted person takes the arm through the Pusher's
+page in Chromium and pushes, by clicks on the map and arrow keys, and answers y/n while the agent drives. A short day
+at the page, then the nights; the browser test skips (saying why) without /usr/bin/chromium or playwright."""
+
+import json
+import os
+import time
+
+import numpy as np
+import pytest
+from conftest import REPO
+
+from inform_utils import scripted_person_pusher as spp
+from inform_utils.scripted_person_browser import browser_missing
+
+TINY = ("--tamer-learning-starts 50 --tamer-batch-size 32 --sleep-batch-size 32 --sleep-gradient-steps 100 "
+        "--eval-episodes 1 --obstacle-episodes 1 --authors-test-episodes 1")  # fmt: skip
+
+
+def test_the_map_pixels_round_trip_and_the_person_goes_round_an_object_in_its_way():
+    for point in ([0.63, -0.196], [0.45, -0.05], [-0.1, 0.2]):
+        assert np.allclose(spp.from_pixel(*spp.to_pixel(point)), point, atol=0.5 / 240 + 1e-9)
+    person = spp.DrivingPerson(np.random.default_rng(0), aim_noise=0.0)
+    start = {"tip": [0.82, -0.6], "object": [0.6, -0.2], "goal": [0.45, -0.05]}
+    assert person.decide(start, driving=False, target=None)[0][0] == "click"  # the episode's start: take the arm
+    ahead = {"tip": [0.4, -0.05], "object": [0.6, -0.2], "goal": [0.45, -0.05]}  # the fingertip between it and goal
+    (click,) = person.decide(ahead, driving=True, target=[0.4, -0.05])
+    u = np.array([-0.15, 0.15]) / np.hypot(0.15, 0.15)
+    waypoint = spp.from_pixel(*click[1:])
+    assert abs((waypoint - np.array([0.6, -0.2])) @ np.array([-u[1], u[0]])) > 0.15  # beside the object, not through
+    at_goal = {"tip": [0.5, -0.1], "object": [0.46, -0.06], "goal": [0.45, -0.05]}
+    assert person.decide(at_goal, driving=True, target=[0.45, -0.05]) == [("release",)]
+
+
+def test_the_driving_person_takes_the_arm_pushes_and_its_steps_are_marked(tmp_path, monkeypatch):
+    why = browser_missing()
+    if why:
+        if os.environ.get("INFORM_REQUIRE_BROWSER") == "1":
+            pytest.fail(why)
+        pytest.skip(why)
+    import torch
+
+    monkeypatch.setenv("PYTHONPATH", REPO)
+    monkeypatch.setenv("MUJOCO_GL", os.environ.get("MUJOCO_GL", "egl"))
+    work, out = tmp_path / "work", tmp_path / "out"
+    args = spp.Args(seeds=[1], out_dir=str(out), work_dir=str(work), steps=300, pace=10.0, drive=True, flags=TINY)
+    t0 = time.monotonic()
+    (row,) = spp.main(args)
+    assert time.monotonic() - t0 < 900
+    (run_dir,) = (work / "seed1" / "runs").glob("*browser_scripted__*")
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["status"] == "completed" and row["takes"] >= 1 and row["driven steps"] > 50
+    with open(run_dir / "answers.jsonl") as f:
+        drives = [r for r in map(json.loads, f) if r["event"] == "drive"]
+    assert drives[0]["drive"] == "take" and sum(r["drive"] == "target" for r in drives) >= 5
+    day = torch.load(run_dir / "day.pt", weights_only=True)
+    driven = day["driven"].nonzero().squeeze(-1)
+    assert driven.numel() == summary["feedback/driven_steps"] == row["driven steps"]
+    first = int(driven[0])
+    assert first <= 20  # taken within the first look and a reaction (a step a 0.1 s)
+    # while it drove, the object came nearer the goal than where the episode began it
+    start = np.linalg.norm(day["obs"][first, 17:19].numpy() - day["obs"][first, 20:22].numpy())
+    reached = np.linalg.norm(
+        day["next_obs"][driven][:, 17:19].numpy() - day["next_obs"][driven][:, 20:22].numpy(), axis=1
+    )
+    assert reached.min() < start - 0.002, (start, reached.min())  # Pusher-v5's contact: millimetres in a short day
+    assert (out / "table.md").exists() and "driven steps" in (out / "table.md").read_text()
