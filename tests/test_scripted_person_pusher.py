@@ -4,7 +4,6 @@ at the page, then the nights; the browser test skips (saying why) without /usr/b
 
 import json
 import os
-import time
 
 import numpy as np
 import pytest
@@ -44,9 +43,7 @@ def test_the_driving_person_takes_the_arm_pushes_and_its_steps_are_marked(tmp_pa
     monkeypatch.setenv("MUJOCO_GL", os.environ.get("MUJOCO_GL", "egl"))
     work, out = tmp_path / "work", tmp_path / "out"
     args = spp.Args(seeds=[1], out_dir=str(out), work_dir=str(work), steps=300, pace=10.0, drive=True, flags=TINY)
-    t0 = time.monotonic()
     (row,) = spp.main(args)
-    assert time.monotonic() - t0 < 900
     (run_dir,) = (work / "seed1" / "runs").glob("*browser_scripted__*")
     summary = json.loads((run_dir / "summary.json").read_text())
     assert summary["status"] == "completed" and row["takes"] >= 1 and row["driven steps"] > 50
