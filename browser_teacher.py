@@ -203,7 +203,7 @@ class BrowserTeacher:
             raise ValueError(f"delay must be (low, high) seconds with 0 <= low < high, got {delay}")
         if no_value not in (0.0, -1.0):
             raise ValueError(f"no_value must be 0 (the paper's no feedback) or -1 (TAMER's), got {no_value}")
-        self.labels = {**LABELS, "no": float(no_value)}  # the label a No gives: 0 by default, or TAMER's -1
+        self.values = {**LABELS, "no": float(no_value)}  # the label each answer gives: a No 0, or TAMER's -1
         self.driving = False  # the person holds the arm (the Pusher), and moves its fingertip's target (x, y)
         self.target: tuple[float, float] | None = None
         self.task = task
@@ -256,7 +256,7 @@ class BrowserTeacher:
         self.answers_path = os.path.join(run_dir, "answers.jsonl")
         self._log = open(self.answers_path, "a", encoding="utf-8")
         start = {"event": "start", "task": task, "participant": participant, "budget": budget, "pace": pace}
-        self._record(start | {"delay": self.delay, "host": host, "port": self.port, "no_value": self.labels["no"]})
+        self._record(start | {"delay": self.delay, "host": host, "port": self.port, "no_value": self.values["no"]})
         shown_host = socket.gethostname() if host in ("", "0.0.0.0", "::") else host
         shown_host = f"[{shown_host}]" if ":" in shown_host else shown_host
         self.url = f"http://{shown_host}:{self.port}/?token={self.token}"
@@ -572,7 +572,7 @@ class BrowserTeacher:
             else:
                 frame = self._frame_record(seq)
                 step = frame[1]
-            answer = Answer(self.labels[label], label, given, step, self._step, question)
+            answer = Answer(self.values[label], label, given, step, self._step, question)
             self._counts[label] += 1
             record = {"event": "answer", "participant": self.participant, "mode": "ask" if question else "stream"}
             record |= {"question": question, "step": step, "step_at_arrival": self._step, "action": frame[2]}

@@ -109,7 +109,7 @@ def test_a_night_that_fails_makes_the_study_exit_1(tmp_path, monkeypatch, capsys
         (["--variants", "nap"], "unknown variant(s) nap"),
         (["--table", "--campaign", "../x"], "one folder name"),
         (["--days", "day", "--results-dir", "afile/results"], "afile is a file, not a directory"),
-        (["--days", "day", "--random-start-episodes", "0"], "--random-start-episodes be >= 1"),
+        (["--days", "day", "--random-start-episodes", "0"], "--random-start-episodes and --gradient-steps be >= 1"),
     ],
 )
 def test_bad_input_exits_2_in_one_line(tmp_path, flags, phrase):
