@@ -517,6 +517,35 @@ def mean_action(actor, obs: torch.Tensor) -> torch.Tensor:  # the actor as a det
     return torch.tanh(actor(obs)[0]) * actor.action_scale + actor.action_bias
 
 
+def td3bc_step(night, cfg: dict, batch: tuple, inputs: tuple, r: torch.Tensor) -> torch.Tensor:
+    """One TD3+BC step of `night` (its critic, actor and their targets) on the rewards `r`: the twin critics towards
+    r + gamma min Q'(s', pi'(s') + clipped noise), and every `delay`-th call the actor (its mean action, on the raw
+    states) on lambda Q plus cloning the batch's actions, then both targets follow softly. `inputs`: the critics' (s,
+    s'), raw or normalised. The critics' loss."""
+    (obs, actions, next_obs, _, terminated), (obs_in, next_in) = batch, inputs
+    scale, bias = night.actor.action_scale, night.actor.action_bias
+    with torch.no_grad():  # TD3's target: clipped noise on the target actor's action, the twins' minimum
+        noise = (torch.randn_like(actions) * cfg["policy_noise"]).clamp(-cfg["noise_clip"], cfg["noise_clip"])
+        next_action = (mean_action(night.actor_target, next_obs) + noise * scale).clamp(bias - scale, bias + scale)
+        y = r + (1.0 - terminated) * cfg["gamma"] * night.critic_target(next_in, next_action).min(0).values
+    critic_loss = (night.critic(obs_in, actions) - y).pow(2).mean(-1).sum()
+    night.critic_optimizer.zero_grad(set_to_none=True)
+    critic_loss.backward()
+    night.critic_optimizer.step()
+    night.calls += 1
+    if night.calls % cfg["delay"] == 0:
+        night.critic.requires_grad_(False)  # the actor's gradient flows through Q1, but none is kept on it
+        pi = mean_action(night.actor, obs)
+        night.pi_loss = td3bc_actor_loss(night.critic(obs_in, pi)[0], pi, actions, cfg["alpha"])
+        night.actor_optimizer.zero_grad(set_to_none=True)
+        night.pi_loss.backward()
+        night.critic.requires_grad_(True)
+        night.actor_optimizer.step()
+        core.soft_update(night.critic_target, night.critic, cfg["tau"])
+        core.soft_update(night.actor_target, night.actor, cfg["tau"])
+    return critic_loss
+
+
 def reward_network(obs_dim: int) -> torch.nn.Module:  # R(s) = sigmoid(f(s))
     nn, hidden = torch.nn, core.HIDDEN_SIZE
     return nn.Sequential(
@@ -640,29 +669,11 @@ class PUTD3BCNight(StudyNight):
         return torch.sigmoid(self.reward(obs).squeeze(-1))
 
     def update_actor(self, batch):
-        obs, actions, next_obs, _, terminated = batch
-        scale, bias = self.actor.action_scale, self.actor.action_bias
+        obs, _, next_obs, _, _ = batch
         z, next_z = (obs - self.obs_mean) / self.obs_std, (next_obs - self.obs_mean) / self.obs_std
-        with torch.no_grad():  # TD3's target: clipped noise on the target actor's action, the twins' minimum
-            noise = (torch.randn_like(actions) * TD3BC["policy_noise"]).clamp(-TD3BC["noise_clip"], TD3BC["noise_clip"])
-            next_action = (mean_action(self.actor_target, next_obs) + noise * scale).clamp(bias - scale, bias + scale)
+        with torch.no_grad():
             r = self.relabelled(obs)
-            y = r + (1.0 - terminated) * TD3BC["gamma"] * self.critic_target(next_z, next_action).min(0).values
-        critic_loss = (self.critic(z, actions) - y).pow(2).mean(-1).sum()
-        self.critic_optimizer.zero_grad(set_to_none=True)
-        critic_loss.backward()
-        self.critic_optimizer.step()
-        self.calls += 1
-        if self.calls % TD3BC["delay"] == 0:
-            self.critic.requires_grad_(False)  # the actor's gradient flows through Q1, but none is kept on it
-            pi = mean_action(self.actor, obs)
-            self.pi_loss = td3bc_actor_loss(self.critic(z, pi)[0], pi, actions, TD3BC["alpha"])
-            self.actor_optimizer.zero_grad(set_to_none=True)
-            self.pi_loss.backward()
-            self.critic.requires_grad_(True)
-            self.actor_optimizer.step()
-            core.soft_update(self.critic_target, self.critic, TD3BC["tau"])
-            core.soft_update(self.actor_target, self.actor, TD3BC["tau"])
+        critic_loss = td3bc_step(self, TD3BC, batch, (z, next_z), r)
         self.terms = {"pu_td3bc_critic_loss": critic_loss.detach(), "pu_reward_expert": r[self.is_expert].mean(),
                       "pu_reward_other": r[~self.is_expert].mean()}  # fmt: skip
 
@@ -705,35 +716,14 @@ class DraftORILNight(StudyNight):
         self.oril_terms = {}
 
     def update_actor(self, batch):
-        obs, actions, next_obs, _, terminated = batch
-        scale, bias = self.actor.action_scale, self.actor.action_bias
+        obs, _, next_obs, _, _ = batch
         f = self.reward(obs).squeeze(-1)  # R(s) = sigmoid(f(s))
         r_loss = nn_pu_loss(f[self.is_expert], f[~self.is_expert], ORIL_DRAFT["eta"])
         self.r_optimizer.zero_grad(set_to_none=True)
         r_loss.backward()
         self.r_optimizer.step()
-        with torch.no_grad():  # TD3's target: clipped noise on the target actor's action, the twins' minimum
-            clip = ORIL_DRAFT["noise_clip"]
-            noise = (torch.randn_like(actions) * ORIL_DRAFT["policy_noise"]).clamp(-clip, clip)
-            next_action = (mean_action(self.actor_target, next_obs) + noise * scale).clamp(bias - scale, bias + scale)
-            next_q = self.critic_target(next_obs, next_action).min(0).values
-            r = torch.sigmoid(f)
-            y = r + (1.0 - terminated) * ORIL_DRAFT["gamma"] * next_q
-        critic_loss = (self.critic(obs, actions) - y).pow(2).mean(-1).sum()
-        self.critic_optimizer.zero_grad(set_to_none=True)
-        critic_loss.backward()
-        self.critic_optimizer.step()
-        self.calls += 1
-        if self.calls % ORIL_DRAFT["delay"] == 0:
-            self.critic.requires_grad_(False)  # the actor's gradient flows through Q1, but none is kept on it
-            pi = mean_action(self.actor, obs)
-            self.pi_loss = td3bc_actor_loss(self.critic(obs, pi)[0], pi, actions, ORIL_DRAFT["alpha"])
-            self.actor_optimizer.zero_grad(set_to_none=True)
-            self.pi_loss.backward()
-            self.critic.requires_grad_(True)
-            self.actor_optimizer.step()
-            core.soft_update(self.critic_target, self.critic, ORIL_DRAFT["tau"])
-            core.soft_update(self.actor_target, self.actor, ORIL_DRAFT["tau"])
+        r = torch.sigmoid(f.detach())  # the reward as it was before this step's update
+        critic_loss = td3bc_step(self, ORIL_DRAFT, batch, (obs, next_obs), r)
         self.oril_terms = {"oril_reward_loss": r_loss.detach(), "oril_critic_loss": critic_loss.detach(),
                            "oril_reward_expert": r[self.is_expert].mean(),
                            "oril_reward_other": r[~self.is_expert].mean()}  # fmt: skip
