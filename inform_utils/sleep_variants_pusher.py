@@ -214,6 +214,7 @@ class StudyNight(core.Night):
 
     hears = None  # the night settings this night uses (None: all); a flag for any other is refused
     fixed = {}  # settings this night sets itself (a method's published values), recorded as what ran
+    method_terms = {}  # a method's own terms of its last actor step, logged beside Eq. 2's
 
     def __init__(self, tamer_actor, device, *, loss_rows: str, twin_critics: bool, bc_coef: float,
                  holdout_fraction: float, holdout_seed: int, **settings):  # fmt: skip
@@ -231,6 +232,10 @@ class StudyNight(core.Night):
         keep = torch.ones(buffer.size, dtype=torch.bool, device=held.device)
         keep[held] = False
         return keep.nonzero().squeeze(-1), *buffer.expert_indices(keep)
+
+    def update(self, step, batch):
+        loss, terms = super().update(step, batch)
+        return loss, {**terms, **self.method_terms}
 
     def loss(self, obs, actions, next_obs, feedback, terminated, **kw):
         rows = self.is_expert if self.loss_rows == "expert" else None
@@ -330,6 +335,18 @@ def dwbc_policy_loss(nll_expert, nll_other, d_expert, d_other, alpha: float, eta
     return expert.mean() + other.mean()
 
 
+def dwbc_actor_step(night, nll: torch.Tensor, d: torch.Tensor, d_loss: torch.Tensor, cfg: dict) -> None:
+    """The policy's DWBC step on the batch's negative log-likelihoods `nll` weighted by the discriminator's `d` (taken
+    before its update, no gradient), and the terms the night logs."""
+    expert, other = night.is_expert, ~night.is_expert
+    night.pi_loss = dwbc_policy_loss(nll[expert], nll[other], d[expert], d[other], cfg["alpha"], cfg["eta"])
+    night.actor_optimizer.zero_grad(set_to_none=True)
+    night.pi_loss.backward()
+    night.actor_optimizer.step()
+    night.method_terms = {"dwbc_d_loss": d_loss.detach(), "dwbc_d_expert": d[expert].mean(),
+                          "dwbc_d_other": d[other].mean()}  # fmt: skip
+
+
 def unit_log_pi(actor, obs, actions) -> torch.Tensor:
     """log pi(a|s) per action dimension, of the action in [-1, 1] (as the release's tasks scale them): the core
     actor's density on the env's bounds plus log(action_scale)."""
@@ -388,7 +405,6 @@ class DWBCNight(StudyNight):
         self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=settings["policy_lr"],
                                                 weight_decay=DWBC["weight_decay"], foreach=True)  # fmt: skip
         self.d_every, self.calls = DWBC["d_every"], 0
-        self.d_terms = {}
 
     def memories(self, buffer):
         replay_idx, expert_idx, fallback = super().memories(buffer)
@@ -405,20 +421,7 @@ class DWBCNight(StudyNight):
             self.d_optimizer.zero_grad(set_to_none=True)
             d_loss.backward()
             self.d_optimizer.step()
-        d, nll = d.detach(), -log_pi.sum(-1)  # the weights of this step: d before its update
-        self.pi_loss = dwbc_policy_loss(nll[expert], nll[other], d[expert], d[other], DWBC["alpha"], DWBC["eta"])
-        self.actor_optimizer.zero_grad(set_to_none=True)
-        self.pi_loss.backward()
-        self.actor_optimizer.step()
-        self.d_terms = {
-            "dwbc_d_loss": d_loss.detach(),
-            "dwbc_d_expert": d[expert].mean(),
-            "dwbc_d_other": d[other].mean(),
-        }
-
-    def update(self, step, batch):
-        loss, terms = super().update(step, batch)
-        return loss, {**terms, **self.d_terms}
+        dwbc_actor_step(self, -log_pi.sum(-1), d.detach(), d_loss, DWBC)  # d before its update
 
 
 class Discriminator(torch.nn.Module):
@@ -453,7 +456,7 @@ class DraftDWBCNight(StudyNight):
         self.d_optimizer = torch.optim.Adam(self.discriminator.parameters(), lr=DWBC_DRAFT["lr"], foreach=True)
         self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=settings["policy_lr"],
                                                 weight_decay=DWBC_DRAFT["weight_decay"], foreach=True)  # fmt: skip
-        self.d_terms = {"dwbc_d_loss": torch.zeros((), device=device)}
+        self.method_terms = {"dwbc_d_loss": torch.zeros((), device=device)}
 
     def update_actor(self, batch):
         obs, actions, *_ = batch
@@ -465,22 +468,7 @@ class DraftDWBCNight(StudyNight):
         self.d_optimizer.zero_grad(set_to_none=True)
         d_loss.backward()
         self.d_optimizer.step()
-        d = d.detach()  # the weights of this step: d before its update
-        self.pi_loss = dwbc_policy_loss(
-            -log_pi[expert], -log_pi[other], d[expert], d[other], DWBC_DRAFT["alpha"], DWBC_DRAFT["eta"]
-        )
-        self.actor_optimizer.zero_grad(set_to_none=True)
-        self.pi_loss.backward()
-        self.actor_optimizer.step()
-        self.d_terms = {
-            "dwbc_d_loss": d_loss.detach(),
-            "dwbc_d_expert": d[expert].mean(),
-            "dwbc_d_other": d[other].mean(),
-        }
-
-    def update(self, step, batch):
-        loss, terms = super().update(step, batch)
-        return loss, {**terms, **self.d_terms}
+        dwbc_actor_step(self, -log_pi, d.detach(), d_loss, DWBC_DRAFT)  # d before its update
 
 
 # TD3+BC (Fujimoto & Gu 2021) at its published settings (github.com/sfujim/TD3_BC, main.py): the BC weight alpha,
@@ -648,7 +636,7 @@ class PUTD3BCNight(StudyNight):
         self.critic_target = copy.deepcopy(self.critic)
         self.critic_optimizer = torch.optim.Adam(self.critic.parameters(), lr=TD3BC["lr"], foreach=True)
         self.batch_size, self.seed = settings["batch_size"], self.holdout[1]
-        self.calls, self.reward_record, self.terms = 0, {}, {}
+        self.calls, self.reward_record = 0, {}
         self.obs_mean = self.obs_std = None
 
     def memories(self, buffer):
@@ -674,12 +662,8 @@ class PUTD3BCNight(StudyNight):
         with torch.no_grad():
             r = self.relabelled(obs)
         critic_loss = td3bc_step(self, TD3BC, batch, (z, next_z), r)
-        self.terms = {"pu_td3bc_critic_loss": critic_loss.detach(), "pu_reward_expert": r[self.is_expert].mean(),
-                      "pu_reward_other": r[~self.is_expert].mean()}  # fmt: skip
-
-    def update(self, step, batch):
-        loss, terms = super().update(step, batch)
-        return loss, {**terms, **self.terms}
+        self.method_terms = {"pu_td3bc_critic_loss": critic_loss.detach(), "pu_reward_expert": r[self.is_expert].mean(),
+                             "pu_reward_other": r[~self.is_expert].mean()}  # fmt: skip
 
     def stats(self):  # the actor back on raw states (saved, tested), and what the reward's stage did
         stats = super().stats()
@@ -713,7 +697,6 @@ class DraftORILNight(StudyNight):
         self.r_optimizer = torch.optim.Adam(self.reward.parameters(), lr=ORIL_DRAFT["lr"], foreach=True)
         self.critic_optimizer = torch.optim.Adam(self.critic.parameters(), lr=ORIL_DRAFT["lr"], foreach=True)
         self.calls = 0
-        self.oril_terms = {}
 
     def update_actor(self, batch):
         obs, _, next_obs, _, _ = batch
@@ -724,13 +707,9 @@ class DraftORILNight(StudyNight):
         self.r_optimizer.step()
         r = torch.sigmoid(f.detach())  # the reward as it was before this step's update
         critic_loss = td3bc_step(self, ORIL_DRAFT, batch, (obs, next_obs), r)
-        self.oril_terms = {"oril_reward_loss": r_loss.detach(), "oril_critic_loss": critic_loss.detach(),
-                           "oril_reward_expert": r[self.is_expert].mean(),
-                           "oril_reward_other": r[~self.is_expert].mean()}  # fmt: skip
-
-    def update(self, step, batch):
-        loss, terms = super().update(step, batch)
-        return loss, {**terms, **self.oril_terms}
+        self.method_terms = {"oril_reward_loss": r_loss.detach(), "oril_critic_loss": critic_loss.detach(),
+                             "oril_reward_expert": r[self.is_expert].mean(),
+                             "oril_reward_other": r[~self.is_expert].mean()}  # fmt: skip
 
 
 CONTROLS = {"bc": CloningControl, "sham": ShamControl}  # by --sleep-control
