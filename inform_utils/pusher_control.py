@@ -52,7 +52,7 @@ UP = np.array([0.0, 0.0, 1.0])
 class FingertipController:
     """Joint torques (the env's action) that bring the fingertip to a point, its crossbar level; see the docstring."""
 
-    def __init__(self, model: mujoco.MjModel, kp: float = 25.0, kd: float = 10.0, max_speed: float = 0.35,
+    def __init__(self, model: mujoco.MjModel, kp: float = 60.0, kd: float = 20.0, max_speed: float = 1.0,
                  posture_gain: float = 4.0, posture_damping: float = 2.0, limit_margin: float = 0.05,
                  limit_gain: float = 20.0, jacobian_gain: float = 1.0):  # fmt: skip
         self.model, self.data = model, mujoco.MjData(model)  # a scratch copy: the env's own data is never touched

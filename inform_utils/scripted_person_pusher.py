@@ -34,6 +34,7 @@ import subprocess
 import sys
 import time
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 import tyro
@@ -73,6 +74,9 @@ class Args:
     aim_noise: float = 0.01
     """with --drive: metres, the standard deviation (per axis) of where the person puts the target from the point
     it means"""
+    nights: tuple[Literal["bc", "sham", "core"], ...] = CONTROLS
+    """the nights run on the saved day after the day's own: cloning the success set (bc), the sham, the core night
+    again (core)"""
     push_lead: float = 0.05
     """with --drive: metres ahead of the object's centre, on its line to the goal, that the person keeps the target
     while pushing"""
@@ -344,7 +348,7 @@ def run_seed(seed: int, args: Args, browser, oracle, work: str, out: str, say) -
         shutil.copy(os.path.join(run, name), os.path.join(out, f"seed{seed}", name))
     with open(os.path.join(run, "summary.json")) as f:
         summaries = {"day": json.load(f)}
-    for name in CONTROLS:
+    for name in args.nights:
         before = runs_in(cwd)
         control = "none" if name == "core" else name
         cmd = [sys.executable, "-m", "inform_utils.sleep_variants_pusher", "--sleep-from", run, "--sleep-control",
@@ -369,10 +373,14 @@ def seed_row(seed: int, given: dict, summaries: dict) -> dict:
     if "takes" in given:  # the driving person (--drive)
         row.update({"takes": given["takes"], "driven steps": day["feedback/driven_steps"]})
         row.update({"day's episodes": day["sleep/episodes"], "day's success episodes": day["sleep/success_episodes"]})
-    for p in POLICIES:
+    for p in [p for p in POLICIES if p in ("tamer", "inform") or p in summaries]:
         s, slot = (day, p) if p in ("tamer", "inform") else (summaries[p], "inform")
         row[f"{p} distance"] = round(s[f"eval/{slot}_final_distance"], 4)
         row[f"{p} success"] = s[f"eval/{slot}_success_rate"]
+        for test, short in (("obstacle", "boxes"), ("authors_test", "authors'")):  # the two tests, when they ran
+            if f"eval/{test}/{slot}_final_distance" in s:
+                row[f"{p} {short} distance"] = round(s[f"eval/{test}/{slot}_final_distance"], 4)
+                row[f"{p} {short} success"] = s[f"eval/{test}/{slot}_success_rate"]
     row["oracle distance"] = round(day["eval/oracle_final_distance"], 4)
     return row
 
