@@ -1041,7 +1041,8 @@ function render() {
   $("end").disabled = !(s.role === "teacher" && !s.ended && !gone);
   $("buttons").hidden = Boolean(s.ended);
   $("end").textContent = endArmed > Date.now() ? "Click again to end the day" : "End the day";
-  const window = `Your answer applies to what happened ${s.delay[0]}–${s.delay[1]} s before it.`;
+  const window = `Your answer applies to what happened ${s.delay[0]}–${s.delay[1]} s before it; hold y or n to ` +
+    "keep answering (four times a second).";
   $("hint").textContent = s.mode === "stream" ? window : "";
   const pusher = s.task === "pusher" && !s.ended && !gone;
   $("drive").hidden = !pusher;
@@ -1147,7 +1148,16 @@ document.addEventListener("keydown", (e) => {
   if ((e.key === "g" || e.key === "G") && state && state.driving) { drive("release"); return; }
   const label = {y: "yes", Y: "yes", n: "no", N: "no", " ": "none"}[e.key];
   if (label) { e.preventDefault(); answer(label); }
+  if (label && label !== "none" && openQuestion() === "stream") {  // held while the arm moves: an answer each HOLD_MS
+    clearInterval(held.timer);
+    held = {key: e.key.toLowerCase(), timer: setInterval(() => answer(label), HOLD_MS)};
+  }
 });
+const HOLD_MS = 250;  // a held y or n answers again every quarter second, each answer a line of its own
+let held = {key: null, timer: null};
+function letGo() { clearInterval(held.timer); held = {key: null, timer: null}; }
+document.addEventListener("keyup", (e) => { if (e.key.toLowerCase() === held.key) letGo(); });
+window.addEventListener("blur", letGo);
 window.addEventListener("pagehide", () => {  // closed or reloaded: the server waits a few seconds to see which
   if (state && state.role === "teacher" && !state.ended) navigator.sendBeacon(url("/bye"));
 });

@@ -15,7 +15,8 @@ clicks the map to take the arm and pushes the object to the goal with the target
 small ones), a reaction time from each look at the map to what it does, its aim off by --aim-noise; it gives the arm
 back when the object is at the goal, and answers y/n as above while the agent drives (DrivingPerson says its rules).
 Its rules are a script's: its numbers are the page's reference numbers, not a person's. The table adds its takes, the
-steps it drove and the day's episodes and successful ones.
+steps it drove and the day's episodes and successful ones. With --hold the person keeps its y or n down from one look
+to the next (the page answers again every 250 ms while a key is down), and the table adds the page's count.
 
     python -m inform_utils.scripted_person_pusher --seeds 1 --drive --steps 1200 --out-dir /tmp/drive
 
@@ -74,6 +75,9 @@ class Args:
     aim_noise: float = 0.01
     """with --drive: metres, the standard deviation (per axis) of where the person puts the target from the point
     it means"""
+    hold: bool = False
+    """hold the answer's key down until the next look instead of pressing it once (the page answers again every
+    250 ms while a key is held: GUIDE's continuous feedback); the judgement is made again at each look"""
     nights: tuple[Literal["bc", "sham", "core"], ...] = CONTROLS
     """the nights run on the saved day after the day's own: cloning the success set (bc), the sham, the core night
     again (core)"""
@@ -95,6 +99,27 @@ def judge(oracle, state: dict, alpha: tuple[float, float], steps: int) -> bool:
     return bool(isp.oracle_feedback(q_sa, q_best, isp.linear_schedule(*alpha, steps - 1, state["step"])))
 
 
+class Keys:
+    """The person's y / n key: pressed once, or (hold) kept down from one look to the next, changed when the answer
+    changes, let go when the person stops answering."""
+
+    def __init__(self, page, hold: bool):
+        self.page, self.hold, self.down = page, hold, None
+
+    def answer(self, key: str) -> None:
+        if not self.hold:
+            self.page.keyboard.press(key)
+        elif key != self.down:
+            self.let_go()
+            self.page.keyboard.down(key)
+            self.down = key
+
+    def let_go(self) -> None:
+        if self.down is not None:
+            self.page.keyboard.up(self.down)
+            self.down = None
+
+
 def wait_for_stream(page) -> dict:
     """The page's state once the day has started."""
     state, deadline = None, time.monotonic() + 300
@@ -108,7 +133,7 @@ def wait_for_stream(page) -> dict:
 
 def teach_day(page, oracle, seed: int, args: Args, say) -> dict:
     """Look and answer until the page says the day is over; the answers given."""
-    rng, given = random.Random(seed), {"yes": 0, "no": 0}
+    rng, given, keys = random.Random(seed), {"yes": 0, "no": 0}, Keys(page, args.hold)
     state = wait_for_stream(page)
     while True:
         state = page.evaluate("state")
@@ -117,11 +142,12 @@ def teach_day(page, oracle, seed: int, args: Args, say) -> dict:
         if state["info"].get("_action") is not None:
             yes = judge(oracle, state, (0.99, 0.992), args.steps)
             time.sleep(rng.uniform(*args.reaction))
-            page.keyboard.press("y" if yes else "n")
+            keys.answer("y" if yes else "n")
             given["yes" if yes else "no"] += 1
             if sum(given.values()) % 60 == 0:
                 say(f"[seed {seed}] day: step {state['step']}, answers yes {given['yes']}, no {given['no']}")
         time.sleep(max(0.0, args.period - args.reaction[1]))
+    keys.let_go()
     say(f"[seed {seed}] the day is over ({state['ended'] or state['mode']}): yes {given['yes']}, no {given['no']}")
     return given
 
@@ -260,7 +286,7 @@ def drive_day(page, oracle, seed: int, args: Args, say) -> dict:
     rng = random.Random(seed)
     person = DrivingPerson(np.random.default_rng(seed), args.aim_noise, args.push_lead, every=args.drive_every)
     given = dict.fromkeys(("yes", "no", "takes", "clicks", "arrow presses", "releases"), 0)
-    state = wait_for_stream(page)
+    keys, state = Keys(page, args.hold), wait_for_stream(page)
     while True:
         state, target = page.evaluate(LOOK)
         if state["ended"] or state["mode"] != "stream":
@@ -268,17 +294,19 @@ def drive_day(page, oracle, seed: int, args: Args, say) -> dict:
         view = state["info"].get("_map")
         acts = [] if view is None else person.decide(view, state["driving"], target)
         if acts or (state["driving"] and person.mine):  # the person drives: one decision each reaction time
+            keys.let_go()
             time.sleep(rng.uniform(*args.reaction))
             act(page, acts, state["driving"], given)
             continue
         if state["info"].get("_action") is not None and not state["driving"]:  # the agent drives: judge it
             yes = judge(oracle, state, (0.99, 0.992), args.steps)
             time.sleep(rng.uniform(*args.reaction))
-            page.keyboard.press("y" if yes else "n")
+            keys.answer("y" if yes else "n")
             given["yes" if yes else "no"] += 1
             if (given["yes"] + given["no"]) % 60 == 0:
                 say(f"[seed {seed}] day: step {state['step']}, " + ", ".join(f"{k} {v}" for k, v in given.items()))
         time.sleep(max(0.0, args.period - args.reaction[1]))
+    keys.let_go()
     say(f"[seed {seed}] the day is over ({state['ended'] or state['mode']}): "
         + ", ".join(f"{k} {v}" for k, v in given.items()))  # fmt: skip
     return given
@@ -360,15 +388,19 @@ def run_seed(seed: int, args: Args, browser, oracle, work: str, out: str, say) -
                     os.path.join(out, f"seed{seed}", f"summary_{name}.json"))  # fmt: skip
         with open(os.path.join(new_run(cwd, before), "summary.json")) as f:
             summaries[name] = json.load(f)
-    row = seed_row(seed, given, summaries)
+    with open(os.path.join(out, f"seed{seed}", "answers.jsonl")) as f:
+        held = sum(json.loads(line).get("event") == "answer" for line in f) if args.hold else None
+    row = seed_row(seed, given, summaries, held)
     row["seconds"] = round(time.monotonic() - t0, 1)
     say(f"[seed {seed}] done in {row['seconds']:.0f}s: " + ", ".join(f"{k} {v}" for k, v in row.items()))
     return row
 
 
-def seed_row(seed: int, given: dict, summaries: dict) -> dict:
+def seed_row(seed: int, given: dict, summaries: dict, held: int | None = None) -> dict:
     day = summaries["day"]
     row = {"seed": seed, "answers": given["yes"] + given["no"], "yes": given["yes"]}
+    if held is not None:  # --hold: each look's answer repeated while its key was down; the page's count
+        row["answers with the key held"] = held
     row.update({"steps": day["feedback/steps"], "yes labels reaching TAMER": day["feedback/positive"]})
     if "takes" in given:  # the driving person (--drive)
         row.update({"takes": given["takes"], "driven steps": day["feedback/driven_steps"]})

@@ -684,6 +684,42 @@ def test_the_pusher_streams_and_answers_arrive_with_their_step(new_page, tmp_pat
     assert [row["mode"] for row in rows] == ["stream", "stream"] and rows[0]["step"] == first.step
 
 
+def test_a_held_key_answers_four_times_a_second_each_answer_a_line(new_page, tmp_path):
+    """GUIDE's continuous feedback at the page: y held down for about 1.1 s while the arm moves answers yes again every
+    250 ms, each answer a line of answers.jsonl with the step then on the screen; letting go stops it."""
+    with BrowserTeacher(str(tmp_path / "run"), task="pusher", pace=20.0, quiet=True) as teacher:
+        got, stop = [], threading.Event()
+
+        def simulation():
+            for step in range(100_000):
+                teacher.show(step, frame=np.zeros((8, 8, 3), np.uint8), action=np.array([0.1, -0.2]))
+                got.extend(teacher.answers())
+                if teacher.ended or stop.is_set():
+                    return
+
+        thread = threading.Thread(target=simulation, daemon=True)
+        thread.start()
+        page = new_page(teacher.url)
+        page.wait_for_selector('#day[data-mode="stream"][data-open="1"]')
+        assert "hold y or n" in page.text_content("#hint")
+        page.keyboard.down("y")
+        page.wait_for_function("() => +document.querySelector('#day').dataset.answers >= 4")  # a press, 3 repeats
+        page.keyboard.up("y")
+        held = -1  # answers.jsonl's lines, read until two reads 0.6 s apart agree (the last answers arrived)
+        for _ in range(50):
+            if held == (held := len(lines(teacher))):
+                break
+            page.wait_for_timeout(600)
+        page.wait_for_timeout(1000)  # four more answers' time, had the key stayed down
+        assert len(lines(teacher)) == held
+        stop.set()
+        thread.join(WAIT_S)
+    rows = lines(teacher)
+    assert [row["answer"] for row in rows] == ["yes"] * held and held >= 4
+    steps = [row["step"] for row in rows]
+    assert steps == sorted(set(steps))  # each about what was on the screen then, a later step each time
+
+
 def test_through_the_page_the_scripted_person_teaches_tamer_the_19_steps_from_s(new_page, tmp_path):
     """The maze script itself under --teacher browser: the scripted person answers each move as the oracle would
     until the page says the agent's own way from S takes 19 steps, then ends the day; the night runs, the page shows

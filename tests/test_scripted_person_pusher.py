@@ -31,6 +31,24 @@ def test_the_map_pixels_round_trip_and_the_person_goes_round_an_object_in_its_wa
     assert person.decide(at_goal, driving=True, target=[0.45, -0.05]) == [("release",)]
 
 
+def test_a_holding_person_keeps_its_key_down_from_look_to_look_and_changes_it_with_its_answer():
+    class Keyboard:
+        def __init__(self):
+            self.calls = []
+
+        def __getattr__(self, name):  # press, down, up
+            return lambda key: self.calls.append((name, key))
+
+    page = type("Page", (), {"keyboard": Keyboard()})()
+    pressing, holding = spp.Keys(page, hold=False), spp.Keys(page, hold=True)
+    pressing.answer("y")
+    for key in ("y", "y", "n"):
+        holding.answer(key)
+    holding.let_go()
+    holding.let_go()
+    assert page.keyboard.calls == [("press", "y"), ("down", "y"), ("up", "y"), ("down", "n"), ("up", "n")]
+
+
 def test_the_driving_person_takes_the_arm_pushes_and_its_steps_are_marked(tmp_path, monkeypatch):
     why = browser_missing()
     if why:
