@@ -81,6 +81,9 @@ class Args:
     nights: tuple[Literal["bc", "sham", "core"], ...] = CONTROLS
     """the nights run on the saved day after the day's own: cloning the success set (bc), the sham, the core night
     again (core)"""
+    rehearse: int | None = None
+    """with --drive: no page and no browser; the driving person's push rehearsed for this many episodes from each
+    seed's fixed start (rehearse() says how), printed per seed; nothing is written"""
     push_lead: float = 0.05
     """with --drive: metres ahead of the object's centre, on its line to the goal, that the person keeps the target
     while pushing"""
@@ -156,6 +159,7 @@ def teach_day(page, oracle, seed: int, args: Args, say) -> dict:
 # ALGO LOGIC: the driving person (--drive): what it sees on the map, and what it does about it
 MAP_VIEW = ((-0.1, 0.9), (-0.8, 0.2), 240)  # the page's map: x left to right, y bottom to top (metres), pixels a side
 ARROW = 0.02  # metres an arrow key moves the target (the page's)
+KEYS = {"ArrowRight": (1, 0), "ArrowLeft": (-1, 0), "ArrowUp": (0, 1), "ArrowDown": (0, -1)}
 
 
 class DrivingPerson:
@@ -333,13 +337,18 @@ def act(page, acts: list, driving: bool, given: dict) -> None:
             driving = True
 
 
+def run_env_id(run_flags: list[str]) -> str:
+    """The --env-id of the runs' flags (the core script's default otherwise)."""
+    return next((run_flags[i + 1] for i, f in enumerate(run_flags[:-1]) if f == "--env-id"), "Pusher-v5")
+
+
 def load_oracle(run_flags: list[str]):
     """The oracle the runs load (the shipped one of the --env-id in `run_flags`), to judge as it does."""
     import torch
 
     import inform_sac_pusher as isp
 
-    env_id = next((run_flags[i + 1] for i, f in enumerate(run_flags[:-1]) if f == "--env-id"), "Pusher-v5")
+    env_id = run_env_id(run_flags)
     ckpt = isp.read_checkpoint(os.path.join(REPO, "oracles", f"{env_id}__sac_oracle.pt"), "--oracle-path", env_id)
     return isp.oracle_from_checkpoint(ckpt, torch.device("cpu"))
 
@@ -426,11 +435,59 @@ def markdown(rows: list[dict], command: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def rehearse(args: Args) -> dict[int, list[float]]:
+    """The driving person's push without the page: DrivingPerson sees the positions the map would show and acts a
+    reaction time later (uniform over --reaction, in steps at --pace), then looks again; the page's controller follows
+    its target. Per seed, `--rehearse` episodes from the run's fixed start (reset with the seed), the person driving
+    each from its first look (the agent's steps before the take are idle here, not TAMER's) and, as at the page,
+    letting go once the object is at the goal. What it leaves out: the page's frames and timing, arrow presses taking
+    time. Returns {seed: final distances}."""
+    import gymnasium as gym
+
+    from inform_utils.pusher_control import FingertipController
+
+    env_id = run_env_id(shlex.split(args.flags))
+    env = gym.make(env_id)
+    controller = FingertipController(env.unwrapped.model)
+    finals = {}
+    for seed in args.seeds:
+        rng, finals[seed] = np.random.default_rng(seed), []
+        person = DrivingPerson(np.random.default_rng(seed), args.aim_noise, args.push_lead)
+        for _ in range(args.rehearse):
+            obs, _ = env.reset(seed=seed)
+            target, driving, acts, due, info = None, False, None, 0, {}
+            for step in range(env.spec.max_episode_steps):
+                if acts is not None and step >= due:  # the reaction time is over: do it
+                    for what, *how in acts:
+                        if what == "release":
+                            driving = False
+                        elif what == "arrows":
+                            key, presses = how
+                            target = np.array(target) + presses * ARROW * np.array(KEYS[key])
+                        else:
+                            target, driving = from_pixel(*how), True
+                    acts = None
+                if acts is None:  # look
+                    view = {"tip": obs[14:16], "object": obs[17:19], "goal": obs[20:22]}
+                    acts = person.decide(view, driving, None if target is None else list(target))
+                    due = step + round(rng.uniform(*args.reaction) * args.pace)
+                action = controller(obs, target) if driving else np.zeros(env.action_space.shape)
+                obs, _, _, _, info = env.step(action)
+            finals[seed].append(abs(float(info["reward_dist"])))
+        d = np.array(finals[seed])
+        say(f"seed {seed}: {int((d < 0.08).sum())} of {len(d)} episodes succeed, final distance {d.mean():.3f} m "
+            f"(best {d.min():.3f}) on {env_id} at {args.pace:g} steps a second")  # fmt: skip
+    env.close()
+    return finals
+
+
 def say(text: str) -> None:
     print(text, flush=True)
 
 
-def main(args: Args) -> list[dict]:
+def main(args: Args) -> list[dict] | dict:
+    if args.rehearse is not None:
+        return rehearse(args)
     check_before_writing(args)
     oracle = load_oracle(shlex.split(args.flags))
     what = f"the scripted person teaches the Pusher, seeds {args.seeds}, at the page"

@@ -49,6 +49,25 @@ def test_a_holding_person_keeps_its_key_down_from_look_to_look_and_changes_it_wi
     assert page.keyboard.calls == [("press", "y"), ("down", "y"), ("up", "y"), ("down", "n"), ("up", "n")]
 
 
+def test_a_rehearsal_without_the_page_pushes_the_object_nearer_the_goal():
+    """--rehearse: the person's push with no browser, from the fixed start; it moves the object towards the goal, and
+    with the person's hand idle (no take, no target) it stays about where it is."""
+    import gymnasium as gym
+
+    args = spp.Args(seeds=[4], drive=True, rehearse=1, pace=10.0)
+    obs, _ = gym.make("Pusher-v5").reset(seed=4)
+    start = float(np.linalg.norm(obs[17:19] - obs[20:22]))
+    (final,) = spp.rehearse(args)[4]
+    assert final < start - 0.01, (start, final)
+    idle = spp.DrivingPerson.decide
+    try:
+        spp.DrivingPerson.decide = lambda self, view, driving, target: []
+        (still,) = spp.rehearse(args)[4]
+    finally:
+        spp.DrivingPerson.decide = idle
+    assert abs(still - start) < 0.01 and final < still - 0.01, (start, still, final)  # (the arm drifts from its reset)
+
+
 def test_the_driving_person_takes_the_arm_pushes_and_its_steps_are_marked(tmp_path, monkeypatch):
     why = browser_missing()
     if why:
