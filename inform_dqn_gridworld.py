@@ -777,9 +777,8 @@ class Evaluator:
                 resets = start_cells(*starts) if self.maze else starts
                 results[maze, id(starts)] = evaluate(policy, self.envs[maze], resets, self.success_max_steps)
             metrics[tag.format(name)] = results[maze, id(starts)][which]
-        for tag, value in metrics.items():
-            if self.writer is not None:
-                self.writer.add_scalar(tag, value, step)
+        for tag, value in metrics.items() if self.writer is not None else ():
+            self.writer.add_scalar(tag, value, step)
         self.final.update(metrics)
         self.seconds += time.time() - t0
         return metrics
@@ -921,10 +920,8 @@ def cli(args: Args) -> int:
                 check_args(args)
             except (InputError, TypeError) as e:  # TypeError: a flag of the wrong type
                 raise InputError(f"{args.sleep_from}/day.pt: its day flags are not valid: {e}") from None
-            say(
-                f"[day] sleeping on {args.sleep_from}'s day ({args.env_id}, seed {args.seed}, {saved['obs'].shape[0]} "
-                "steps); its day flags replace these"
-            )
+            say(f"[day] sleeping on {args.sleep_from}'s day ({args.env_id}, seed {args.seed}, {saved['obs'].shape[0]} "
+                "steps); its day flags replace these")  # fmt: skip
             unknown = {k: v for k, v in saved["day_args"].items() if k not in flags}
             if unknown:  # a copy's day: its settings are recorded, never dropped
                 say(f"[day] the day's settings that are not this script's flags, kept in summary.json: {unknown}")
@@ -956,9 +953,8 @@ def make_writer(run_dir: str, flags: dict, track: bool) -> SummaryWriter:
     if track:
         import wandb
 
-        project = os.environ.get("WANDB_PROJECT", "inform")
-        wandb.init(project=project, sync_tensorboard=True, config=flags, name=os.path.basename(run_dir),
-                   dir=run_dir, save_code=True)  # fmt: skip
+        wandb.init(project=os.environ.get("WANDB_PROJECT", "inform"), sync_tensorboard=True, config=flags,
+                   name=os.path.basename(run_dir), dir=run_dir, save_code=True)  # fmt: skip
     writer = SummaryWriter(run_dir)
     table = "\n".join(f"|{key}|{value}|" for key, value in flags.items())
     writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + table)
@@ -1020,8 +1016,7 @@ def record_videos(run_dir: str, policies: dict[str, np.ndarray]) -> dict:
     from PIL import Image
 
     os.makedirs(f"{run_dir}/videos", exist_ok=True)
-    record, t0 = {}, time.time()
-    start = (gridworld_env.START,)
+    record, t0, start = {}, time.time(), (gridworld_env.START,)
     clips = (("plain", "", start), ("wall", "Wall", start), ("starts", "", VIDEO_START_CELLS))
     for (name, policy), (clip, maze, starts) in itertools.product(policies.items(), clips):
         env = gym.wrappers.RenderCollection(gym.make(f"KnoxStoneMaze{maze}-v0", render_mode="rgb_array"))
@@ -1057,9 +1052,8 @@ def read_checkpoint(path: str, flag: str) -> dict:
         what = "refused, it holds more than tensors and plain values (it could run code)" if code else "corrupt"
         raise InputError(f"{flag} {path}: {what}: {(code or lines)[0][:160]}") from None
     if not isinstance(ckpt, dict):
-        raise InputError(
-            f"{flag} {path}: not a checkpoint of this project (expected a dict, not {type(ckpt).__name__})"
-        )
+        raise InputError(f"{flag} {path}: not a checkpoint of this project (expected a dict, not "
+                         f"{type(ckpt).__name__})")  # fmt: skip
     return ckpt
 
 
@@ -1192,10 +1186,9 @@ def restore_day(saved: dict, device: torch.device) -> tuple[np.ndarray, ReplayBu
     buffer.size = saved["obs"].shape[0]
     rows = zip(*(saved[k].tolist() for k in ("episode_start", "episode_end", "episode_ended")), strict=True)
     buffer.episodes = [(start, end) for start, end, ended in rows if ended]
-    day = saved["learner"]
-    day.h_net.to(device)
+    saved["learner"].h_net.to(device)
     set_rng_state(saved["rng"])
-    return saved["q_star"].double().numpy(), buffer, day
+    return saved["q_star"].double().numpy(), buffer, saved["learner"]
 
 
 def check_args(args: Args) -> None:
@@ -1286,9 +1279,8 @@ def check_env(env_id: str) -> None:
         env = gym.make(env_id)
     except Exception as e:  # unknown id, a missing extra, ...
         first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
-        raise InputError(
-            f"--env-id {env_id}: Gymnasium cannot make it ({first}); mazes: {', '.join(MAZE_IDS)}"
-        ) from None
+        raise InputError(f"--env-id {env_id}: Gymnasium cannot make it ({first}); mazes: "
+                         f"{', '.join(MAZE_IDS)}") from None  # fmt: skip
     spaces = (env.observation_space, env.action_space)
     ok = all(isinstance(s, gym.spaces.Discrete) for s in spaces) and isinstance(getattr(env.unwrapped, "P", None), dict)
     env.close()
@@ -1435,8 +1427,7 @@ def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop
         print_results(summary, run_dir)
     summary.setdefault("status", status)
     if status == "interrupted" and getattr(sys.modules.get("wandb"), "run", None) is not None:
-        sys.stdout.flush()  # --track: wandb's exit would wait ~10 s for its upload; a stop must not
-        sys.stderr.flush()
+        sys.stdout.flush(), sys.stderr.flush()  # --track: wandb's exit would wait ~10 s for its upload; a stop must not
         os._exit(stop.exit_code(status))
     return summary
 
