@@ -31,6 +31,7 @@ import select
 import signal
 import sys
 import tempfile
+import threading
 import time
 import typing
 import zipfile
@@ -886,6 +887,7 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", saved: di
             say("\n" + "\n\n".join(drawn))
             if page is not None:
                 page.show_outcome("\n\n".join(drawn))
+        writer.flush()  # the events whole before the summary says completed (an error in TensorBoard's thread: here)
     except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
         status = "interrupted"
         stop.broken_pipe = isinstance(e, BrokenPipeError)
@@ -931,6 +933,8 @@ def cli(args: Args) -> int:
     except InputError as e:
         say(f"error: {e}", sys.stderr)
         return 2
+    # TensorBoard's writer thread on a full disk: no traceback from it; main hears its error at its next write
+    threading.excepthook = lambda h: "tensorboard" in type(h.thread).__module__ or threading.__excepthook__(h)
     stop = StopSignals()
     summary = main(args, oracle_q, stop, saved)
     gc.freeze()  # the interpreter's last collections over torch's objects take seconds on a busy machine; skip them
@@ -1417,7 +1421,8 @@ def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop
             say(f"error: {run_dir}/summary.json not written ({e.strerror or e}); this run has no record", sys.stderr)
             status = summary["status"] = "unrecorded"
     for thing in (thing for thing in (*closing, evaluator) if thing is not None):
-        thing.close()
+        with contextlib.suppress(OSError):  # TensorBoard on a full disk: a completed run's main flushed it first
+            thing.close()
     if status == "interrupted":
         saved = f"what finished is saved in {run_dir}" if run_dir else "no run was made"
         say(f"interrupted ({stop.reason()}) during the {phase} phase; {saved}", sys.stderr)

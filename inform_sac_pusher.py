@@ -35,6 +35,7 @@ import shutil
 import signal
 import sys
 import tempfile
+import threading
 import time
 import typing
 import xml.etree.ElementTree as ET
@@ -1275,6 +1276,7 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
             obstacle_episodes=args.obstacle_episodes, authors_test_episodes=args.authors_test_episodes,
             capture_video=args.capture_video,
         ))  # fmt: skip
+        writer.flush()  # the events whole before the summary says completed (an error in TensorBoard's thread: here)
     except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
         status, stop.broken_pipe = "interrupted", isinstance(e, BrokenPipeError)
     except Diverged as e:
@@ -1696,6 +1698,8 @@ def cli(args: Args, make_teacher=None) -> int:
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
+    # TensorBoard's writer thread on a full disk: no traceback from it; main hears its error at its next write
+    threading.excepthook = lambda h: "tensorboard" in type(h.thread).__module__ or threading.__excepthook__(h)
     stop = StopSignals()
     summary = main(args, oracle_ckpt, stop, saved, make_teacher)
     gc.freeze()  # the interpreter's last collections over torch's objects take seconds on a busy machine; skip them
@@ -1829,7 +1833,8 @@ def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop
             say(f"error: {run_dir}/summary.json not written ({e.strerror or e}); this run has no record", sys.stderr)
             status = summary["status"] = "unrecorded"
     for thing in (thing for thing in (*closing, evaluator) if thing is not None):
-        thing.close()
+        with contextlib.suppress(OSError):  # TensorBoard on a full disk: a completed run's main flushed it first
+            thing.close()
     if status == "interrupted":
         saved = f"what finished is saved in {run_dir}" if run_dir else "no run was made"
         say(f"interrupted ({stop.reason()}) during the {phase} phase; {saved}", sys.stderr)
