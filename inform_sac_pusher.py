@@ -942,8 +942,9 @@ def final_evaluation(buffer, q_net, policies: dict, evaluator, writer, run_dir: 
         test = (env_id, seed, obstacle_layout, obstacle_episodes, outcome)
         obstacle, distances, paths = obstacle_test(*test, policies, evaluator.generator)
         results.update(obstacle)
-        np.savez(f"{run_dir}/obstacle_distances.npz", **distances)
-        np.savez(f"{run_dir}/obstacle_paths.npz", **paths)
+        for name, arrays in (("distances", distances), ("paths", paths)):  # whole or not at all (a full disk)
+            with atomic(f"{run_dir}/obstacle_{name}.npz") as tmp, open(tmp, "wb") as f:
+                np.savez(f, **arrays)
         boxes = paths["boxes"]
     if authors_test_episodes > 0:  # the authors' test: sampled actions, every episode from the run's start
         envs = env_copies(env_id, seed, authors_test_episodes)
