@@ -1617,6 +1617,23 @@ def check_args(args: Args) -> None:
         raise InputError("--save-buffer and --sleep-from exclude each other: a night on a saved day saves no new day")
 
 
+def check_writable(directory: str) -> None:
+    """A read-only or full disk is said before the run starts (64 kB written, then removed): nothing is left."""
+    made = not os.path.isdir(directory)
+    try:
+        os.makedirs(directory, exist_ok=True)
+        with tempfile.TemporaryFile(dir=directory) as f:
+            f.write(bytes(65536))
+            f.flush()
+            os.fsync(f.fileno())
+    except OSError as e:
+        raise InputError(f"cannot write into {os.path.abspath(directory)}: {e.strerror or e}") from None
+    finally:
+        if made:  # main makes it again
+            with contextlib.suppress(OSError):
+                os.rmdir(directory)
+
+
 def check_env(args: Args) -> None:
     """--env-id: a Gymnasium env with a flat observation and continuous actions, whose episodes can be judged (one
     random step shows whether `info` has --success-info-key). Raises InputError."""
@@ -1696,6 +1713,7 @@ def cli(args: Args, make_teacher=None) -> int:
             check_video(args.env_id)
         if saved is None:
             oracle_ckpt = load_oracle(args.env_id, args.oracle_path, args.train_oracle, args.oracle_total_timesteps)
+        check_writable("runs")
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -9,6 +9,7 @@ file, a Pusher oracle of the wrong shapes, a Pusher run directory whose summary.
 of one seed.
 """
 
+import contextlib
 import json
 import os
 import random
@@ -17,6 +18,7 @@ import shlex
 import numpy as np
 import pytest
 import torch
+from test_plumbing_maze import small_disk  # a tmpfs of the given options, or a skip without root
 
 import oracle_train as ot
 
@@ -165,3 +167,24 @@ def test_a_new_flag_is_never_refused_for_its_default(module):
             script.check_args(extended(sleep_q_lr=0.0))
         with pytest.raises(script.InputError, match=r"--sleep-chi2-coef must be in \[0, inf\), got nan"):
             script.check_args(extended(sleep_chi2_coef=float("nan")))
+
+
+# where a run cannot be written, or a file cannot be read (issue 55, item 14) ------------------------------------------
+@pytest.mark.parametrize("script", ["inform_sac_pusher.py", "inform_dqn_gridworld.py"])
+@pytest.mark.parametrize("kind", ["a file", "a dangling link", "read-only"])
+def test_a_runs_folder_that_cannot_take_a_run_is_one_line_and_exit_2(run_script, script, kind):
+    """runs/ a file, a dangling link, or a read-only disk: the Pusher said `NotADirectoryError...` and exited 1 where
+    the maze said "cannot write into ..." and exited 2; both say the latter, before anything is written."""
+    runs = run_script.cwd / "runs"
+    if kind == "a file":
+        runs.write_text("")
+    elif kind == "a dangling link":
+        runs.symlink_to(run_script.cwd / "nowhere")
+    disk = small_disk(runs, "ro,size=1m") if kind == "read-only" else contextlib.nullcontext()
+    with disk:
+        before = snapshot(run_script.cwd)
+        result = run_script(script, timeout=120)  # the checks refuse it: no run starts
+        lines = result.stderr.strip().splitlines()
+        assert result.returncode == 2 and len(lines) == 1 and "Traceback" not in result.stderr, result.stderr[-2000:]
+        assert lines[0].startswith(f"error: cannot write into {runs}: "), lines[0]
+        assert snapshot(run_script.cwd) == before and (kind == "read-only" or not os.path.isdir(runs))
