@@ -1045,6 +1045,8 @@ def read_checkpoint(path: str, flag: str) -> dict:
     Every way it can fail is one InputError naming the flag and the file."""
     if not os.path.isfile(path):
         raise InputError(f"{flag} {path}: no such file")
+    if not os.access(path, os.R_OK):  # zipfile.is_zipfile, below, would take it for a truncated archive
+        raise InputError(f"{flag} {path}: cannot read it (Permission denied)")
     if not zipfile.is_zipfile(path):  # torch.save writes a zip archive; a truncated one has lost its directory
         raise InputError(f"{flag} {path}: not a torch checkpoint, or a truncated one (not a complete zip archive)")
     check_crc(path, f"{flag} {path}")
@@ -1454,6 +1456,8 @@ def check_crc(path: str, where: str) -> None:
     try:
         with zipfile.ZipFile(path) as archive:
             damaged = archive.testzip()
+    except OSError as e:  # unreadable (permission denied): said so, not taken for a damaged archive
+        raise InputError(f"{where}: cannot read it ({e.strerror or e})") from None
     except Exception as e:  # a damaged archive fails in many ways (BadZipFile, EOFError, a garbled name)
         raise InputError(f"{where}: not a complete torch checkpoint, or a damaged one ({e})") from None
     if damaged is not None:

@@ -10,10 +10,13 @@ of one seed.
 """
 
 import contextlib
+import ctypes
 import json
 import os
 import random
 import shlex
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -188,3 +191,41 @@ def test_a_runs_folder_that_cannot_take_a_run_is_one_line_and_exit_2(run_script,
         assert result.returncode == 2 and len(lines) == 1 and "Traceback" not in result.stderr, result.stderr[-2000:]
         assert lines[0].startswith(f"error: cannot write into {runs}: "), lines[0]
         assert snapshot(run_script.cwd) == before and (kind == "read-only" or not os.path.isdir(runs))
+
+
+def no_root_powers():
+    """In the child, before it runs: root reads any file whatever its mode; without these two capabilities it cannot."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    for capability in (1, 2):  # CAP_DAC_OVERRIDE, CAP_DAC_READ_SEARCH, out of the bounding set: exec keeps neither
+        if libc.prctl(24, capability, 0, 0, 0) != 0:  # PR_CAPBSET_DROP
+            raise OSError(ctypes.get_errno(), "prctl(PR_CAPBSET_DROP)")
+
+
+def unreadable(path) -> dict:
+    """chmod 000 `path`; the arguments of subprocess.run under which a script cannot read it (as root: no_root_powers;
+    a skip where those cannot be dropped)."""
+    os.chmod(path, 0)
+    if os.geteuid() != 0:
+        return {}
+    try:
+        probe = subprocess.run([sys.executable, "-c", f"open({str(path)!r}).close()"], preexec_fn=no_root_powers)
+    except subprocess.SubprocessError:
+        probe = None
+    if probe is None or probe.returncode == 0:
+        pytest.skip("running as root, and cannot drop the capabilities that let root read a chmod 000 file")
+    return {"preexec_fn": no_root_powers}
+
+
+@pytest.mark.parametrize("script", ["inform_dqn_gridworld.py", "inform_sac_pusher.py"])
+def test_an_unreadable_day_is_said_so(tmp_path, script):
+    """A day.pt this user may not read: the maze said "not a torch checkpoint, or a truncated one" (zipfile.is_zipfile
+    takes any OSError for "not a zip"), the Pusher "not a complete torch checkpoint, or a damaged one"."""
+    (tmp_path / "day").mkdir()
+    torch.save({"format": "never read"}, tmp_path / "day" / "day.pt")
+    extra = unreadable(tmp_path / "day" / "day.pt")
+    result = subprocess.run([sys.executable, os.path.join(REPO, script), "--sleep-from", "day"], cwd=tmp_path,
+                            capture_output=True, text=True, timeout=120, **extra)  # fmt: skip
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1 and "Traceback" not in result.stderr, result.stderr[-2000:]
+    assert lines[0] == "error: --sleep-from day/day.pt: cannot read it (Permission denied)", lines[0]
+    assert sorted(os.listdir(tmp_path)) == ["day"]
