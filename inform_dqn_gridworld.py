@@ -31,6 +31,7 @@ import select
 import signal
 import sys
 import tempfile
+import threading
 import time
 import typing
 import zipfile
@@ -777,9 +778,8 @@ class Evaluator:
                 resets = start_cells(*starts) if self.maze else starts
                 results[maze, id(starts)] = evaluate(policy, self.envs[maze], resets, self.success_max_steps)
             metrics[tag.format(name)] = results[maze, id(starts)][which]
-        for tag, value in metrics.items():
-            if self.writer is not None:
-                self.writer.add_scalar(tag, value, step)
+        for tag, value in metrics.items() if self.writer is not None else ():
+            self.writer.add_scalar(tag, value, step)
         self.final.update(metrics)
         self.seconds += time.time() - t0
         return metrics
@@ -887,6 +887,7 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", saved: di
             say("\n" + "\n\n".join(drawn))
             if page is not None:
                 page.show_outcome("\n\n".join(drawn))
+        writer.flush()  # the events whole before the summary says completed (an error in TensorBoard's thread: here)
     except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
         status = "interrupted"
         stop.broken_pipe = isinstance(e, BrokenPipeError)
@@ -921,10 +922,8 @@ def cli(args: Args) -> int:
                 check_args(args)
             except (InputError, TypeError) as e:  # TypeError: a flag of the wrong type
                 raise InputError(f"{args.sleep_from}/day.pt: its day flags are not valid: {e}") from None
-            say(
-                f"[day] sleeping on {args.sleep_from}'s day ({args.env_id}, seed {args.seed}, {saved['obs'].shape[0]} "
-                "steps); its day flags replace these"
-            )
+            say(f"[day] sleeping on {args.sleep_from}'s day ({args.env_id}, seed {args.seed}, {saved['obs'].shape[0]} "
+                "steps); its day flags replace these")  # fmt: skip
             unknown = {k: v for k, v in saved["day_args"].items() if k not in flags}
             if unknown:  # a copy's day: its settings are recorded, never dropped
                 say(f"[day] the day's settings that are not this script's flags, kept in summary.json: {unknown}")
@@ -934,6 +933,8 @@ def cli(args: Args) -> int:
     except InputError as e:
         say(f"error: {e}", sys.stderr)
         return 2
+    # TensorBoard's writer thread on a full disk: no traceback from it; main hears its error at its next write
+    threading.excepthook = lambda h: "tensorboard" in type(h.thread).__module__ or threading.__excepthook__(h)
     stop = StopSignals()
     summary = main(args, oracle_q, stop, saved)
     gc.freeze()  # the interpreter's last collections over torch's objects take seconds on a busy machine; skip them
@@ -956,9 +957,8 @@ def make_writer(run_dir: str, flags: dict, track: bool) -> SummaryWriter:
     if track:
         import wandb
 
-        project = os.environ.get("WANDB_PROJECT", "inform")
-        wandb.init(project=project, sync_tensorboard=True, config=flags, name=os.path.basename(run_dir),
-                   dir=run_dir, save_code=True)  # fmt: skip
+        wandb.init(project=os.environ.get("WANDB_PROJECT", "inform"), sync_tensorboard=True, config=flags,
+                   name=os.path.basename(run_dir), dir=run_dir, save_code=True)  # fmt: skip
     writer = SummaryWriter(run_dir)
     table = "\n".join(f"|{key}|{value}|" for key, value in flags.items())
     writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + table)
@@ -1020,8 +1020,7 @@ def record_videos(run_dir: str, policies: dict[str, np.ndarray]) -> dict:
     from PIL import Image
 
     os.makedirs(f"{run_dir}/videos", exist_ok=True)
-    record, t0 = {}, time.time()
-    start = (gridworld_env.START,)
+    record, t0, start = {}, time.time(), (gridworld_env.START,)
     clips = (("plain", "", start), ("wall", "Wall", start), ("starts", "", VIDEO_START_CELLS))
     for (name, policy), (clip, maze, starts) in itertools.product(policies.items(), clips):
         env = gym.wrappers.RenderCollection(gym.make(f"KnoxStoneMaze{maze}-v0", render_mode="rgb_array"))
@@ -1046,6 +1045,8 @@ def read_checkpoint(path: str, flag: str) -> dict:
     Every way it can fail is one InputError naming the flag and the file."""
     if not os.path.isfile(path):
         raise InputError(f"{flag} {path}: no such file")
+    if not os.access(path, os.R_OK):  # zipfile.is_zipfile, below, would take it for a truncated archive
+        raise InputError(f"{flag} {path}: cannot read it (Permission denied)")
     if not zipfile.is_zipfile(path):  # torch.save writes a zip archive; a truncated one has lost its directory
         raise InputError(f"{flag} {path}: not a torch checkpoint, or a truncated one (not a complete zip archive)")
     check_crc(path, f"{flag} {path}")
@@ -1057,9 +1058,8 @@ def read_checkpoint(path: str, flag: str) -> dict:
         what = "refused, it holds more than tensors and plain values (it could run code)" if code else "corrupt"
         raise InputError(f"{flag} {path}: {what}: {(code or lines)[0][:160]}") from None
     if not isinstance(ckpt, dict):
-        raise InputError(
-            f"{flag} {path}: not a checkpoint of this project (expected a dict, not {type(ckpt).__name__})"
-        )
+        raise InputError(f"{flag} {path}: not a checkpoint of this project (expected a dict, not "
+                         f"{type(ckpt).__name__})")  # fmt: skip
     return ckpt
 
 
@@ -1192,10 +1192,9 @@ def restore_day(saved: dict, device: torch.device) -> tuple[np.ndarray, ReplayBu
     buffer.size = saved["obs"].shape[0]
     rows = zip(*(saved[k].tolist() for k in ("episode_start", "episode_end", "episode_ended")), strict=True)
     buffer.episodes = [(start, end) for start, end, ended in rows if ended]
-    day = saved["learner"]
-    day.h_net.to(device)
+    saved["learner"].h_net.to(device)
     set_rng_state(saved["rng"])
-    return saved["q_star"].double().numpy(), buffer, day
+    return saved["q_star"].double().numpy(), buffer, saved["learner"]
 
 
 def check_args(args: Args) -> None:
@@ -1286,9 +1285,8 @@ def check_env(env_id: str) -> None:
         env = gym.make(env_id)
     except Exception as e:  # unknown id, a missing extra, ...
         first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
-        raise InputError(
-            f"--env-id {env_id}: Gymnasium cannot make it ({first}); mazes: {', '.join(MAZE_IDS)}"
-        ) from None
+        raise InputError(f"--env-id {env_id}: Gymnasium cannot make it ({first}); mazes: "
+                         f"{', '.join(MAZE_IDS)}") from None  # fmt: skip
     spaces = (env.observation_space, env.action_space)
     ok = all(isinstance(s, gym.spaces.Discrete) for s in spaces) and isinstance(getattr(env.unwrapped, "P", None), dict)
     env.close()
@@ -1425,7 +1423,8 @@ def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop
             say(f"error: {run_dir}/summary.json not written ({e.strerror or e}); this run has no record", sys.stderr)
             status = summary["status"] = "unrecorded"
     for thing in (thing for thing in (*closing, evaluator) if thing is not None):
-        thing.close()
+        with contextlib.suppress(OSError):  # TensorBoard on a full disk: a completed run's main flushed it first
+            thing.close()
     if status == "interrupted":
         saved = f"what finished is saved in {run_dir}" if run_dir else "no run was made"
         say(f"interrupted ({stop.reason()}) during the {phase} phase; {saved}", sys.stderr)
@@ -1435,8 +1434,7 @@ def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop
         print_results(summary, run_dir)
     summary.setdefault("status", status)
     if status == "interrupted" and getattr(sys.modules.get("wandb"), "run", None) is not None:
-        sys.stdout.flush()  # --track: wandb's exit would wait ~10 s for its upload; a stop must not
-        sys.stderr.flush()
+        sys.stdout.flush(), sys.stderr.flush()  # --track: wandb's exit would wait ~10 s for its upload; a stop must not
         os._exit(stop.exit_code(status))
     return summary
 
@@ -1458,6 +1456,8 @@ def check_crc(path: str, where: str) -> None:
     try:
         with zipfile.ZipFile(path) as archive:
             damaged = archive.testzip()
+    except OSError as e:  # unreadable (permission denied): said so, not taken for a damaged archive
+        raise InputError(f"{where}: cannot read it ({e.strerror or e})") from None
     except Exception as e:  # a damaged archive fails in many ways (BadZipFile, EOFError, a garbled name)
         raise InputError(f"{where}: not a complete torch checkpoint, or a damaged one ({e})") from None
     if damaged is not None:

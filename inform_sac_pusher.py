@@ -35,6 +35,7 @@ import shutil
 import signal
 import sys
 import tempfile
+import threading
 import time
 import typing
 import xml.etree.ElementTree as ET
@@ -900,9 +901,8 @@ class Evaluator:
 
     def __init__(self, env_id: str, seed: int, random_starts: bool, outcome: Outcome, writer: SummaryWriter | None):
         self.envs = env_copies(env_id, seed, SIDE_BY_SIDE)
-        self.writer, self.seed, self.random_starts = writer, seed, random_starts
+        self.writer, self.seed, self.random_starts, self.outcome = writer, seed, random_starts, outcome
         self.generator = torch.Generator().manual_seed(seed + 12345)  # sampled actions, off the training RNG
-        self.outcome = outcome
         self.seconds = 0.0  # spent evaluating
         self.final = {}  # the latest value of each tag
 
@@ -942,8 +942,9 @@ def final_evaluation(buffer, q_net, policies: dict, evaluator, writer, run_dir: 
         test = (env_id, seed, obstacle_layout, obstacle_episodes, outcome)
         obstacle, distances, paths = obstacle_test(*test, policies, evaluator.generator)
         results.update(obstacle)
-        np.savez(f"{run_dir}/obstacle_distances.npz", **distances)
-        np.savez(f"{run_dir}/obstacle_paths.npz", **paths)
+        for name, arrays in (("distances", distances), ("paths", paths)):  # whole or not at all (a full disk)
+            with atomic(f"{run_dir}/obstacle_{name}.npz") as tmp, open(tmp, "wb") as f:
+                np.savez(f, **arrays)
         boxes = paths["boxes"]
     if authors_test_episodes > 0:  # the authors' test: sampled actions, every episode from the run's start
         envs = env_copies(env_id, seed, authors_test_episodes)
@@ -1276,6 +1277,7 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
             obstacle_episodes=args.obstacle_episodes, authors_test_episodes=args.authors_test_episodes,
             capture_video=args.capture_video,
         ))  # fmt: skip
+        writer.flush()  # the events whole before the summary says completed (an error in TensorBoard's thread: here)
     except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
         status, stop.broken_pipe = "interrupted", isinstance(e, BrokenPipeError)
     except Diverged as e:
@@ -1303,12 +1305,8 @@ def video_camera() -> dict:
     """The camera's MJCF attributes: VIDEO_CAMERA's distance from its lookat, seen from +x (image up is -x)."""
     (x, y, z), d, el = VIDEO_CAMERA["lookat"], VIDEO_CAMERA["distance"], math.radians(VIDEO_CAMERA["elevation"])
     pos = f"{x + d * math.cos(el):.4f} {y} {z - d * math.sin(el):.4f}"
-    return {
-        "name": "inform_video",
-        "mode": "fixed",
-        "pos": pos,
-        "xyaxes": f"0 1 0 {math.sin(el):.4f} 0 {math.cos(el):.4f}",
-    }
+    xyaxes = f"0 1 0 {math.sin(el):.4f} 0 {math.cos(el):.4f}"
+    return {"name": "inform_video", "mode": "fixed", "pos": pos, "xyaxes": xyaxes}
 
 
 GL_HINT = "install EGL (Debian: apt-get install libegl1 libegl-mesa0) or OSMesa (libosmesa6, MUJOCO_GL=osmesa)"
@@ -1385,9 +1383,8 @@ class Progress:
 
 
 def env_shapes(env_id: str) -> tuple[int, int]:
-    env = gym.make(env_id)
-    env.close()
-    return int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
+    with gym.make(env_id) as env:
+        return int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
 
 
 def read_checkpoint(path: str, flag: str, env_id: str) -> dict:
@@ -1411,15 +1408,13 @@ def read_checkpoint(path: str, flag: str, env_id: str) -> dict:
         raise InputError(f"{where}: trained on {ckpt['env_id']}, not {env_id}; pass --env-id")
     shapes, (obs_dim, act_dim) = (ckpt["kwargs"].get("obs_dim"), ckpt["kwargs"].get("act_dim")), env_shapes(env_id)
     if shapes != (obs_dim, act_dim):
-        raise InputError(
-            f"{where}: shapes obs {shapes[0]} act {shapes[1]} do not match {env_id} (obs {obs_dim}, act {act_dim})"
-        )
+        raise InputError(f"{where}: shapes obs {shapes[0]} act {shapes[1]} do not match {env_id} (obs {obs_dim}, "
+                         f"act {act_dim})")  # fmt: skip
     try:
         nets = oracle_from_checkpoint(ckpt, torch.device("cpu")) if oracle else (actor_from_checkpoint(ckpt),)
     except Exception as e:
-        raise InputError(
-            f"{where}: the networks do not load ({type(e).__name__}: {' '.join(str(e).split())[:80]})"
-        ) from None
+        why = " ".join(str(e).split())[:80]
+        raise InputError(f"{where}: the networks do not load ({type(e).__name__}: {why})") from None
     if not all(torch.isfinite(p).all() for net in nets for p in net.state_dict().values()):
         raise InputError(f"{where}: its networks hold NaN or inf")
     return ckpt
@@ -1450,9 +1445,8 @@ def load_oracle(env_id: str, path: str | None, train: bool, train_steps: int) ->
         if path is None:  # a copied script far from the repository: say so before an hour of training starts
             hint = "pass --oracle-path PATH (a checkpoint of oracle_train.py, as in oracles/), or --train-oracle"
             say(f"[oracle] no shipped teacher found (looked for {name} beside the script, in the working directory and "
-                f"in every directory above them: {', '.join(places)}); training one here for "
-                f"{train_steps} env steps (~100 steps/s on one core). To skip this, {hint}",
-                sys.stderr)  # fmt: skip
+                f"in every directory above them: {', '.join(places)}); training one here for {train_steps} env steps "
+                f"(~100 steps/s on one core). To skip this, {hint}", sys.stderr)  # fmt: skip
     return None if path is None else {**read_checkpoint(path, "--oracle-path", env_id), "path": path}
 
 
@@ -1468,9 +1462,8 @@ def state_dict_cpu(net: nn.Module) -> dict:
 def save_actor(path: str, actor: Actor, **extra) -> None:
     kwargs = {"obs_dim": actor.fc1.in_features, "act_dim": actor.fc_mean.out_features, "hidden": actor.fc1.out_features}
     low, high = (actor.action_bias - actor.action_scale).cpu(), (actor.action_bias + actor.action_scale).cpu()
-    save_atomic(
-        {"state_dict": state_dict_cpu(actor), "kwargs": kwargs, "action_low": low, "action_high": high, **extra}, path
-    )
+    ckpt = {"state_dict": state_dict_cpu(actor), "kwargs": kwargs, "action_low": low, "action_high": high}
+    save_atomic({**ckpt, **extra}, path)
 
 
 def save_critic(path: str, q_net: QEnsemble, obs_dim: int, act_dim: int, **extra) -> None:
@@ -1597,17 +1590,11 @@ def check_args(args: Args) -> None:
     other. Raises InputError."""
     hints = typing.get_type_hints(type(args), include_extras=True)
     for f in fields(args):
-        value, spec = (
-            getattr(args, f.name),
-            [m for m in getattr(hints[f.name], "__metadata__", ()) if isinstance(m, In)],
-        )
-        if spec and value is not None and value not in spec[0]:
-            integer = isinstance(value, int)  # a count: ">= 1"; a float: its interval
-            must = (
-                f">= {spec[0].low}" + (f" and < {spec[0].high}" if spec[0].high < math.inf else "")
-                if integer
-                else spec[0]
-            )
+        value = getattr(args, f.name)
+        spec = next((m for m in getattr(hints[f.name], "__metadata__", ()) if isinstance(m, In)), None)
+        if spec is not None and value is not None and value not in spec:  # a count: ">= 1"; a float: its interval
+            bound = f" and < {spec.high}" if spec.high < math.inf else ""
+            must = f">= {spec.low}{bound}" if isinstance(value, int) else spec
             raise InputError(f"--{f.name.replace('_', '-')} must be {must}, got {value}")
     check_run_name(args.env_id, args.exp_name, args.seed)
     if args.num_threads > (cpus := os.cpu_count() or 1):  # torch segfaults on absurd counts
@@ -1630,6 +1617,23 @@ def check_args(args: Args) -> None:
         raise InputError("--save-buffer and --sleep-from exclude each other: a night on a saved day saves no new day")
 
 
+def check_writable(directory: str) -> None:
+    """A read-only or full disk is said before the run starts (64 kB written, then removed): nothing is left."""
+    made = not os.path.isdir(directory)
+    try:
+        os.makedirs(directory, exist_ok=True)
+        with tempfile.TemporaryFile(dir=directory) as f:
+            f.write(bytes(65536))
+            f.flush()
+            os.fsync(f.fileno())
+    except OSError as e:
+        raise InputError(f"cannot write into {os.path.abspath(directory)}: {e.strerror or e}") from None
+    finally:
+        if made:  # main makes it again
+            with contextlib.suppress(OSError):
+                os.rmdir(directory)
+
+
 def check_env(args: Args) -> None:
     """--env-id: a Gymnasium env with a flat observation and continuous actions, whose episodes can be judged (one
     random step shows whether `info` has --success-info-key). Raises InputError."""
@@ -1637,9 +1641,7 @@ def check_env(args: Args) -> None:
         env = gym.make(args.env_id)
     except Exception as e:  # unknown id, a missing extra (box2d, ...), a version that needs other packages
         first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
-        if os.environ.get("MUJOCO_GL") and re.search(
-            r"\bgl[A-Z]|OSMesa|EGL|GLFW|MUJOCO_GL", str(e)
-        ):  # the backend, not the id
+        if os.environ.get("MUJOCO_GL") and re.search(r"\bgl[A-Z]|OSMesa|EGL|GLFW|MUJOCO_GL", str(e)):  # GL, not the id
             raise InputError(f"MUJOCO_GL={os.environ['MUJOCO_GL']}: MuJoCo cannot load that GL backend ({first}); "
                              f"{GL_HINT}, or unset MUJOCO_GL") from None  # fmt: skip
         raise InputError(f"--env-id {args.env_id}: Gymnasium cannot make it ({first})") from None
@@ -1656,9 +1658,8 @@ def check_env(args: Args) -> None:
             if key not in info:
                 has = f"it has: {', '.join(sorted(info)) or 'none'}"
                 hint = "pass --success-info-key KEY, or --success-return R to judge episodes by return"
-                raise InputError(
-                    f"--env-id {args.env_id}: its info has no {key!r} for a final distance ({has}); {hint}"
-                )
+                raise InputError(f"--env-id {args.env_id}: its info has no {key!r} for a final distance ({has}); "
+                                 f"{hint}")  # fmt: skip
     finally:
         env.close()
 
@@ -1668,20 +1669,16 @@ def mujoco_log_in(run_dir: str) -> None:
     and writes MUJOCO_LOG.TXT into the working directory, outside the run. The run's error line says what failed."""
     import mujoco
 
-    if not hasattr(mujoco, "set_mju_user_warning"):  # an older MuJoCo: its default stays
-        return
-
     def warning(message: str) -> None:
         with open(os.path.join(run_dir, "MUJOCO_LOG.TXT"), "a") as f:
             f.write(message.rstrip() + "\n")
 
-    mujoco.set_mju_user_warning(warning)
+    if hasattr(mujoco, "set_mju_user_warning"):  # an older MuJoCo: its default stays
+        mujoco.set_mju_user_warning(warning)
 
 
 def mujoco_major() -> int:
-    import mujoco
-
-    return int(mujoco.__version__.split(".")[0])
+    return int(importlib.import_module("mujoco").__version__.split(".")[0])
 
 
 def print_results(summary: dict, run_dir: str) -> None:
@@ -1700,7 +1697,7 @@ def cli(args: Args, make_teacher=None) -> int:
     """The command line after tyro: a saved day, the checks, then the run; returns the exit code. The study
     module (inform_utils/sleep_variants_pusher.py) runs it with its own Args (and their night), the web page
     (inform_utils/browser_pusher.py) with its own Args and `make_teacher`."""
-    saved = None
+    saved = oracle_ckpt = None  # a saved day brings its own teacher
     try:
         if args.sleep_from is not None:  # the day's flags replace this run's: its numbers are the day's
             saved = load_day(args.sleep_from)
@@ -1714,12 +1711,14 @@ def cli(args: Args, make_teacher=None) -> int:
         check_args(args)
         if args.capture_video:
             check_video(args.env_id)
-        oracle_ckpt = None  # a saved day brings its own teacher
         if saved is None:
             oracle_ckpt = load_oracle(args.env_id, args.oracle_path, args.train_oracle, args.oracle_total_timesteps)
+        check_writable("runs")
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
+    # TensorBoard's writer thread on a full disk: no traceback from it; main hears its error at its next write
+    threading.excepthook = lambda h: "tensorboard" in type(h.thread).__module__ or threading.__excepthook__(h)
     stop = StopSignals()
     summary = main(args, oracle_ckpt, stop, saved, make_teacher)
     gc.freeze()  # the interpreter's last collections over torch's objects take seconds on a busy machine; skip them
@@ -1853,7 +1852,8 @@ def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop
             say(f"error: {run_dir}/summary.json not written ({e.strerror or e}); this run has no record", sys.stderr)
             status = summary["status"] = "unrecorded"
     for thing in (thing for thing in (*closing, evaluator) if thing is not None):
-        thing.close()
+        with contextlib.suppress(OSError):  # TensorBoard on a full disk: a completed run's main flushed it first
+            thing.close()
     if status == "interrupted":
         saved = f"what finished is saved in {run_dir}" if run_dir else "no run was made"
         say(f"interrupted ({stop.reason()}) during the {phase} phase; {saved}", sys.stderr)
@@ -1863,8 +1863,7 @@ def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop
         print_results(summary, run_dir)
     summary.setdefault("status", status)
     if status == "interrupted" and getattr(sys.modules.get("wandb"), "run", None) is not None:
-        sys.stdout.flush()  # --track: wandb's exit would wait ~10 s for its upload; a stop must not
-        sys.stderr.flush()
+        sys.stdout.flush(), sys.stderr.flush()  # --track: wandb's exit would wait ~10 s for its upload; a stop must not
         os._exit(stop.exit_code(status))
     return summary
 
@@ -1886,6 +1885,8 @@ def check_crc(path: str, where: str) -> None:
     try:
         with zipfile.ZipFile(path) as archive:
             damaged = archive.testzip()
+    except OSError as e:  # unreadable (permission denied): said so, not taken for a damaged archive
+        raise InputError(f"{where}: cannot read it ({e.strerror or e})") from None
     except Exception as e:  # a damaged archive fails in many ways (BadZipFile, EOFError, a garbled name)
         raise InputError(f"{where}: not a complete torch checkpoint, or a damaged one ({e})") from None
     if damaged is not None:

@@ -912,6 +912,8 @@ def check_crc(path: str, where: str) -> None:
     try:
         with zipfile.ZipFile(path) as archive:
             damaged = archive.testzip()
+    except OSError as e:  # unreadable (permission denied): said so, not taken for a damaged archive
+        raise InputError(f"{where}: cannot read it ({e.strerror or e})") from None
     except Exception as e:  # a damaged archive fails in many ways (BadZipFile, EOFError, a garbled name)
         raise InputError(f"{where}: not a complete torch checkpoint, or a damaged one ({e})") from None
     if damaged is not None:

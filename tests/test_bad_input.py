@@ -9,14 +9,19 @@ file, a Pusher oracle of the wrong shapes, a Pusher run directory whose summary.
 of one seed.
 """
 
+import contextlib
+import ctypes
 import json
 import os
 import random
 import shlex
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 import torch
+from test_plumbing_maze import small_disk  # a tmpfs of the given options, or a skip without root
 
 import oracle_train as ot
 
@@ -165,3 +170,62 @@ def test_a_new_flag_is_never_refused_for_its_default(module):
             script.check_args(extended(sleep_q_lr=0.0))
         with pytest.raises(script.InputError, match=r"--sleep-chi2-coef must be in \[0, inf\), got nan"):
             script.check_args(extended(sleep_chi2_coef=float("nan")))
+
+
+# where a run cannot be written, or a file cannot be read (issue 55, item 14) ------------------------------------------
+@pytest.mark.parametrize("script", ["inform_sac_pusher.py", "inform_dqn_gridworld.py"])
+@pytest.mark.parametrize("kind", ["a file", "a dangling link", "read-only"])
+def test_a_runs_folder_that_cannot_take_a_run_is_one_line_and_exit_2(run_script, script, kind):
+    """runs/ a file, a dangling link, or a read-only disk: the Pusher said `NotADirectoryError...` and exited 1 where
+    the maze said "cannot write into ..." and exited 2; both say the latter, before anything is written."""
+    runs = run_script.cwd / "runs"
+    if kind == "a file":
+        runs.write_text("")
+    elif kind == "a dangling link":
+        runs.symlink_to(run_script.cwd / "nowhere")
+    disk = small_disk(runs, "ro,size=1m") if kind == "read-only" else contextlib.nullcontext()
+    with disk:
+        before = snapshot(run_script.cwd)
+        result = run_script(script, timeout=120)  # the checks refuse it: no run starts
+        lines = result.stderr.strip().splitlines()
+        assert result.returncode == 2 and len(lines) == 1 and "Traceback" not in result.stderr, result.stderr[-2000:]
+        assert lines[0].startswith(f"error: cannot write into {runs}: "), lines[0]
+        assert snapshot(run_script.cwd) == before and (kind == "read-only" or not os.path.isdir(runs))
+
+
+def no_root_powers():
+    """In the child, before it runs: root reads any file whatever its mode; without these two capabilities it cannot."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    for capability in (1, 2):  # CAP_DAC_OVERRIDE, CAP_DAC_READ_SEARCH, out of the bounding set: exec keeps neither
+        if libc.prctl(24, capability, 0, 0, 0) != 0:  # PR_CAPBSET_DROP
+            raise OSError(ctypes.get_errno(), "prctl(PR_CAPBSET_DROP)")
+
+
+def unreadable(path) -> dict:
+    """chmod 000 `path`; the arguments of subprocess.run under which a script cannot read it (as root: no_root_powers;
+    a skip where those cannot be dropped)."""
+    os.chmod(path, 0)
+    if os.geteuid() != 0:
+        return {}
+    try:
+        probe = subprocess.run([sys.executable, "-c", f"open({str(path)!r}).close()"], preexec_fn=no_root_powers)
+    except subprocess.SubprocessError:
+        probe = None
+    if probe is None or probe.returncode == 0:
+        pytest.skip("running as root, and cannot drop the capabilities that let root read a chmod 000 file")
+    return {"preexec_fn": no_root_powers}
+
+
+@pytest.mark.parametrize("script", ["inform_dqn_gridworld.py", "inform_sac_pusher.py"])
+def test_an_unreadable_day_is_said_so(tmp_path, script):
+    """A day.pt this user may not read: the maze said "not a torch checkpoint, or a truncated one" (zipfile.is_zipfile
+    takes any OSError for "not a zip"), the Pusher "not a complete torch checkpoint, or a damaged one"."""
+    (tmp_path / "day").mkdir()
+    torch.save({"format": "never read"}, tmp_path / "day" / "day.pt")
+    extra = unreadable(tmp_path / "day" / "day.pt")
+    result = subprocess.run([sys.executable, os.path.join(REPO, script), "--sleep-from", "day"], cwd=tmp_path,
+                            capture_output=True, text=True, timeout=120, **extra)  # fmt: skip
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1 and "Traceback" not in result.stderr, result.stderr[-2000:]
+    assert lines[0] == "error: --sleep-from day/day.pt: cannot read it (Permission denied)", lines[0]
+    assert sorted(os.listdir(tmp_path)) == ["day"]

@@ -1,7 +1,10 @@
 """The plumbing of inform_sac_pusher.py holds where users have broken it: each probe ends either with one `error:` line
 and exit 2 before anything is written (bad input), or with a summary.json whose status says what happened."""
 
+import contextlib
+import errno
 import glob
+import io
 import json
 import os
 import signal
@@ -9,6 +12,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 import torch
 import tyro
@@ -163,6 +167,31 @@ def test_a_disk_that_fills_while_saving_the_day_fails_with_the_reason_and_leaves
     assert written["status"] == "failed" and written["phase"] == "tamer" and "file write failed" in written["error"]
     assert written["error"].startswith("OSError: runs/") and summary["status"] == "failed"
     assert not glob.glob(os.path.join(run_dir, "*.tmp")) and os.path.isfile(os.path.join(run_dir, "tamer_actor.pt"))
+
+
+@pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")
+def test_a_disk_that_fills_while_writing_the_obstacle_paths_leaves_no_partial_file(tmp_path, monkeypatch):
+    """Issue 55, item 11: obstacle_*.npz were written in place; on a full disk obstacle_paths.npz was left at 8,192 of
+    its 12,072 bytes. As np.savez meets a full disk: two pages written, then ENOSPC. Neither file is half there."""
+    real_savez = np.savez
+
+    def full_disk(file, *args, **kwargs):
+        name = str(getattr(file, "name", file))
+        if "obstacle_paths" not in name:
+            return real_savez(file, *args, **kwargs)
+        whole = io.BytesIO()
+        real_savez(whole, *args, **kwargs)
+        with open(name, "wb") if isinstance(file, str) else contextlib.nullcontext(file) as f:
+            f.write(whole.getvalue()[:8192])
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(np, "savez", full_disk)
+    short = ["--tamer-total-timesteps", "300", "--tamer-learning-starts", "200", "--sleep-gradient-steps", "10"]
+    summary = in_process_run(tmp_path, monkeypatch, *short, "--authors-test-episodes", "0")  # no exception
+    run_dir, written = summary_of(tmp_path)
+    assert written["status"] == "failed" and written["phase"] == "eval" and "No space left" in written["error"]
+    assert summary["status"] == "failed" and os.path.isfile(os.path.join(run_dir, "obstacle_distances.npz"))
+    assert not glob.glob(os.path.join(run_dir, "obstacle_paths*")), os.listdir(run_dir)  # nor its .tmp
 
 
 @pytest.mark.skipif(not os.path.isfile(SHIPPED), reason="shipped oracle missing")
