@@ -397,8 +397,10 @@ def run_seed(seed: int, args: Args, browser, oracle, work: str, out: str, say) -
                     os.path.join(out, f"seed{seed}", f"summary_{name}.json"))  # fmt: skip
         with open(os.path.join(new_run(cwd, before), "summary.json")) as f:
             summaries[name] = json.load(f)
-    with open(os.path.join(out, f"seed{seed}", "answers.jsonl")) as f:
-        held = sum(json.loads(line).get("event") == "answer" for line in f) if args.hold else None
+    held = None
+    if args.hold:  # the page's count of answers, each held key's repeats too
+        with open(os.path.join(out, f"seed{seed}", "answers.jsonl")) as f:
+            held = sum(json.loads(line).get("event") == "answer" for line in f)
     row = seed_row(seed, given, summaries, held)
     row["seconds"] = round(time.monotonic() - t0, 1)
     say(f"[seed {seed}] done in {row['seconds']:.0f}s: " + ", ".join(f"{k} {v}" for k, v in row.items()))
