@@ -299,17 +299,18 @@ class BatchedLinear(nn.Module):
 class QEnsemble(nn.Module):
     """`n` Q (or H) networks as one module: twin critics with n=2, the sleep critic with n=1. Returns [n, B]."""
 
-    def __init__(self, obs_dim: int, act_dim: int, hidden: int = 256, n: int = 2):
+    def __init__(self, obs_dim: int, act_dim: int, hidden: int = 256, n: int = 2, layer_norm: bool = False):
         super().__init__()
         self.n = n
         self.fc1 = BatchedLinear(n, obs_dim + act_dim, hidden)
         self.fc2 = BatchedLinear(n, hidden, hidden)
         self.fc3 = BatchedLinear(n, hidden, 1)
+        self.register_buffer("norm", torch.ones(()) if layer_norm else None)  # RLPD's LayerNorm, a saved marker
 
     def forward(self, obs: torch.Tensor, act: torch.Tensor) -> torch.Tensor:
         x = torch.cat([obs, act], -1).unsqueeze(0).expand(self.n, -1, -1)
-        x = F.relu(self.fc1(x))
-        x = F.relu(self.fc2(x))
+        for layer in (self.fc1, self.fc2):  # each hidden layer, then LayerNorm if built with it
+            x = F.relu(layer(x) if self.norm is None else F.layer_norm(layer(x), layer.bias.shape[-1:]))
         return self.fc3(x).squeeze(-1)
 
 
@@ -671,8 +672,7 @@ def forward_phase(day: Day, env, oracle_actor, oracle_qf, teacher, outcome, buff
 
 
 def sleep_batch(buffer: ReplayBuffer, batch_size: int, expert_idx: torch.Tensor, replay_idx=None):
-    """The sleep's batch: `batch_size` replay rows (drawn from replay_idx; None: the whole buffer), then as many
-    expert rows."""
+    """The sleep's batch: `batch_size` replay rows (replay_idx's; None: the whole buffer), then as many expert rows."""
     device = expert_idx.device
     replay = torch.randint(0, buffer.size if replay_idx is None else replay_idx.numel(), (batch_size,), device=device)
     replay = replay if replay_idx is None else replay_idx[replay]
@@ -1422,7 +1422,7 @@ def read_checkpoint(path: str, flag: str, env_id: str) -> dict:
 
 def oracle_from_checkpoint(ckpt: dict, device: torch.device) -> tuple[Actor, QEnsemble]:
     actor, kw = actor_from_checkpoint(ckpt).to(device), ckpt["kwargs"]
-    qf = QEnsemble(kw["obs_dim"], kw["act_dim"], kw["hidden"], n=2).to(device)
+    qf = QEnsemble(kw["obs_dim"], kw["act_dim"], kw["hidden"], n=2, layer_norm=kw.get("layer_norm", False)).to(device)
     qf.load_state_dict(ckpt["qf_state_dict"])
     return actor, qf
 

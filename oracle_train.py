@@ -135,6 +135,18 @@ class Args:
     """automatic tuning of the entropy coefficient"""
     ent_coef: Annotated[float, POSITIVE] = 0.2
     """the entropy coefficient when it is not autotuned (CleanRL's --alpha)"""
+    layer_norm: bool = False
+    """LayerNorm after each hidden layer of the critics (RLPD's; kept in the teacher's kwargs)"""
+
+    # Learning from demonstrations (docs/protocol.md, "A teacher from demonstrations")
+    demos: str | None = None
+    """an .npz of demonstrations (`python -m inform_utils.pusher_control --save-demos`), sampled as --demo-ratio of
+    every batch (RLPD, Ball et al. 2023); their steps count in --total-timesteps (the agent's own start after them)"""
+    demo_ratio: Annotated[float, PROBABILITY] = 0.5
+    """the share of every SAC batch drawn from --demos (RLPD's symmetric sampling: 0.5)"""
+    clone_steps: Annotated[int, Range(0)] = 0
+    """with --demos: before SAC, clone the successful demonstrations into the actor for this many gradient steps,
+    then warm the critics on every demonstration for as many (the actor fixed); the actor acts from the first step"""
 
     # Evaluation, logging and checkpointing
     eval_frequency: Annotated[int, POSITIVE_INT] = 10000
@@ -231,17 +243,18 @@ class BatchedLinear(nn.Module):
 class QEnsemble(nn.Module):
     """`n` Q (or H) networks as one module: twin critics with n=2, the sleep critic with n=1. Returns [n, B]."""
 
-    def __init__(self, obs_dim: int, act_dim: int, hidden: int = 256, n: int = 2):
+    def __init__(self, obs_dim: int, act_dim: int, hidden: int = 256, n: int = 2, layer_norm: bool = False):
         super().__init__()
         self.n = n
         self.fc1 = BatchedLinear(n, obs_dim + act_dim, hidden)
         self.fc2 = BatchedLinear(n, hidden, hidden)
         self.fc3 = BatchedLinear(n, hidden, 1)
+        self.register_buffer("norm", torch.ones(()) if layer_norm else None)  # RLPD's LayerNorm, a saved marker
 
     def forward(self, obs: torch.Tensor, act: torch.Tensor) -> torch.Tensor:
         x = torch.cat([obs, act], -1).unsqueeze(0).expand(self.n, -1, -1)
-        x = F.relu(self.fc1(x))
-        x = F.relu(self.fc2(x))
+        for layer in (self.fc1, self.fc2):  # each hidden layer, then LayerNorm if built with it
+            x = F.relu(layer(x) if self.norm is None else F.layer_norm(layer(x), layer.bias.shape[-1:]))
         return self.fc3(x).squeeze(-1)
 
 
@@ -310,6 +323,13 @@ class ReplayBuffer:
             self.data[name][self.n % self.size] = value
         self.n += 1
 
+    @classmethod
+    def of(cls, data: dict, device: torch.device) -> "ReplayBuffer":
+        """A full buffer holding the given transitions (FIELDS, as tensors), the demonstrations'."""
+        rb = cls(len(data["rew"]), data["obs"].shape[1], data["act"].shape[1], device)
+        rb.data, rb.n = {name: data[name].to(device) for name in cls.FIELDS}, len(data["rew"])
+        return rb
+
     def sample(self, batch_size: int) -> tuple[torch.Tensor, ...]:
         idx = torch.randint(0, min(self.n, self.size), (batch_size,), device=self.device)
         return tuple(self.data[name][idx] for name in self.FIELDS)
@@ -321,11 +341,12 @@ class SAC:
 
     MODULES = ("actor", "qf", "qf_target", "q_optimizer", "actor_optimizer", "ent_coef_optimizer")
 
-    def __init__(self, obs_dim, act_dim, low, high, hidden, policy_lr, q_lr, ent_coef, autotune, device, warm=False):
+    def __init__(self, obs_dim, act_dim, low, high, hidden, policy_lr, q_lr, ent_coef, autotune, device, warm=False,
+                 layer_norm=False):  # fmt: skip
         self.obs_dim, self.act_dim, self.low, self.high, self.hidden = obs_dim, act_dim, low, high, hidden
         self.actor = Actor(obs_dim, act_dim, hidden, low, high).to(device)
-        self.qf = QEnsemble(obs_dim, act_dim, hidden, n=2).to(device)
-        self.qf_target = QEnsemble(obs_dim, act_dim, hidden, n=2).to(device)
+        self.qf = QEnsemble(obs_dim, act_dim, hidden, n=2, layer_norm=layer_norm).to(device)
+        self.qf_target = QEnsemble(obs_dim, act_dim, hidden, n=2, layer_norm=layer_norm).to(device)
         self.qf_target.load_state_dict(self.qf.state_dict())
         self.q_optimizer = torch.optim.Adam(self.qf.parameters(), lr=q_lr)
         self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=policy_lr)
@@ -366,6 +387,18 @@ class SAC:
                 self.ent_coef_optimizer.step()
                 self.losses["ent_coef_loss"] = ent_coef_loss
         soft_update(self.qf_target, self.qf, tau)
+
+    def clone(self, batch) -> None:
+        """--clone-steps: one gradient step of the actor on -log pi(a|s) of the demonstrated actions (behaviour
+        cloning); an action at its limit is taken 0.1% inside it (at the limit, its pre-tanh value is infinite)."""
+        b_obs, _, b_act, _, _ = batch
+        inside = self.actor.action_scale * 0.999
+        b_act = b_act.clamp(self.actor.action_bias - inside, self.actor.action_bias + inside)
+        clone_loss = -self.actor.log_prob(b_obs, b_act).mean()
+        self.actor_optimizer.zero_grad(set_to_none=True)
+        clone_loss.backward()
+        self.actor_optimizer.step()
+        self.losses["clone_loss"] = clone_loss
 
     def warm_start(self, teacher: dict) -> None:
         """--init-from: the actor and the twin critics (their target too) of a teacher's checkpoint."""
@@ -465,13 +498,25 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
 
     env = make_env(args.env_id, args.seed, args.reward_dist_weight)
     obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
+    acts_first = args.init_from is not None or args.clone_steps > 0  # the actor acts from the first step
     sac = SAC(obs_dim, act_dim, env.action_space.low, env.action_space.high, args.hidden_size, args.policy_lr,
-              args.q_lr, args.ent_coef, args.autotune, device, warm=args.init_from is not None)  # fmt: skip
+              args.q_lr, args.ent_coef, args.autotune, device, warm=acts_first, layer_norm=args.layer_norm)  # fmt: skip
     if args.init_from is not None and args.resume is None:
         sac.warm_start(read_teacher(args.init_from, obs_dim, act_dim, args.hidden_size))
     amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
     rb = ReplayBuffer(min(args.buffer_size, args.total_timesteps), obs_dim, act_dim, device)
-    start_step = 0
+    demo_rb = clone_rb = None
+    demo_id = {}
+    if args.demos is not None:  # read by a helper module, imported under its flag only
+        from inform_utils.demos import read_demos
+
+        demos = read_demos(args.demos, args.env_id, env, args.reward_dist_weight, resume_state, InputError)
+        demo_rb, clone_rb = ReplayBuffer.of(demos["all"], device), ReplayBuffer.of(demos["success"], device)
+        demo_id = {"demos_sha256": demos["sha256"]}
+        if demo_rb.n >= args.total_timesteps or (args.clone_steps and clone_rb.n == 0):
+            raise InputError(f"--demos {args.demos}: its {demo_rb.n} steps " + ("leave none of --total-timesteps" if
+                             demo_rb.n >= args.total_timesteps else "hold no successful episode to clone"))  # fmt: skip
+    start_step = demo_rb.n if demo_rb is not None else 0  # the demonstrator's steps count in the budget
     if args.resume is not None:
         run_dir = os.path.dirname(os.path.abspath(args.resume))
         start_step = load_training_state(resume_state, sac, rb, args)
@@ -480,6 +525,10 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
         print(f"resumed from {args.resume} at step {start_step}", flush=True)
     else:
         run_dir = new_run_dir(args)
+        for _ in range(args.clone_steps):  # BC first (the successful demonstrations), then the critics warmed on all
+            sac.clone(clone_rb.sample(args.batch_size))
+        for _ in range(args.clone_steps):
+            sac.update(demo_rb.sample(args.batch_size), args.gamma, args.tau, False, amp)
     output_path = args.output_path or os.path.join(run_dir, "oracle.pt")
     writer = open_writer(args, run_dir)
     print(f"run directory: {run_dir}", flush=True)
@@ -498,7 +547,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     report_every = max(1, (args.total_timesteps - start_step) // 20)
     for global_step in range(start_step, args.total_timesteps):
         Stop.check()
-        if global_step < args.learning_starts and args.init_from is None:
+        if global_step < args.learning_starts and not acts_first:
             action = env.action_space.sample()
         else:
             with torch.no_grad():
@@ -516,9 +565,11 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
             next_obs_t = torch.as_tensor(env.reset()[0], dtype=torch.float32, device=device)
         obs_t = next_obs_t
 
-        # ALGO LOGIC: one SAC update per env step, the actor's delayed
+        # ALGO LOGIC: one SAC update per env step, the actor's delayed; with --demos, --demo-ratio of the batch theirs
         if global_step >= args.learning_starts:
-            sac.update(rb.sample(args.batch_size), args.gamma, args.tau, global_step % args.policy_frequency == 0, amp)
+            batch = rb.sample(args.batch_size - (k := round(args.batch_size * args.demo_ratio) if demo_rb else 0))
+            batch = tuple(torch.cat(pair) for pair in zip(demo_rb.sample(k), batch, strict=True)) if k else batch
+            sac.update(batch, args.gamma, args.tau, global_step % args.policy_frequency == 0, amp)
 
         # TRY NOT TO MODIFY: logging, the evaluation that chooses the checkpoint, training states
         step = trained = global_step + 1
@@ -534,7 +585,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
         if step % report_every == 0 or evaluated:
             print_progress(step, start_step, args.total_timesteps, t0, last_eval, selection)
         if step % args.checkpoint_frequency == 0 or step == args.total_timesteps:
-            save_training_state(state_path, sac, rb, step, args)
+            save_training_state(state_path, sac, rb, step, args, **demo_id)
             save_oracle(step, last_eval, os.path.join(run_dir, "oracle_latest.pt"))
             if step % args.snapshot_frequency == 0:  # kept, so the teacher can be chosen by a longer evaluation later
                 save_oracle(step, last_eval, os.path.join(run_dir, f"oracle_step{step:07d}.pt"))
@@ -542,7 +593,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
         if args.stop_at_expert and evaluated and last_eval["success_rate"] >= EXPERT_SUCCESS_RATE and (
             args.env_id not in PUSHER_IDS or last_eval["final_distance"] <= EXPERT_FINAL_DISTANCE):  # fmt: skip
             print(f"[oracle] step {step}: the evaluation meets the expert bar (--stop-at-expert), training ends")
-            save_training_state(state_path, sac, rb, step, args)
+            save_training_state(state_path, sac, rb, step, args, **demo_id)
             break
     env.close()
     write_oracle(args, sac, selection, run_dir, output_path, device, trained, time.time() - t0)
@@ -763,6 +814,11 @@ def check_args(args: Args) -> None:
         raise InputError(f"--init-from {args.init_from}: " + ("the maze has no warm start" if maze else "no such file"))
     if args.resume is not None and (maze or not os.path.isfile(args.resume)):
         raise InputError(f"--resume {args.resume}: " + ("the maze has no training state" if maze else "no such file"))
+    if args.clone_steps and args.demos is None:
+        raise InputError("--clone-steps clones demonstrations: it needs --demos")
+    if args.demos is not None and (maze or not os.path.isfile(args.demos)):
+        raise InputError(f"--demos {args.demos}: " + ("the maze learns no teacher from them" if maze else "no such file"
+                                                     ))  # fmt: skip
     if args.batch_size > args.total_timesteps:
         raise InputError(f"--batch-size {args.batch_size} is larger than --total-timesteps {args.total_timesteps}")
     if args.maze_dqn_batch_size > args.maze_dqn_timesteps:
@@ -846,7 +902,8 @@ def oracle_checkpoint(sac: SAC, args: Args, step: int, evaluation: dict) -> dict
     """The deployable oracle: state_dicts plus everything needed to rebuild and check them, and the opt-in speed flags
     it was trained with (they change the numbers)."""
     return {"algorithm": "sac", "env_id": args.env_id, "obs_shape": [sac.obs_dim], "act_shape": [sac.act_dim],
-            "kwargs": {"obs_dim": sac.obs_dim, "act_dim": sac.act_dim, "hidden": sac.hidden},
+            "kwargs": {"obs_dim": sac.obs_dim, "act_dim": sac.act_dim, "hidden": sac.hidden,
+                       "layer_norm": sac.qf.norm is not None},  # fmt: skip
             "action_low": torch.as_tensor(sac.low, dtype=torch.float32),
             "action_high": torch.as_tensor(sac.high, dtype=torch.float32),
             "actor_state_dict": {k: v.detach().cpu().clone() for k, v in sac.actor.state_dict().items()},
@@ -883,12 +940,13 @@ def resumed_args(path: str, saved: dict) -> Args:
     return args
 
 
-def save_training_state(path: str, sac: SAC, rb: ReplayBuffer, step: int, args: Args) -> None:
-    """Everything --resume needs: networks, optimizers, the replay buffer, the RNG, and the run's flags."""
+def save_training_state(path: str, sac: SAC, rb: ReplayBuffer, step: int, args: Args, **extra) -> None:
+    """Everything --resume needs: networks, optimizers, the replay buffer, the RNG, the run's flags (and `extra`: the
+    demonstrations' digest)."""
     state = {key: getattr(sac, key).state_dict() for key in SAC.MODULES}
     state.update({f"buf_{name}": buf[: min(rb.n, rb.size)].clone() for name, buf in rb.data.items()})
     state.update(log_ent_coef=sac.log_ent_coef.detach().clone(), buf_n=rb.n, global_step=step,
-                 torch_rng=torch.get_rng_state(), args=asdict(args))  # fmt: skip
+                 torch_rng=torch.get_rng_state(), args=asdict(args), **extra)  # fmt: skip
     atomic_save(state, path)
 
 

@@ -29,8 +29,10 @@ MPPIDemonstrator (pusher_mpc.py, `--demonstrator mpc`) does both by sampling MPC
 
     python -m inform_utils.pusher_control --episodes 100              # the demonstrator on reset seeds 0-99
     python -m inform_utils.pusher_control --episodes 100 --demonstrator mpc   # MPC on the true model (pusher_mpc.py)
+    python -m inform_utils.pusher_control --episodes 200 --demonstrator mpc --first-seed 3000000 --save-demos demos.npz
 """
 
+import os
 import time
 from dataclasses import dataclass
 from typing import Literal
@@ -177,17 +179,41 @@ class PushingDemonstrator:
         return self.controller(obs, target, WORK_HEIGHT, push_direction=u)
 
 
-def run_episode(env: gym.Env, demonstrator: PushingDemonstrator | MPPIDemonstrator, seed: int) -> tuple[float, float]:
+def run_episode(env: gym.Env, demonstrator: PushingDemonstrator | MPPIDemonstrator, seed: int,
+                record: dict | None = None) -> tuple[float, float]:  # fmt: skip
     """(final object-to-goal distance, return) of one episode from reset(seed); the demonstrator is reset with the
-    same seed (MPPIDemonstrator seeds its sampler from it)."""
+    same seed (MPPIDemonstrator seeds its sampler from it). `record`: lists per DEMO_FIELDS, each step appended."""
     obs, _ = env.reset(seed=seed)
     demonstrator.reset(seed)
     ep_return, done, info = 0.0, False, {}
     while not done:
-        obs, reward, terminated, truncated, info = env.step(demonstrator(obs))
-        ep_return += float(reward)
-        done = terminated or truncated
+        action = demonstrator(obs)
+        next_obs, reward, terminated, truncated, info = env.step(action)
+        if record is not None:  # the reward's terms too, so a teacher can re-weight them (--reward-dist-weight)
+            row = (obs, action, next_obs, reward, terminated, *(info.get(k, np.nan) for k in DEMO_FIELDS[5:]))
+            for name, value in zip(DEMO_FIELDS, row, strict=True):
+                record[name].append(value)
+        obs, ep_return, done = next_obs, ep_return + float(reward), terminated or truncated
     return abs(float(info["reward_dist"])), ep_return
+
+
+DEMO_FIELDS = ("obs", "act", "next_obs", "rew", "term", "reward_dist", "reward_ctrl", "reward_near")
+
+
+def save_demos(path: str, record: dict, env_id: str, demonstrator: str, seeds, distances, success_distance) -> None:
+    """The demonstrations as one .npz of plain arrays (np.load(..., allow_pickle=False) reads it): DEMO_FIELDS per
+    step (float32), per episode its reset seed, final distance and success; written whole or not at all."""
+    arrays = {name: np.asarray(values, dtype=np.float32) for name, values in record.items()}
+    episodes = {"episode_seed": np.asarray(seeds, dtype=np.int64), "episode_distance": np.asarray(distances),
+                "episode_success": np.asarray(distances) < success_distance}  # fmt: skip
+    meta = {"env_id": np.str_(env_id), "demonstrator": np.str_(demonstrator)}
+    tmp = f"{path}.tmp{os.getpid()}.npz"
+    try:
+        np.savez_compressed(tmp, **arrays, **episodes, **meta)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
 
 
 @dataclass
@@ -202,6 +228,9 @@ class Args:
     """the Outcome's success: final |reward_dist| below this (inform_sac_pusher.Outcome)"""
     demonstrator: Literal["scripted", "mpc"] = "scripted"
     """scripted: PushingDemonstrator (this module); mpc: MPPIDemonstrator (inform_utils/pusher_mpc.py)"""
+    save_demos: str | None = None
+    """write every step of the episodes to this .npz (new file) for a teacher to learn from (oracle_train.py
+    --demos); pick reset seeds no evaluation uses (e.g. --first-seed 3000000)"""
 
 
 def make_demonstrator(name: str, env: gym.Env) -> PushingDemonstrator | MPPIDemonstrator:
@@ -209,11 +238,14 @@ def make_demonstrator(name: str, env: gym.Env) -> PushingDemonstrator | MPPIDemo
 
 
 def main(args: Args) -> None:
+    if args.save_demos is not None and (os.path.exists(args.save_demos) or not args.save_demos.endswith(".npz")):
+        raise SystemExit(f"--save-demos {args.save_demos}: name a new file ending in .npz (it exists, or is no .npz)")
     env = gym.make(args.env_id)
     demonstrator = make_demonstrator(args.demonstrator, env)
     seeds = range(args.first_seed, args.first_seed + args.episodes)
     cpu = time.process_time()
-    results = np.array([run_episode(env, demonstrator, seed) for seed in seeds])
+    record = {name: [] for name in DEMO_FIELDS} if args.save_demos else None
+    results = np.array([run_episode(env, demonstrator, seed, record) for seed in seeds])
     cpu = time.process_time() - cpu
     env.close()
     distances, returns = results[:, 0], results[:, 1]
@@ -226,6 +258,9 @@ def main(args: Args) -> None:
     ]
     if failed:
         print(f"failed (seed, final distance): {failed}")
+    if record is not None:
+        save_demos(args.save_demos, record, args.env_id, args.demonstrator, seeds, distances, args.success_distance)
+        print(f"{len(record['rew'])} steps of {args.episodes} episodes written to {args.save_demos}")
 
 
 if __name__ == "__main__":

@@ -44,6 +44,7 @@ NO_ARGS = {
     "inform_utils.videos",
     "inform_utils.pusher_contact",  # a measurement with no flags
     "inform_utils.pusher_mpc",  # a library: run by pusher_control --demonstrator mpc
+    "inform_utils.demos",  # a library: read by oracle_train --demos
 }  # libraries
 STOP_TIMES = "benchmarks/stop_times.py"  # stop_times.py N SCRIPT FLAGS...: the flags are SCRIPT's
 SHELL_SPLIT = re.compile(r"&&|\|\||[;|()]")

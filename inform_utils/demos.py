@@ -1,0 +1,53 @@
+"""Demonstrations for a teacher (oracle_train.py --demos): the .npz that `python -m inform_utils.pusher_control
+--save-demos` writes, read without unpickling and checked against the run, as tensors for two buffers: every step
+(RLPD's half of each batch, and the critics' warm-up) and the steps of the successful episodes (what --clone-steps
+clones).
+
+    python -m inform_utils.pusher_control --episodes 150 --demonstrator mpc --first-seed 3000000 --save-demos d.npz
+    python oracle_train.py --env-id Pusher-v5 --demos d.npz --layer-norm --total-timesteps 1000000
+"""
+
+import hashlib
+import zipfile
+
+import numpy as np
+import torch
+
+FIELDS = ("obs", "act", "next_obs", "rew", "term", "reward_dist", "reward_ctrl", "reward_near")  # pusher_control's
+EPISODE_FIELDS = ("episode_seed", "episode_distance", "episode_success")
+
+
+def read_demos(path: str, env_id: str, env, reward_dist_weight: float | None, resume_state: dict | None,
+               error: type[Exception]) -> dict:  # fmt: skip
+    """{"all": FIELDS' tensors, "success": the same for the successful episodes' steps, "sha256", "steps"}; `error`
+    (oracle_train's InputError), one line, for a file that is not such demonstrations, or not the resumed run's."""
+    with open(path, "rb") as f:
+        sha256 = hashlib.sha256(f.read()).hexdigest()
+    if resume_state is not None and resume_state.get("demos_sha256") != sha256:
+        raise error(f"--demos {path}: not the demonstrations this run was trained with (their SHA-256 differs)")
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            data = {name: npz[name] for name in (*FIELDS, *EPISODE_FIELDS, "env_id")}
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile, EOFError) as e:
+        raise error(f"--demos {path}: not demonstrations of pusher_control --save-demos ({type(e).__name__})") from None
+    if str(data["env_id"]) != env_id:
+        raise error(f"--demos {path}: demonstrations of {data['env_id']}, not {env_id}")
+    steps, episodes = len(data["rew"]), len(data["episode_seed"])
+    obs_shape, act_shape = (steps, *env.observation_space.shape), (steps, *env.action_space.shape)
+    fits = [data["act"].shape == act_shape, data["obs"].shape == data["next_obs"].shape == obs_shape]
+    if episodes == 0 or steps % episodes or not all(fits) or any(data[n].shape != (steps,) for n in FIELDS[3:5]):
+        raise error(f"--demos {path}: {steps} steps of {episodes} episodes, observations {data['obs'].shape[1:]} and "
+                    f"actions {data['act'].shape[1:]}, do not fit {env_id}'s")  # fmt: skip
+    low, high = env.action_space.low, env.action_space.high
+    if not all(np.isfinite(data[name]).all() for name in FIELDS[:5]) or (data["act"] < low).any() or \
+            (data["act"] > high).any():  # fmt: skip
+        raise error(f"--demos {path}: holds NaN or inf, or actions outside {env_id}'s limits")
+    if reward_dist_weight is not None:  # the reward re-weighted as the run's env weighs it (recorded at weight 1)
+        terms = data["reward_dist"] * reward_dist_weight + data["reward_ctrl"] + data["reward_near"]
+        if not np.isfinite(terms).all():
+            raise error(f"--demos {path}: its steps lack the reward's terms that --reward-dist-weight needs")
+        data["rew"] = terms.astype(np.float32)
+    tensors = {name: torch.as_tensor(data[name], dtype=torch.float32) for name in FIELDS[:5]}
+    success_rows = torch.as_tensor(np.repeat(data["episode_success"], steps // episodes))  # episodes of equal length
+    return {"all": tensors, "success": {name: t[success_rows] for name, t in tensors.items()}, "sha256": sha256,
+            "steps": steps}  # fmt: skip
