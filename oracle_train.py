@@ -253,8 +253,8 @@ class QEnsemble(nn.Module):
 
     def forward(self, obs: torch.Tensor, act: torch.Tensor) -> torch.Tensor:
         x = torch.cat([obs, act], -1).unsqueeze(0).expand(self.n, -1, -1)
-        for layer in (self.fc1, self.fc2):  # each hidden layer, then LayerNorm if built with it
-            x = F.relu(layer(x) if self.norm is None else F.layer_norm(layer(x), layer.bias.shape[-1:]))
+        x = F.relu(self.fc1(x) if self.norm is None else F.layer_norm(self.fc1(x), self.fc1.bias.shape[-1:]))
+        x = F.relu(self.fc2(x) if self.norm is None else F.layer_norm(self.fc2(x), self.fc2.bias.shape[-1:]))
         return self.fc3(x).squeeze(-1)
 
 
