@@ -502,7 +502,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     sac = SAC(obs_dim, act_dim, env.action_space.low, env.action_space.high, args.hidden_size, args.policy_lr,
               args.q_lr, args.ent_coef, args.autotune, device, warm=acts_first, layer_norm=args.layer_norm)  # fmt: skip
     if args.init_from is not None and args.resume is None:
-        sac.warm_start(read_teacher(args.init_from, obs_dim, act_dim, args.hidden_size))
+        sac.warm_start(read_teacher(args.init_from, obs_dim, act_dim, args.hidden_size, args.layer_norm))
     amp = torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16)  # --bf16; off, it changes nothing
     rb = ReplayBuffer(min(args.buffer_size, args.total_timesteps), obs_dim, act_dim, device)
     demo_rb = clone_rb = None
@@ -526,8 +526,10 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     else:
         run_dir = new_run_dir(args)
         for _ in range(args.clone_steps):  # BC first (the successful demonstrations), then the critics warmed on all
+            Stop.check()
             sac.clone(clone_rb.sample(args.batch_size))
         for _ in range(args.clone_steps):
+            Stop.check()
             sac.update(demo_rb.sample(args.batch_size), args.gamma, args.tau, False, amp)
     output_path = args.output_path or os.path.join(run_dir, "oracle.pt")
     writer = open_writer(args, run_dir)
@@ -814,8 +816,8 @@ def check_args(args: Args) -> None:
         raise InputError(f"--init-from {args.init_from}: " + ("the maze has no warm start" if maze else "no such file"))
     if args.resume is not None and (maze or not os.path.isfile(args.resume)):
         raise InputError(f"--resume {args.resume}: " + ("the maze has no training state" if maze else "no such file"))
-    if args.clone_steps and args.demos is None:
-        raise InputError("--clone-steps clones demonstrations: it needs --demos")
+    if args.clone_steps and (args.demos is None or args.init_from is not None):
+        raise InputError("--clone-steps clones demonstrations into a new actor: it needs --demos, not --init-from")
     if args.demos is not None and (maze or not os.path.isfile(args.demos)):
         raise InputError(f"--demos {args.demos}: " + ("the maze learns no teacher from them" if maze else "no such file"
                                                      ))  # fmt: skip
@@ -978,7 +980,7 @@ def check_crc(path: str, where: str) -> None:
         raise InputError(f"{where}: damaged since it was saved ({damaged} fails its CRC-32 check); make it again")
 
 
-def read_teacher(path: str, obs_dim: int, act_dim: int, hidden: int) -> dict:
+def read_teacher(path: str, obs_dim: int, act_dim: int, hidden: int, layer_norm: bool) -> dict:
     """--init-from: a SAC teacher's checkpoint (torch.load(weights_only=True)) that fits this env and --hidden-size."""
     check_crc(path, f"--init-from {path}")
     try:
@@ -992,6 +994,9 @@ def read_teacher(path: str, obs_dim: int, act_dim: int, hidden: int) -> dict:
     if (kwargs.get("obs_dim"), kwargs.get("act_dim")) != (obs_dim, act_dim) or kwargs.get("hidden") != hidden:
         raise InputError(f"--init-from {path}: its networks are {kwargs} (from {teacher.get('env_id')}); this run's "
                          f"are obs_dim {obs_dim}, act_dim {act_dim}, hidden {hidden} (--hidden-size)")  # fmt: skip
+    if kwargs.get("layer_norm", False) != layer_norm:
+        raise InputError(f"--init-from {path}: its critics are {'with' if not layer_norm else 'without'} LayerNorm; "
+                         f"pass {'--layer-norm' if not layer_norm else '--no-layer-norm'}")  # fmt: skip
     return teacher
 
 

@@ -34,10 +34,16 @@ def read_demos(path: str, env_id: str, env, reward_dist_weight: float | None, re
         raise error(f"--demos {path}: demonstrations of {data['env_id']}, not {env_id}")
     steps, episodes = len(data["rew"]), len(data["episode_seed"])
     obs_shape, act_shape = (steps, *env.observation_space.shape), (steps, *env.action_space.shape)
-    fits = [data["act"].shape == act_shape, data["obs"].shape == data["next_obs"].shape == obs_shape]
-    if episodes == 0 or steps % episodes or not all(fits) or any(data[n].shape != (steps,) for n in FIELDS[3:5]):
+    fits = [
+        data["act"].shape == act_shape,
+        data["obs"].shape == data["next_obs"].shape == obs_shape,
+        data["episode_success"].shape == (episodes,) and data["episode_success"].dtype == bool,
+        episodes > 0 and steps == episodes * env.spec.max_episode_steps,  # whole episodes: Pusher never ends early
+        *(data[name].shape == (steps,) for name in FIELDS[3:]),
+    ]
+    if not all(fits):
         raise error(f"--demos {path}: {steps} steps of {episodes} episodes, observations {data['obs'].shape[1:]} and "
-                    f"actions {data['act'].shape[1:]}, do not fit {env_id}'s")  # fmt: skip
+                    f"actions {data['act'].shape[1:]}: not whole {env_id} episodes of pusher_control")  # fmt: skip
     low, high = env.action_space.low, env.action_space.high
     if not all(np.isfinite(data[name]).all() for name in FIELDS[:5]) or (data["act"] < low).any() or \
             (data["act"] > high).any():  # fmt: skip
@@ -48,6 +54,6 @@ def read_demos(path: str, env_id: str, env, reward_dist_weight: float | None, re
             raise error(f"--demos {path}: its steps lack the reward's terms that --reward-dist-weight needs")
         data["rew"] = terms.astype(np.float32)
     tensors = {name: torch.as_tensor(data[name], dtype=torch.float32) for name in FIELDS[:5]}
-    success_rows = torch.as_tensor(np.repeat(data["episode_success"], steps // episodes))  # episodes of equal length
+    success_rows = torch.as_tensor(np.repeat(data["episode_success"], env.spec.max_episode_steps))
     return {"all": tensors, "success": {name: t[success_rows] for name, t in tensors.items()}, "sha256": sha256,
             "steps": steps}  # fmt: skip

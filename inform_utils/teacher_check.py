@@ -18,7 +18,6 @@ import torch
 import tyro
 
 import inform_sac_pusher as isp
-from oracle_train import Actor
 
 SUCCESS_DISTANCE = 0.08  # the paper's success tag, on v4 and v5 alike
 EXPERT_SUCCESS_RATE = 0.95
@@ -41,7 +40,7 @@ class Args:
 
 
 @torch.no_grad()
-def final_distance(actor: Actor, env: gym.Env, reset_seed: int) -> tuple[float, float]:
+def final_distance(actor: isp.Actor, env: gym.Env, reset_seed: int) -> tuple[float, float]:
     obs, _ = env.reset(seed=reset_seed)
     done = False
     ep_return = 0.0
@@ -74,8 +73,7 @@ def read_teacher(path: str) -> dict:
 
 def check(args: Args) -> dict:
     ckpt = read_teacher(args.checkpoint)
-    actor = Actor(**ckpt["kwargs"], action_low=ckpt["action_low"], action_high=ckpt["action_high"])
-    actor.load_state_dict(ckpt["actor_state_dict"])
+    actor = isp.actor_from_checkpoint(ckpt)  # the kwargs may hold the critics' too (layer_norm)
     env = gym.make(ckpt["env_id"])
     runs = [final_distance(actor, env, args.reset_seed + ep) for ep in range(args.episodes)]
     distances = np.array([d for d, _ in runs])

@@ -71,7 +71,7 @@ def test_a_flipped_maze_teacher_and_network_are_refused(tmp_path):
 
 def test_a_flipped_training_state_and_warm_start_are_refused(tmp_path):
     with pytest.raises(ot.InputError, match="--init-from .* damaged"):
-        ot.read_teacher(flipped(V5_TEACHER, tmp_path / "t.pt"), 23, 7, 256)
+        ot.read_teacher(flipped(V5_TEACHER, tmp_path / "t.pt"), 23, 7, 256, False)
     sac = ot.SAC(3, 2, -torch.ones(2).numpy(), torch.ones(2).numpy(), 8, 1e-3, 1e-3, 0.2, True, torch.device("cpu"))
     ot.save_training_state(
         str(tmp_path / "state.pt"), sac, ot.ReplayBuffer(10, 3, 2, torch.device("cpu")), 10, ot.Args()

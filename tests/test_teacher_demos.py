@@ -14,7 +14,7 @@ import torch
 
 import inform_sac_pusher as isp
 import oracle_train as ot
-from inform_utils import pusher_control
+from inform_utils import pusher_control, teacher_check
 from inform_utils.demos import read_demos
 
 DEMO_EPISODES = 2  # the scripted demonstrator: 200 steps in a fraction of a second
@@ -95,6 +95,8 @@ def test_a_run_from_demonstrations_clones_warms_and_counts_their_steps(run_scrip
     assert ckpt["kwargs"]["layer_norm"] is True
     actor, qf = isp.oracle_from_checkpoint(ckpt, torch.device("cpu"))  # the core script rebuilds the LayerNorm teacher
     assert qf.norm is not None
+    checked = teacher_check.check(teacher_check.Args(str(run_script.cwd / "oracle.pt"), episodes=1, fixed_seeds=[1]))
+    assert checked["random_starts"]["episodes"] == 1  # the bar's command reads a LayerNorm teacher too
     obs, act = demo_states(data)
     success = torch.as_tensor(np.repeat(data["episode_success"], 100))
     with torch.no_grad():
@@ -136,6 +138,15 @@ def test_every_batch_holds_its_share_of_demonstrations(run_script, tmp_path):
         assert qf(*demo_states(data)).mean().item() > 0.5  # 1.8 here; -0.8 from a batch without them
 
 
+def test_a_warm_start_across_layer_norm_is_refused_in_one_line(run_script):
+    shipped = os.path.join(os.path.dirname(ot.__file__), "oracles", "Pusher-v5__sac_oracle.pt")
+    flags = [*TINY, "--hidden-size", "256", "--total-timesteps", "400", "--init-from", shipped, "--layer-norm"]
+    result = run_script("oracle_train.py", *flags)
+    assert result.returncode == 2 and result.stderr.strip().splitlines() == [
+        f"error: --init-from {shipped}: its critics are without LayerNorm; pass --no-layer-norm"
+    ], result.stderr[-2000:]
+
+
 def test_a_layer_norm_critic_refuses_to_load_into_one_without():
     with_norm, without = isp.QEnsemble(23, 7, 16, n=2, layer_norm=True), isp.QEnsemble(23, 7, 16, n=2)
     with pytest.raises(RuntimeError, match="norm"):
@@ -148,7 +159,7 @@ def test_a_layer_norm_critic_refuses_to_load_into_one_without():
 @pytest.mark.parametrize(
     "case, phrase",
     [("missing", "no such file"), ("not_npz", "not demonstrations of pusher_control"),
-     ("maze", "the maze learns no teacher"), ("clone_without", "--clone-steps clones demonstrations: it needs --demos"),
+     ("maze", "the maze learns no teacher"), ("clone_without", "--clone-steps clones demonstrations into a new actor"),
      ("no_success", "no successful episode to clone"), ("too_long", "leave none of --total-timesteps"),
      ("other_env", "demonstrations of Pusher-v5, not Reacher-v5")],
 )  # fmt: skip
