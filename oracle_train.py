@@ -905,7 +905,7 @@ def oracle_checkpoint(sac: SAC, args: Args, step: int, evaluation: dict) -> dict
     it was trained with (they change the numbers)."""
     return {"algorithm": "sac", "env_id": args.env_id, "obs_shape": [sac.obs_dim], "act_shape": [sac.act_dim],
             "kwargs": {"obs_dim": sac.obs_dim, "act_dim": sac.act_dim, "hidden": sac.hidden,
-                       "layer_norm": sac.qf.norm is not None},  # fmt: skip
+                       **({"layer_norm": True} if sac.qf.norm is not None else {})},  # fmt: skip
             "action_low": torch.as_tensor(sac.low, dtype=torch.float32),
             "action_high": torch.as_tensor(sac.high, dtype=torch.float32),
             "actor_state_dict": {k: v.detach().cpu().clone() for k, v in sac.actor.state_dict().items()},

@@ -27,7 +27,7 @@ DECLARED = {
         "Args", "Sleep", "cli", "main", "check_args", "Evaluator", "StopSignals", "Teacher", "ReplayBuffer",
         "tamer_loss", "iq_loss", "greedy_actions", "QNetwork", "read_checkpoint", "InputError",
     },
-    "oracle_train": {"Actor"},
+    "oracle_train": set(),  # inform_utils/ reads teachers through inform_sac_pusher's loaders
 }  # fmt: skip
 
 
@@ -56,7 +56,7 @@ def test_inform_utils_uses_only_the_declared_names():
             seen.add(script)
             extra = names - DECLARED[script]
             assert not extra, f"{os.path.basename(path)} uses {sorted(extra)} of {script}.py, not in DECLARED"
-    assert seen == SCRIPTS  # the check saw every script's imports (a rename would not slip by unseen)
+    assert seen == {s for s in SCRIPTS if DECLARED[s]}  # it saw every script's imports (a rename would not slip by)
 
 
 def test_every_declared_name_is_defined_at_the_top_level_of_its_script():
