@@ -156,26 +156,33 @@ def test_a_layer_norm_critic_refuses_to_load_into_one_without():
     assert not torch.allclose(with_norm(x, a), without(x, a))  # the same weights, normalised: other values
 
 
+def test_bad_demonstrations_are_refused_in_one_line(run_script, tmp_path):
+    (tmp_path / "x.npz").write_bytes(b"not a zip")
+    result = run_script("oracle_train.py", "--demos", str(tmp_path / "x.npz"))
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1 and "not demonstrations of pusher_control" in lines[0], lines
+    assert not (run_script.cwd / "runs").exists()
+
+
 @pytest.mark.parametrize(
     "case, phrase",
-    [("missing", "no such file"), ("not_npz", "not demonstrations of pusher_control"),
-     ("maze", "the maze learns no teacher"), ("clone_without", "--clone-steps clones demonstrations into a new actor"),
+    [("missing", "no such file"), ("maze", "the maze learns no teacher"),
+     ("clone_without", "--clone-steps clones demonstrations into a new actor"),
      ("no_success", "no successful episode to clone"), ("too_long", "leave none of --total-timesteps"),
      ("other_env", "demonstrations of Pusher-v5, not Reacher-v5")],
 )  # fmt: skip
-def test_bad_demonstrations_are_refused_in_one_line(run_script, tmp_path, demos, case, phrase):
+def test_bad_demonstrations_are_refused_before_anything_is_written(tmp_path, monkeypatch, demos, case, phrase):
+    """In-process (the one-line report is the test above's): InputError, and no runs/ made."""
     path, _ = demos
-    if case == "not_npz":
-        (tmp_path / "x.npz").write_bytes(b"not a zip")
-        path = tmp_path / "x.npz"
-    flags = {"missing": ["--demos", "nowhere.npz"], "not_npz": ["--demos", str(path)],
-             "maze": ["--env-id", "KnoxStoneMaze-v0", "--demos", str(path)], "clone_without": ["--clone-steps", "5"],
-             "no_success": ["--demos", str(tmp_path / "none.npz"), "--clone-steps", "5"],
-             "too_long": ["--demos", str(path), "--total-timesteps", "200", "--batch-size", "64"],
-             "other_env": ["--env-id", "Reacher-v5", "--demos", str(path)]}[case]  # fmt: skip
     if case == "no_success":
         make_demos(tmp_path / "none.npz", success=(False, False))
-    result = run_script("oracle_train.py", *flags)
-    lines = result.stderr.strip().splitlines()
-    assert result.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: ") and phrase in lines[0], lines
-    assert not (run_script.cwd / "runs").exists()
+    flags = {"missing": {"demos": "nowhere.npz"}, "maze": {"env_id": "KnoxStoneMaze-v0", "demos": str(path)},
+             "clone_without": {"clone_steps": 5}, "no_success": {"demos": str(tmp_path / "none.npz"), "clone_steps": 5},
+             "too_long": {"demos": str(path), "total_timesteps": 200, "batch_size": 64},
+             "other_env": {"env_id": "Reacher-v5", "demos": str(path)}}[case]  # fmt: skip
+    monkeypatch.chdir(tmp_path)
+    args = ot.Args(**flags)
+    with pytest.raises(ot.InputError, match=phrase):
+        ot.check_args(args)
+        ot.train_sac(args)
+    assert not (tmp_path / "runs").exists()
