@@ -510,12 +510,9 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     if args.demos is not None:  # read by a helper module, imported under its flag only
         from inform_utils.demos import read_demos
 
-        demos = read_demos(args.demos, args.env_id, env, args.reward_dist_weight, resume_state, InputError)
+        demos = read_demos(args.demos, env, args, resume_state, InputError)
         demo_rb, clone_rb = ReplayBuffer.of(demos["all"], device), ReplayBuffer.of(demos["success"], device)
         demo_id = {"demos_sha256": demos["sha256"]}
-        if demo_rb.n >= args.total_timesteps or (args.clone_steps and clone_rb.n == 0):
-            raise InputError(f"--demos {args.demos}: its {demo_rb.n} steps " + ("leave none of --total-timesteps" if
-                             demo_rb.n >= args.total_timesteps else "hold no successful episode to clone"))  # fmt: skip
     start_step = demo_rb.n if demo_rb is not None else 0  # the demonstrator's steps count in the budget
     if args.resume is not None:
         run_dir = os.path.dirname(os.path.abspath(args.resume))

@@ -13,14 +13,16 @@ import zipfile
 import numpy as np
 import torch
 
-FIELDS = ("obs", "act", "next_obs", "rew", "term", "reward_dist", "reward_ctrl", "reward_near")  # pusher_control's
+# a step of pusher_control --save-demos: the transition, then the reward's terms (to re-weight it)
+FIELDS = ("obs", "act", "next_obs", "rew", "term", "reward_dist", "reward_ctrl", "reward_near")
 EPISODE_FIELDS = ("episode_seed", "episode_distance", "episode_success")
 
 
-def read_demos(path: str, env_id: str, env, reward_dist_weight: float | None, resume_state: dict | None,
-               error: type[Exception]) -> dict:  # fmt: skip
+def read_demos(path: str, env, args, resume_state: dict | None, error: type[Exception]) -> dict:
     """{"all": FIELDS' tensors, "success": the same for the successful episodes' steps, "sha256", "steps"}; `error`
-    (oracle_train's InputError), one line, for a file that is not such demonstrations, or not the resumed run's."""
+    (oracle_train's InputError), one line, for a file that is not such demonstrations, not the resumed run's, or
+    not usable by the run (`args`: oracle_train's: --env-id, --reward-dist-weight, --total-timesteps, --clone-steps)."""
+    env_id, reward_dist_weight = args.env_id, args.reward_dist_weight
     with open(path, "rb") as f:
         sha256 = hashlib.sha256(f.read()).hexdigest()
     if resume_state is not None and resume_state.get("demos_sha256") != sha256:
@@ -55,5 +57,8 @@ def read_demos(path: str, env_id: str, env, reward_dist_weight: float | None, re
         data["rew"] = terms.astype(np.float32)
     tensors = {name: torch.as_tensor(data[name], dtype=torch.float32) for name in FIELDS[:5]}
     success_rows = torch.as_tensor(np.repeat(data["episode_success"], env.spec.max_episode_steps))
+    if steps >= args.total_timesteps or (args.clone_steps and not success_rows.any()):
+        raise error(f"--demos {path}: its {steps} steps " + ("leave none of --total-timesteps" if
+                    steps >= args.total_timesteps else "hold no successful episode to clone"))  # fmt: skip
     return {"all": tensors, "success": {name: t[success_rows] for name, t in tensors.items()}, "sha256": sha256,
             "steps": steps}  # fmt: skip

@@ -42,6 +42,7 @@ import mujoco
 import numpy as np
 import tyro
 
+from inform_utils.demos import FIELDS as DEMO_FIELDS
 from inform_utils.pusher_mpc import MPPIDemonstrator
 
 ARM = 7  # the arm's joints lead qpos and qvel; the object's and the goal's slides follow
@@ -195,9 +196,6 @@ def run_episode(env: gym.Env, demonstrator: PushingDemonstrator | MPPIDemonstrat
                 record[name].append(value)
         obs, ep_return, done = next_obs, ep_return + float(reward), terminated or truncated
     return abs(float(info["reward_dist"])), ep_return
-
-
-DEMO_FIELDS = ("obs", "act", "next_obs", "rew", "term", "reward_dist", "reward_ctrl", "reward_near")
 
 
 def save_demos(path: str, record: dict, env_id: str, demonstrator: str, seeds, distances, success_distance) -> None:

@@ -51,15 +51,15 @@ def test_the_demonstrations_are_written_whole_and_read_back(tmp_path, capsys):
     pusher_control.main(pusher_control.Args(episodes=DEMO_EPISODES, save_demos=str(path)))
     assert f"200 steps of {DEMO_EPISODES} episodes written" in capsys.readouterr().out
     env = gym.make("Pusher-v5")
-    got = read_demos(str(path), "Pusher-v5", env, None, None, ot.InputError)
+    got = read_demos(str(path), env, ot.Args(), None, ot.InputError)
     assert got["steps"] == 200 and got["all"]["obs"].shape == (200, 23) and got["all"]["act"].shape == (200, 7)
     assert len(got["success"]["rew"]) == 0  # the scripted demonstrator succeeds on neither start
     with np.load(path, allow_pickle=False) as npz:  # the reward is the sum of its terms, so it can be re-weighted
         terms = npz["reward_dist"] + npz["reward_ctrl"] + npz["reward_near"]
         np.testing.assert_allclose(npz["rew"], terms, rtol=1e-5, atol=1e-6)
-        weighted = read_demos(str(path), "Pusher-v5", env, 3.0, None, ot.InputError)["all"]["rew"].numpy()
+        weighted = read_demos(str(path), env, ot.Args(reward_dist_weight=3.0), None, ot.InputError)["all"]["rew"]
         expected = 3 * npz["reward_dist"] + npz["reward_ctrl"] + npz["reward_near"]
-        np.testing.assert_allclose(weighted, expected, rtol=1e-5)
+        np.testing.assert_allclose(weighted.numpy(), expected, rtol=1e-5)
     with pytest.raises(SystemExit, match="name a new file"):  # never over a file
         pusher_control.main(pusher_control.Args(episodes=1, save_demos=str(path)))
 
@@ -67,7 +67,7 @@ def test_the_demonstrations_are_written_whole_and_read_back(tmp_path, capsys):
 def test_cloning_brings_the_actor_to_the_demonstrated_actions(demos):
     path, data = demos
     env = gym.make("Pusher-v5")
-    got = read_demos(str(path), "Pusher-v5", env, None, None, ot.InputError)
+    got = read_demos(str(path), env, ot.Args(), None, ot.InputError)
     torch.manual_seed(0)
     sac = ot.SAC(23, 7, env.action_space.low, env.action_space.high, 64, 1e-3, 1e-3, 0.2, True, torch.device("cpu"))
     clone_rb = ot.ReplayBuffer.of(got["success"], torch.device("cpu"))
