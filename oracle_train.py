@@ -388,18 +388,6 @@ class SAC:
                 self.losses["ent_coef_loss"] = ent_coef_loss
         soft_update(self.qf_target, self.qf, tau)
 
-    def clone(self, batch) -> None:
-        """--clone-steps: one gradient step of the actor on -log pi(a|s) of the demonstrated actions (behaviour
-        cloning); an action at its limit is taken 0.1% inside it (at the limit, its pre-tanh value is infinite)."""
-        b_obs, _, b_act, _, _ = batch
-        inside = self.actor.action_scale * 0.999
-        b_act = b_act.clamp(self.actor.action_bias - inside, self.actor.action_bias + inside)
-        clone_loss = -self.actor.log_prob(b_obs, b_act).mean()
-        self.actor_optimizer.zero_grad(set_to_none=True)
-        clone_loss.backward()
-        self.actor_optimizer.step()
-        self.losses["clone_loss"] = clone_loss
-
     def warm_start(self, teacher: dict) -> None:
         """--init-from: the actor and the twin critics (their target too) of a teacher's checkpoint."""
         self.actor.load_state_dict(teacher["actor_state_dict"])
@@ -508,7 +496,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     demo_rb = clone_rb = None
     demo_id = {}
     if args.demos is not None:  # read by a helper module, imported under its flag only
-        from inform_utils.demos import read_demos
+        from inform_utils.demos import pretrain, read_demos
 
         demos = read_demos(args.demos, env, args, resume_state, InputError)
         demo_rb, clone_rb = ReplayBuffer.of(demos["all"], device), ReplayBuffer.of(demos["success"], device)
@@ -522,12 +510,8 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
         print(f"resumed from {args.resume} at step {start_step}", flush=True)
     else:
         run_dir = new_run_dir(args)
-        for _ in range(args.clone_steps):  # BC first (the successful demonstrations), then the critics warmed on all
-            Stop.check()
-            sac.clone(clone_rb.sample(args.batch_size))
-        for _ in range(args.clone_steps):
-            Stop.check()
-            sac.update(demo_rb.sample(args.batch_size), args.gamma, args.tau, False, amp)
+        if args.clone_steps:  # the actor cloned from the successful demonstrations, then the critics warmed on all
+            pretrain(sac, clone_rb, demo_rb, args, amp, Stop.check)
     output_path = args.output_path or os.path.join(run_dir, "oracle.pt")
     writer = open_writer(args, run_dir)
     print(f"run directory: {run_dir}", flush=True)

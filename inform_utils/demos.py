@@ -1,7 +1,7 @@
 """Demonstrations for a teacher (oracle_train.py --demos): the .npz that `python -m inform_utils.pusher_control
 --save-demos` writes, read without unpickling and checked against the run, as tensors for two buffers: every step
 (RLPD's half of each batch, and the critics' warm-up) and the steps of the successful episodes (what --clone-steps
-clones).
+clones); and the pretraining that --clone-steps runs before SAC's first step.
 
     python -m inform_utils.pusher_control --episodes 150 --demonstrator mpc --first-seed 3000000 --save-demos d.npz
     python oracle_train.py --env-id Pusher-v5 --demos d.npz --layer-norm --total-timesteps 1000000
@@ -62,3 +62,27 @@ def read_demos(path: str, env, args, resume_state: dict | None, error: type[Exce
                     steps >= args.total_timesteps else "hold no successful episode to clone"))  # fmt: skip
     return {"all": tensors, "success": {name: t[success_rows] for name, t in tensors.items()}, "sha256": sha256,
             "steps": steps}  # fmt: skip
+
+
+def pretrain(sac, clone_rb, demo_rb, args, amp, stop) -> None:
+    """--clone-steps N before SAC's first step: N steps of cloning the successful demonstrations into the actor
+    (clone_step), then N steps of the critics alone on all of them (SAC's update, the actor not moved), so that the
+    critics know the cloned actor's actions before they move it. `stop` is called before every step."""
+    for _ in range(args.clone_steps):
+        stop()
+        clone_step(sac, clone_rb.sample(args.batch_size))
+    for _ in range(args.clone_steps):
+        stop()
+        sac.update(demo_rb.sample(args.batch_size), args.gamma, args.tau, False, amp)
+
+
+def clone_step(sac, batch) -> None:
+    """One gradient step of SAC's actor on -log pi(a|s) of the demonstrated actions (behaviour cloning); an action at
+    its limit is taken 0.1% inside it (at the limit, its pre-tanh value is infinite)."""
+    obs, _, actions, _, _ = batch
+    actor, inside = sac.actor, sac.actor.action_scale * 0.999
+    loss = -actor.log_prob(obs, actions.clamp(actor.action_bias - inside, actor.action_bias + inside)).mean()
+    sac.actor_optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    sac.actor_optimizer.step()
+    sac.losses["clone_loss"] = loss
