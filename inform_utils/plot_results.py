@@ -9,9 +9,15 @@ output say so; a damaged recovered_reward.pt (its CRC-32) is refused. Writes, ea
 - fig3_pusher.png: the same for Pusher's return (Fig. 3);
 - fig5b_obstacle.png: final object-goal distances of TAMER and INFORM on the obstacle env (Fig. 5b);
 - fig6_wall_maze.png: tabular agents on the wall maze, every arm of the reward-experiment runs (Fig. 6);
-- recovered_reward.png: the recovered reward of one maze run, drawn over the maze.
+- recovered_reward.png: the recovered reward of one maze run, drawn over the maze;
+- teacher_curves.png: with --teacher-curves, teachers' training curves (oracle_train.py's eval_curve.csv): success and
+  final distance on the selection starts against environment steps, the expert bar drawn.
+
+    python -m inform_utils.plot_results --teacher-curves results/teachers/Pusher-v5__demos_rlpd_eval_curve.csv \
+        results/teachers/Pusher-v5__sac_oracle_890k_below_bar_eval_curve.csv --out docs/figures
 """
 
+import csv
 import glob
 import io
 import os
@@ -31,6 +37,7 @@ import gridworld_env
 from inform_utils.files import atomic, check_crc, read_json, read_npz
 
 COLOURS = {"oracle": "black", "tamer": "tab:orange", "inform": "tab:blue"}
+EXPERT = {"success_rate": 0.95, "final_distance": 0.06}  # the bar a Pusher teacher is held to (docs/protocol.md)
 
 
 @dataclass
@@ -45,6 +52,8 @@ class Args:
     """where the runs are"""
     out: str | None = None
     """where the PNGs go (None: a fresh folder runs/figures__{time}, never over what the repository keeps)"""
+    teacher_curves: tuple[str, ...] = ()
+    """eval_curve.csv files of oracle_train.py runs, drawn together in teacher_curves.png (each labelled by its name)"""
 
 
 def mtime(path: str) -> float:
@@ -232,8 +241,51 @@ def fig6(runs: dict, path: str) -> None:
     save(fig, path)
 
 
+def read_curve(path: str) -> dict[str, np.ndarray]:
+    """An eval_curve.csv's columns step, success_rate and final_distance; ValueError if it is not one."""
+    try:
+        with open(path, newline="") as f:
+            rows = list(csv.DictReader(f))
+        columns = {
+            name: np.array([float(row[name]) for row in rows]) for name in ("step", "success_rate", "final_distance")
+        }
+        if rows:
+            return columns
+    except (OSError, KeyError, TypeError, ValueError, csv.Error):
+        pass
+    raise ValueError(f"--teacher-curves {path}: not an eval_curve.csv of oracle_train.py with an evaluation")
+
+
+def curve_label(path: str) -> str:
+    """A curve's name: its file's (results/teachers/X_eval_curve.csv: X), or its run's (runs/X/eval_curve.csv: X)."""
+    name = os.path.basename(path).removesuffix(".csv").removesuffix("eval_curve").removesuffix("_")
+    return name or os.path.basename(os.path.dirname(os.path.abspath(path)))
+
+
+def teacher_figure(curves: dict[str, dict], path: str) -> None:
+    """Success rate (left) and final distance (right) on the selection starts against environment steps, one line per
+    curve (by its label), the expert bar (EXPERT) dashed."""
+    fig = Figure(figsize=(11, 4))
+    success, distance = fig.subplots(1, 2, sharex=True)
+    for label, curve in curves.items():
+        success.plot(curve["step"], curve["success_rate"], label=label)
+        distance.plot(curve["step"], curve["final_distance"], label=label)
+    for ax, bar, ylabel in ((success, EXPERT["success_rate"], "success rate"),
+                            (distance, EXPERT["final_distance"], "final distance (m)")):  # fmt: skip
+        ax.axhline(bar, color=COLOURS["oracle"], ls="--", lw=1.5, label="expert bar")
+        ax.set(xlabel="environment steps (demonstrated steps counted)", ylabel=ylabel)
+        ax.grid(alpha=0.3)
+    success.legend(loc="center left", fontsize=8)
+    fig.suptitle("Teachers' training: 100 selection starts every 10,000 steps")
+    fig.tight_layout()
+    save(fig, path)
+
+
 def main(args: Args) -> None:
-    if not os.path.isdir(args.runs_dir):
+    teachers = {curve_label(p): read_curve(p) for p in dict.fromkeys(args.teacher_curves)}
+    if len(teachers) < len(set(args.teacher_curves)):
+        raise ValueError("--teacher-curves: two curves would have the same label (their file or run names)")
+    if not os.path.isdir(args.runs_dir) and not teachers:
         raise ValueError(f"--runs-dir {args.runs_dir}: no such directory (run the experiments first, see README)")
     if args.out is None:  # a fresh folder: a run of plot_results never writes over another's, nor the repository's
         args.out = os.path.join("runs", f"figures__{time.strftime('%Y%m%d-%H%M%S')}")
@@ -265,6 +317,9 @@ def main(args: Args) -> None:
     if reward_runs:
         fig6(reward_runs, f"{args.out}/fig6_wall_maze.png")
         written.append("fig6_wall_maze.png")
+    if teachers:
+        teacher_figure(teachers, f"{args.out}/teacher_curves.png")
+        written.append("teacher_curves.png")
     for note in notes:
         print(note)
     print(f"wrote {', '.join(written) or 'nothing (no finished runs found)'} to {args.out}")

@@ -51,3 +51,28 @@ def test_a_damaged_recovered_reward_is_refused(run_script):
     result = run_script("inform_utils/plot_results.py", "--maze-exp", "plots", "--out", "figs")
     assert result.returncode == 2 and result.stderr.startswith("error: ") and "CRC-32" in result.stderr, result.stderr
     assert len(result.stderr.strip().splitlines()) == 1 and not (run_script.cwd / "figs").exists()
+
+
+def test_teachers_curves_are_drawn_from_their_csv_and_a_bad_one_is_refused(run_script):
+    """--teacher-curves: oracle_train.py's eval_curve.csv, from a run folder or committed under its own name, drawn
+    together (no runs needed); each labelled by its file's or its run's name; one that is not such a curve is one line,
+    exit 2, nothing written."""
+    header = "step,success_rate,final_distance,return\n"
+    run = run_script.cwd / "runs" / "Pusher-v5__demo__1__1"
+    run.mkdir(parents=True)
+    (run / "eval_curve.csv").write_text(header + "10000,0.0,0.25,-40.0\n20000,0.1,0.2,-35.0\n")
+    (run_script.cwd / "Pusher-v5__sac_eval_curve.csv").write_text(header + "10000,0.0,0.24,-41.0\n")
+    curves = ["runs/Pusher-v5__demo__1__1/eval_curve.csv", "Pusher-v5__sac_eval_curve.csv"]
+    assert [plot_results.curve_label(str(run_script.cwd / c)) for c in curves] == ["Pusher-v5__demo__1__1",
+                                                                                   "Pusher-v5__sac"]  # fmt: skip
+    result = run_script("inform_utils/plot_results.py", "--teacher-curves", *curves, "--out", "figs")
+    assert result.returncode == 0, result.stderr
+    assert sorted(os.listdir(run_script.cwd / "figs")) == ["teacher_curves.png"]
+    assert (run_script.cwd / "figs" / "teacher_curves.png").stat().st_size > 10_000
+    (run_script.cwd / "empty_eval_curve.csv").write_text(header)
+    for bad in ("empty_eval_curve.csv", "runs"):
+        result = run_script("inform_utils/plot_results.py", "--teacher-curves", curves[1], bad, "--out", "figs2")
+        assert result.returncode == 2 and result.stderr.strip().splitlines() == [
+            f"error: --teacher-curves {bad}: not an eval_curve.csv of oracle_train.py with an evaluation"
+        ], result.stderr
+        assert not (run_script.cwd / "figs2").exists()
