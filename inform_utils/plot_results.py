@@ -10,8 +10,8 @@ output say so; a damaged recovered_reward.pt (its CRC-32) is refused. Writes, ea
 - fig5b_obstacle.png: final object-goal distances of TAMER and INFORM on the obstacle env (Fig. 5b);
 - fig6_wall_maze.png: tabular agents on the wall maze, every arm of the reward-experiment runs (Fig. 6);
 - recovered_reward.png: the recovered reward of one maze run, drawn over the maze;
-- teacher_curves.png: with --teacher-curves, teachers' training curves (oracle_train.py's eval_curve.csv): success and
-  final distance on the selection starts against environment steps, the expert bar drawn.
+- teacher_curves.png: with --teacher-curves (and then only it), teachers' training curves (oracle_train.py's
+  eval_curve.csv): success and final distance on the selection starts against environment steps, the expert bar.
 
     python -m inform_utils.plot_results --teacher-curves results/teachers/Pusher-v5__demos_rlpd_eval_curve.csv \
         results/teachers/Pusher-v5__sac_oracle_890k_below_bar_eval_curve.csv --out docs/figures
@@ -292,6 +292,11 @@ def main(args: Args) -> None:
         args.out += f"_{time.time_ns()}" if os.path.lexists(args.out) else ""
     if os.path.exists(args.out) and not os.path.isdir(args.out):
         raise ValueError(f"--out {args.out}: exists and is not a directory (the figures go into a directory)")
+    if teachers:  # the teachers' figure alone: no run is read
+        os.makedirs(args.out, exist_ok=True)
+        teacher_figure(teachers, f"{args.out}/teacher_curves.png")
+        print(f"wrote teacher_curves.png to {args.out}")
+        return
     notes = []
     maze = completed_runs(args.runs_dir, f"KnoxStoneMaze-v0__{args.maze_exp}__*", notes)
     reward = None
@@ -317,9 +322,6 @@ def main(args: Args) -> None:
     if reward_runs:
         fig6(reward_runs, f"{args.out}/fig6_wall_maze.png")
         written.append("fig6_wall_maze.png")
-    if teachers:
-        teacher_figure(teachers, f"{args.out}/teacher_curves.png")
-        written.append("teacher_curves.png")
     for note in notes:
         print(note)
     print(f"wrote {', '.join(written) or 'nothing (no finished runs found)'} to {args.out}")
