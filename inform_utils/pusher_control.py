@@ -226,20 +226,27 @@ class Args:
     """the Outcome's success: final |reward_dist| below this (inform_sac_pusher.Outcome)"""
     demonstrator: Literal["scripted", "mpc"] = "scripted"
     """scripted: PushingDemonstrator (this module); mpc: MPPIDemonstrator (inform_utils/pusher_mpc.py)"""
+    mpc_ctrl_weight: float = 0.01
+    """the MPC's weight on the torques' squares, against the object distance's 10 (the env's reward weighs them a
+    tenth of the distance: 1.0 here); only with --demonstrator mpc"""
     save_demos: str | None = None
     """write every step of the episodes to this .npz (new file) for a teacher to learn from (oracle_train.py
     --demos); pick reset seeds no evaluation uses (e.g. --first-seed 3000000)"""
 
 
-def make_demonstrator(name: str, env: gym.Env) -> PushingDemonstrator | MPPIDemonstrator:
-    return MPPIDemonstrator(env) if name == "mpc" else PushingDemonstrator(env.unwrapped.model)
+def make_demonstrator(args: Args, env: gym.Env) -> PushingDemonstrator | MPPIDemonstrator:
+    if args.demonstrator == "mpc":
+        return MPPIDemonstrator(env, w_ctrl=args.mpc_ctrl_weight)
+    return PushingDemonstrator(env.unwrapped.model)
 
 
 def main(args: Args) -> None:
     if args.save_demos is not None and (os.path.exists(args.save_demos) or not args.save_demos.endswith(".npz")):
         raise SystemExit(f"--save-demos {args.save_demos}: name a new file ending in .npz (it exists, or is no .npz)")
+    if args.demonstrator != "mpc" and args.mpc_ctrl_weight != Args.mpc_ctrl_weight:
+        raise SystemExit("--mpc-ctrl-weight weighs the MPC's torques: it needs --demonstrator mpc")
     env = gym.make(args.env_id)
-    demonstrator = make_demonstrator(args.demonstrator, env)
+    demonstrator = make_demonstrator(args, env)
     seeds = range(args.first_seed, args.first_seed + args.episodes)
     cpu = time.process_time()
     record = {name: [] for name in DEMO_FIELDS} if args.save_demos else None
@@ -249,7 +256,8 @@ def main(args: Args) -> None:
     distances, returns = results[:, 0], results[:, 1]
     print(f"success {np.mean(distances < args.success_distance):.2f}, final distance {distances.mean():.3f} m, "
           f"return {returns.mean():.1f} over {args.episodes} random starts (reset seeds {seeds[0]}-{seeds[-1]}) "
-          f"on {args.env_id}, the {args.demonstrator} demonstrator "
+          f"on {args.env_id}, the {args.demonstrator} demonstrator"
+          f"{f' (torques weighed {args.mpc_ctrl_weight:g})' if args.demonstrator == 'mpc' else ''} "
           f"({cpu / args.episodes:.2f} s of CPU an episode)")  # fmt: skip
     failed = [
         (seed, round(float(d), 3)) for seed, d in zip(seeds, distances, strict=True) if d >= args.success_distance
@@ -257,7 +265,8 @@ def main(args: Args) -> None:
     if failed:
         print(f"failed (seed, final distance): {failed}")
     if record is not None:
-        save_demos(args.save_demos, record, args.env_id, args.demonstrator, seeds, distances, args.success_distance)
+        name = f"mpc w_ctrl={args.mpc_ctrl_weight:g}" if args.demonstrator == "mpc" else args.demonstrator
+        save_demos(args.save_demos, record, args.env_id, name, seeds, distances, args.success_distance)
         print(f"{len(record['rew'])} steps of {args.episodes} episodes written to {args.save_demos}")
 
 

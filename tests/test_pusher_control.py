@@ -8,6 +8,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from inform_utils import pusher_control
 from inform_utils.pusher_contact import PUSHERS, push
 from inform_utils.pusher_control import SHOULDER_XY, WORK_HEIGHT, FingertipController, PushingDemonstrator, run_episode
 from inform_utils.pusher_mpc import MPPIDemonstrator
@@ -134,3 +135,13 @@ def test_mpc_is_the_same_on_every_run():
     seed other actions."""
     first, again, other = (mpc_episode(seed, steps=5)[1] for seed in (3, 3, 4))
     assert np.array_equal(first, again) and not np.array_equal(first, other)
+
+
+def test_the_mpc_torque_weight_reaches_the_mpc_and_only_it():
+    """--mpc-ctrl-weight is the MPC's w_ctrl (the rollouts' price of torque); with the scripted demonstrator, which
+    has no such price, it is refused in one line before any episode runs."""
+    env = gym.make("Pusher-v5")
+    mpc = pusher_control.make_demonstrator(pusher_control.Args(demonstrator="mpc", mpc_ctrl_weight=1.0), env)
+    assert isinstance(mpc, MPPIDemonstrator) and mpc.w_ctrl == 1.0
+    with pytest.raises(SystemExit, match="--mpc-ctrl-weight weighs the MPC's torques: it needs --demonstrator mpc"):
+        pusher_control.main(pusher_control.Args(episodes=1, mpc_ctrl_weight=1.0))
