@@ -35,9 +35,9 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 
 import gridworld_env
 from inform_utils.files import atomic, check_crc, read_json, read_npz
+from oracle_train import EXPERT_FINAL_DISTANCE, EXPERT_SUCCESS_RATE
 
 COLOURS = {"oracle": "black", "tamer": "tab:orange", "inform": "tab:blue"}
-EXPERT = {"success_rate": 0.95, "final_distance": 0.06}  # the bar a Pusher teacher is held to (docs/protocol.md)
 
 
 @dataclass
@@ -264,14 +264,14 @@ def curve_label(path: str) -> str:
 
 def teacher_figure(curves: dict[str, dict], path: str) -> None:
     """Success rate (left) and final distance (right) on the selection starts against environment steps, one line per
-    curve (by its label), the expert bar (EXPERT) dashed."""
+    curve (by its label), the expert bar (oracle_train's) dashed."""
     fig = Figure(figsize=(11, 4))
     success, distance = fig.subplots(1, 2, sharex=True)
     for label, curve in curves.items():
         success.plot(curve["step"], curve["success_rate"], label=label)
         distance.plot(curve["step"], curve["final_distance"], label=label)
-    for ax, bar, ylabel in ((success, EXPERT["success_rate"], "success rate"),
-                            (distance, EXPERT["final_distance"], "final distance (m)")):  # fmt: skip
+    for ax, bar, ylabel in ((success, EXPERT_SUCCESS_RATE, "success rate"),
+                            (distance, EXPERT_FINAL_DISTANCE, "final distance (m)")):  # fmt: skip
         ax.axhline(bar, color=COLOURS["oracle"], ls="--", lw=1.5, label="expert bar")
         ax.set(xlabel="environment steps (demonstrated steps counted)", ylabel=ylabel)
         ax.grid(alpha=0.3)

@@ -245,6 +245,8 @@ def main(args: Args) -> None:
         raise SystemExit(f"--save-demos {args.save_demos}: name a new file ending in .npz (it exists, or is no .npz)")
     if args.demonstrator != "mpc" and args.mpc_ctrl_weight != Args.mpc_ctrl_weight:
         raise SystemExit("--mpc-ctrl-weight weighs the MPC's torques: it needs --demonstrator mpc")
+    if not args.mpc_ctrl_weight >= 0:
+        raise SystemExit(f"--mpc-ctrl-weight {args.mpc_ctrl_weight}: a price of torque is 0 or more")
     env = gym.make(args.env_id)
     demonstrator = make_demonstrator(args, env)
     seeds = range(args.first_seed, args.first_seed + args.episodes)
