@@ -249,6 +249,7 @@ def main(args: Args) -> None:
         raise SystemExit(f"--mpc-ctrl-weight {args.mpc_ctrl_weight}: a price of torque is 0 or more")
     env = gym.make(args.env_id)
     demonstrator = make_demonstrator(args, env)
+    demonstrator_name = f"mpc (torques weighed {args.mpc_ctrl_weight:g})" if args.demonstrator == "mpc" else "scripted"
     seeds = range(args.first_seed, args.first_seed + args.episodes)
     cpu = time.process_time()
     record = {name: [] for name in DEMO_FIELDS} if args.save_demos else None
@@ -258,8 +259,7 @@ def main(args: Args) -> None:
     distances, returns = results[:, 0], results[:, 1]
     print(f"success {np.mean(distances < args.success_distance):.2f}, final distance {distances.mean():.3f} m, "
           f"return {returns.mean():.1f} over {args.episodes} random starts (reset seeds {seeds[0]}-{seeds[-1]}) "
-          f"on {args.env_id}, the {args.demonstrator} demonstrator"
-          f"{f' (torques weighed {args.mpc_ctrl_weight:g})' if args.demonstrator == 'mpc' else ''} "
+          f"on {args.env_id}, the {demonstrator_name} demonstrator "
           f"({cpu / args.episodes:.2f} s of CPU an episode)")  # fmt: skip
     failed = [
         (seed, round(float(d), 3)) for seed, d in zip(seeds, distances, strict=True) if d >= args.success_distance
@@ -267,8 +267,7 @@ def main(args: Args) -> None:
     if failed:
         print(f"failed (seed, final distance): {failed}")
     if record is not None:
-        name = f"mpc w_ctrl={args.mpc_ctrl_weight:g}" if args.demonstrator == "mpc" else args.demonstrator
-        save_demos(args.save_demos, record, args.env_id, name, seeds, distances, args.success_distance)
+        save_demos(args.save_demos, record, args.env_id, demonstrator_name, seeds, distances, args.success_distance)
         print(f"{len(record['rew'])} steps of {args.episodes} episodes written to {args.save_demos}")
 
 
