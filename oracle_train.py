@@ -63,10 +63,8 @@ class Range:
         if value is None or (math.isfinite(value) and value <= self.high and
                              (value > self.low if self.open_low else value >= self.low)):  # fmt: skip
             return
-        if self.high < math.inf:
-            bound = f"in {'(' if self.open_low else '['}{self.low}, {self.high}]"
-        else:
-            bound = f"{'>' if self.open_low else '>='} {self.low}" if self.low > -math.inf else "finite"
+        low = f"{'>' if self.open_low else '>='} {self.low}" if self.low > -math.inf else "finite"
+        bound = f"in {'(' if self.open_low else '['}{self.low}, {self.high}]" if self.high < math.inf else low
         raise InputError(f"{flag} must be {bound}, got {value}")
 
 
@@ -583,9 +581,8 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     writer.close()
 
 
-def write_oracle(
-    args: Args, sac: SAC, selection: Selection, run_dir: str, output_path: str, device, trained: int, train_time: float
-) -> None:
+def write_oracle(args: Args, sac: SAC, selection: Selection, run_dir: str, output_path: str, device, trained: int,
+                 train_time: float) -> None:  # fmt: skip
     """The best evaluation's networks (the last ones stay in oracle_latest.pt), judged again on held-out starts."""
     best = torch.load(selection.path, weights_only=True, map_location="cpu")
     sac.actor.load_state_dict(best["actor_state_dict"])
@@ -719,15 +716,8 @@ def main() -> None:
     # Ctrl-C, SIGTERM (Slurm's cancel and time limit, kill), SIGHUP (a closed terminal), Ctrl-\ (SIGQUIT), a CPU-time
     # limit (SIGXCPU) and SIGUSR1/2 stop training: recorded here, acted on by Stop.check() at the next loop head. An
     # ignored signal stays ignored (nohup, `&`).
-    stops = (
-        signal.SIGINT,
-        signal.SIGTERM,
-        signal.SIGHUP,
-        signal.SIGQUIT,
-        signal.SIGXCPU,
-        signal.SIGUSR1,
-        signal.SIGUSR2,
-    )
+    stops = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT, signal.SIGXCPU, signal.SIGUSR1,
+             signal.SIGUSR2)  # fmt: skip
     for sig in stops:
         if signal.getsignal(sig) is not signal.SIG_IGN:
             signal.signal(sig, lambda signum, frame: Stop.signals.append(signal.Signals(signum).name))
@@ -793,15 +783,11 @@ def check_args(args: Args) -> None:
         if not args.overwrite:
             raise InputError(f"--output-path {output_path} exists; name another path, or pass --overwrite to replace "
                              "it (a shipped teacher is replaced only on purpose)")  # fmt: skip
-    if args.init_from is not None and (maze or not os.path.isfile(args.init_from)):
-        raise InputError(f"--init-from {args.init_from}: " + ("the maze has no warm start" if maze else "no such file"))
-    if args.resume is not None and (maze or not os.path.isfile(args.resume)):
-        raise InputError(f"--resume {args.resume}: " + ("the maze has no training state" if maze else "no such file"))
+    for flag, path in (("init-from", args.init_from), ("resume", args.resume), ("demos", args.demos)):
+        if path is not None and (maze or not os.path.isfile(path)):  # SAC's files: the maze's teachers have none
+            raise InputError(f"--{flag} {path}: " + ("the maze trains no SAC to read it" if maze else "no such file"))
     if args.clone_steps and (args.demos is None or args.init_from is not None):
         raise InputError("--clone-steps clones demonstrations into a new actor: it needs --demos, not --init-from")
-    if args.demos is not None and (maze or not os.path.isfile(args.demos)):
-        raise InputError(f"--demos {args.demos}: " + ("the maze learns no teacher from them" if maze else "no such file"
-                                                     ))  # fmt: skip
     if args.batch_size > args.total_timesteps:
         raise InputError(f"--batch-size {args.batch_size} is larger than --total-timesteps {args.total_timesteps}")
     if args.maze_dqn_batch_size > args.maze_dqn_timesteps:
@@ -935,21 +921,17 @@ def save_training_state(path: str, sac: SAC, rb: ReplayBuffer, step: int, args: 
 
 def read_training_state(path: str) -> dict:
     """torch.load(path, weights_only=True) of a training_state.pt; every way it can fail is one InputError."""
-    check_crc(path, f"--resume {path}")
-    try:  # weights_only refuses a pickle that could run code
-        state = torch.load(path, weights_only=True, map_location="cpu")
-    except Exception as e:
-        raise InputError(f"--resume {path}: not a torch checkpoint of tensors and plain values, refused "
-                         f"({type(e).__name__})") from None  # fmt: skip
+    state = load_checked(path, f"--resume {path}")
     keys = (*SAC.MODULES, "log_ent_coef", "buf_n", *(f"buf_{f}" for f in ReplayBuffer.FIELDS), "global_step")
     if not isinstance(state, dict) or any(key not in state for key in (*keys, "torch_rng")):
         raise InputError(f"--resume {path}: not a training_state.pt of oracle_train.py")
     return state
 
 
-def check_crc(path: str, where: str) -> None:
-    """torch.save writes a zip archive with a CRC-32 per member, which torch.load never checks: a flipped bit would be
-    used. InputError, one line, for an archive that is truncated or whose bytes changed since it was saved."""
+def load_checked(path: str, where: str):
+    """torch.load(path, weights_only=True) (a pickle that could run code is refused) after a check torch.load never
+    makes: torch.save writes a zip archive with a CRC-32 per member, so a flipped bit would be used. InputError, one
+    line, for an archive that is truncated, changed since it was saved, or not of tensors and plain values."""
     try:
         with zipfile.ZipFile(path) as archive:
             damaged = archive.testzip()
@@ -959,16 +941,15 @@ def check_crc(path: str, where: str) -> None:
         raise InputError(f"{where}: not a complete torch checkpoint, or a damaged one ({e})") from None
     if damaged is not None:
         raise InputError(f"{where}: damaged since it was saved ({damaged} fails its CRC-32 check); make it again")
+    try:
+        return torch.load(path, weights_only=True, map_location="cpu")
+    except Exception as e:
+        raise InputError(f"{where}: refused: not a weights-only torch checkpoint ({type(e).__name__})") from None
 
 
 def read_teacher(path: str, obs_dim: int, act_dim: int, hidden: int, layer_norm: bool) -> dict:
     """--init-from: a SAC teacher's checkpoint (torch.load(weights_only=True)) that fits this env and --hidden-size."""
-    check_crc(path, f"--init-from {path}")
-    try:
-        teacher = torch.load(path, weights_only=True, map_location="cpu")
-    except Exception as e:
-        raise InputError(f"--init-from {path}: not a torch checkpoint of tensors and plain values, refused "
-                         f"({type(e).__name__})") from None  # fmt: skip
+    teacher = load_checked(path, f"--init-from {path}")
     if not isinstance(teacher, dict) or teacher.get("algorithm") != "sac" or "actor_state_dict" not in teacher:
         raise InputError(f"--init-from {path}: not a SAC teacher of oracle_train.py")
     kwargs = teacher.get("kwargs", {})

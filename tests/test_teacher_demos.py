@@ -166,7 +166,7 @@ def test_bad_demonstrations_are_refused_in_one_line(run_script, tmp_path):
 
 @pytest.mark.parametrize(
     "case, phrase",
-    [("missing", "no such file"), ("maze", "the maze learns no teacher"),
+    [("missing", "no such file"), ("maze", "the maze trains no SAC to read it"),
      ("clone_without", "--clone-steps clones demonstrations into a new actor"),
      ("no_success", "no successful episode to clone"), ("too_long", "leave none of --total-timesteps"),
      ("other_env", "demonstrations of Pusher-v5, not Reacher-v5")],
