@@ -1,7 +1,9 @@
 """Check a Pusher teacher against the expert bar (docs/protocol.md, "Oracles and the expert bar"), on starts it was
 neither trained nor chosen on: deterministic (mean-action) episodes from random starts on a block of reset seeds of
 its own, and from the fixed start of each seed the results use. Prints one JSON object: success rate, the final
-distances' mean and quantiles, the return, and each fixed start's final distance; --out writes it too.
+distances' mean and quantiles, the return, and each fixed start's final distance; --out writes it too. And the pace
+of the push: how fast the object closes on the goal, in the successful and the failed episodes apart (on Pusher-v5,
+whose object is ~500x heavier than v4's, a failure is mostly a push still under way when the episode ends).
 
     python -m inform_utils.teacher_check oracles/Pusher-v5__sac_oracle.pt --episodes 100 --fixed-seeds 1 2 3 4 5
 """
@@ -18,10 +20,11 @@ import torch
 import tyro
 
 import inform_sac_pusher as isp
+from oracle_train import EXPERT_FINAL_DISTANCE, EXPERT_SUCCESS_RATE
 
 SUCCESS_DISTANCE = 0.08  # the paper's success tag, on v4 and v5 alike
-EXPERT_SUCCESS_RATE = 0.95
-EXPERT_FINAL_DISTANCE = 0.06
+PACE_WINDOW = 10  # steps over which the object's closing speed on the goal is measured
+STILL_CLOSING = 0.01  # m/s: an episode whose object closes faster than this over its last window ends mid-push
 
 
 @dataclass
@@ -40,17 +43,33 @@ class Args:
 
 
 @torch.no_grad()
-def final_distance(actor: isp.Actor, env: gym.Env, reset_seed: int) -> tuple[float, float]:
+def final_distance(actor: isp.Actor, env: gym.Env, reset_seed: int) -> tuple[float, float, np.ndarray]:
+    """|info["reward_dist"]| at the end, the return, and the object's distance to the goal in the table's plane
+    before each step and after the last (isp.object_xy; the goal, fixed, at obs[20:22])."""
     obs, _ = env.reset(seed=reset_seed)
     done = False
     ep_return = 0.0
     info = {}
+    path = [np.linalg.norm(isp.object_xy(obs) - obs[20:22])]
     while not done:
         _, _, action = actor.get_action(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0))
         obs, reward, terminated, truncated, info = env.step(action[0].numpy())
         ep_return += float(reward)
         done = terminated or truncated
-    return abs(float(info["reward_dist"])), ep_return
+        path.append(np.linalg.norm(isp.object_xy(obs) - obs[20:22]))
+    return abs(float(info["reward_dist"])), ep_return, np.array(path)
+
+
+def pace(paths: np.ndarray, dt: float) -> dict | None:
+    """Means over episodes (rows: the object's distances to the goal, one a step) of the start distance (m), the
+    fastest and the last closing speed over PACE_WINDOW steps (m/s), and the share still closing faster than
+    STILL_CLOSING at the end; None for no episode."""
+    if len(paths) == 0:
+        return None
+    closing = (paths[:, :-PACE_WINDOW] - paths[:, PACE_WINDOW:]) / (PACE_WINDOW * dt)
+    return {"episodes": len(paths), "start_distance": float(paths[:, 0].mean()),
+            "peak_closing_speed": float(closing.max(axis=1).mean()), "last_closing_speed": float(closing[:, -1].mean()),
+            "still_closing": float((closing[:, -1] > STILL_CLOSING).mean())}  # fmt: skip
 
 
 def read_teacher(path: str) -> dict:
@@ -76,8 +95,9 @@ def check(args: Args) -> dict:
     actor = isp.actor_from_checkpoint(ckpt)  # the kwargs may hold the critics' too (layer_norm)
     env = gym.make(ckpt["env_id"])
     runs = [final_distance(actor, env, args.reset_seed + ep) for ep in range(args.episodes)]
-    distances = np.array([d for d, _ in runs])
+    distances, paths = np.array([d for d, _, _ in runs]), np.array([path for _, _, path in runs])
     fixed = {seed: final_distance(actor, env, seed)[0] for seed in args.fixed_seeds}
+    dt = env.unwrapped.dt  # seconds an action lasts
     env.close()
     success = float((distances < SUCCESS_DISTANCE).mean())
     levels = {"p10": 0.1, "p25": 0.25, "p50": 0.5, "p75": 0.75, "p90": 0.9}
@@ -92,7 +112,14 @@ def check(args: Args) -> dict:
             "success_rate": success,
             "final_distance": float(distances.mean()),
             "final_distance_quantiles": {k: float(v) for k, v in quantiles.items()},
-            "return": float(np.mean([r for _, r in runs])),
+            "return": float(np.mean([r for _, r, _ in runs])),
+            "pace": {
+                outcome: pace(paths[ended], dt)
+                for outcome, ended in (
+                    ("success", distances < SUCCESS_DISTANCE),
+                    ("failure", distances >= SUCCESS_DISTANCE),
+                )
+            },
         },
         "fixed_starts": {str(seed): d for seed, d in fixed.items()},
         "fixed_start_successes": int(sum(d < SUCCESS_DISTANCE for d in fixed.values())),

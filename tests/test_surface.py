@@ -27,7 +27,7 @@ DECLARED = {
         "Args", "Sleep", "cli", "main", "check_args", "Evaluator", "StopSignals", "Teacher", "ReplayBuffer",
         "tamer_loss", "iq_loss", "greedy_actions", "QNetwork", "read_checkpoint", "InputError",
     },
-    "oracle_train": {"EXPERT_SUCCESS_RATE", "EXPERT_FINAL_DISTANCE"},  # the bar (teachers load through the pusher's loaders)
+    "oracle_train": {"EXPERT_SUCCESS_RATE", "EXPERT_FINAL_DISTANCE"},  # the bar (teachers load through the pusher)
 }  # fmt: skip
 
 

@@ -11,6 +11,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from conftest import REPO
 
 import inform_sac_pusher as isp
 import oracle_train as ot
@@ -81,6 +82,22 @@ def test_cloning_brings_the_actor_to_the_demonstrated_actions(demos):
     for _ in range(1000):
         clone_step(sac, clone_rb.sample(64))
     assert error() < 0.8 * before, (before, error())  # 0.59 -> 0.39 m here: a likelihood's first steps move the std
+
+
+def test_the_pace_of_a_push_by_hand_and_on_the_v5_teacher():
+    """pace(): a push closing 0.005 m a step (0.1 m/s at Pusher's dt 0.05) for 40 steps then resting, and one closing
+    0.001 m a step to the end (0.02 m/s, so still closing); teacher_check's JSON splits episodes by outcome."""
+    pushed = np.r_[np.linspace(0.30, 0.10, 41), np.full(60, 0.10)]
+    slow = np.linspace(0.30, 0.20, 101)
+    got = teacher_check.pace(np.array([pushed, slow]), 0.05)
+    assert got["episodes"] == 2 and got["start_distance"] == pytest.approx(0.30)
+    assert got["peak_closing_speed"] == pytest.approx((0.1 + 0.02) / 2)
+    assert got["last_closing_speed"] == pytest.approx((0.0 + 0.02) / 2) and got["still_closing"] == 0.5
+    assert teacher_check.pace(np.zeros((0, 101)), 0.05) is None
+    teacher = os.path.join(REPO, "oracles", "Pusher-v5__sac_oracle.pt")
+    checked = teacher_check.check(teacher_check.Args(teacher, episodes=4, fixed_seeds=[]))["random_starts"]
+    split = [checked["pace"][k]["episodes"] if checked["pace"][k] else 0 for k in ("success", "failure")]
+    assert split == [round(4 * checked["success_rate"]), 4 - round(4 * checked["success_rate"])]
 
 
 def test_a_run_from_demonstrations_clones_warms_and_counts_their_steps(run_script, demos):
