@@ -902,16 +902,14 @@ def resumed_args(path: str, saved: dict) -> Args:
     changed = [n for n in names if n not in RESUME_MAY_CHANGE and getattr(args, n) != getattr(original, n)]
     if changed:
         flag = changed[0]
-        raise InputError(
-            f"--resume {path}: --{flag.replace('_', '-')} {getattr(args, flag)} differs from the run's "
-            f"{getattr(original, flag)}; a resumed run keeps its flags (drop it, or start a new run)"
-        )
+        raise InputError(f"--resume {path}: --{flag.replace('_', '-')} {getattr(args, flag)} differs from the run's "
+                         f"{getattr(original, flag)}; a resumed run keeps its flags (drop it, or start a new run)"
+                         )  # fmt: skip
     return args
 
 
 def save_training_state(path: str, sac: SAC, rb: ReplayBuffer, step: int, args: Args, **extra) -> None:
-    """Everything --resume needs: networks, optimizers, the replay buffer, the RNG, the run's flags (and `extra`: the
-    demonstrations' digest)."""
+    """What --resume needs: networks, optimizers, the replay buffer, the RNG, the flags, `extra` (the demos' digest)."""
     state = {key: getattr(sac, key).state_dict() for key in SAC.MODULES}
     state.update({f"buf_{name}": buf[: min(rb.n, rb.size)].clone() for name, buf in rb.data.items()})
     state.update(log_ent_coef=sac.log_ent_coef.detach().clone(), buf_n=rb.n, global_step=step,
@@ -929,9 +927,17 @@ def read_training_state(path: str) -> dict:
 
 
 def load_checked(path: str, where: str):
-    """torch.load(path, weights_only=True) (a pickle that could run code is refused) after a check torch.load never
-    makes: torch.save writes a zip archive with a CRC-32 per member, so a flipped bit would be used. InputError, one
-    line, for an archive that is truncated, changed since it was saved, or not of tensors and plain values."""
+    """torch.load(path, weights_only=True) after check_crc; InputError, one line, for a pickle that could run code."""
+    check_crc(path, where)
+    try:
+        return torch.load(path, weights_only=True, map_location="cpu")
+    except Exception as e:
+        raise InputError(f"{where}: refused: not a weights-only torch checkpoint ({type(e).__name__})") from None
+
+
+def check_crc(path: str, where: str) -> None:
+    """torch.save writes a zip archive with a CRC-32 per member, which torch.load never checks: a flipped bit would be
+    used. InputError, one line, for an archive that is truncated or whose bytes changed since it was saved."""
     try:
         with zipfile.ZipFile(path) as archive:
             damaged = archive.testzip()
@@ -941,10 +947,6 @@ def load_checked(path: str, where: str):
         raise InputError(f"{where}: not a complete torch checkpoint, or a damaged one ({e})") from None
     if damaged is not None:
         raise InputError(f"{where}: damaged since it was saved ({damaged} fails its CRC-32 check); make it again")
-    try:
-        return torch.load(path, weights_only=True, map_location="cpu")
-    except Exception as e:
-        raise InputError(f"{where}: refused: not a weights-only torch checkpoint ({type(e).__name__})") from None
 
 
 def read_teacher(path: str, obs_dim: int, act_dim: int, hidden: int, layer_norm: bool) -> dict:
@@ -1057,10 +1059,8 @@ def record_teacher(args: Args, actor: Actor, run_dir: str, device: torch.device)
 
     write_video(path := os.path.join(run_dir, "videos", "oracle.mp4"), frames, env.metadata["render_fps"])
     record = {"file": "oracle.mp4", "size": list(frames[0].shape), "frames": len(frames), "evaluation": evaluation}
-    atomic_write(
-        os.path.join(run_dir, "videos", "videos.json"),
-        json.dumps({**record, "first_reset_seed": FINAL_EVAL_SEED}, indent=1),
-    )
+    atomic_write(os.path.join(run_dir, "videos", "videos.json"),
+                 json.dumps({**record, "first_reset_seed": FINAL_EVAL_SEED}, indent=1))  # fmt: skip
     print(f"[video] {VIDEO_EPISODES} episodes of the oracle filmed in {time.time() - t0:.1f}s: {path}", flush=True)
 
 
