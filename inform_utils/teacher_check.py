@@ -3,7 +3,7 @@ neither trained nor chosen on: deterministic (mean-action) episodes from random 
 its own, and from the fixed start of each seed the results use. Prints one JSON object: success rate, the final
 distances' mean and quantiles, the return, and each fixed start's final distance; --out writes it too. And the pace
 of the push: how fast the object closes on the goal, in the successful and the failed episodes apart (on Pusher-v5,
-whose object is ~500x heavier than v4's, a failure is mostly a push still under way when the episode ends).
+under MuJoCo 4's soft contact, a failure is mostly a push still under way when the episode ends).
 
     python -m inform_utils.teacher_check oracles/Pusher-v5__sac_oracle.pt --episodes 100 --fixed-seeds 1 2 3 4 5
 """
@@ -63,12 +63,13 @@ def final_distance(actor: isp.Actor, env: gym.Env, reset_seed: int) -> tuple[flo
 def pace(paths: np.ndarray, dt: float) -> dict | None:
     """Means over episodes (rows: the object's distances to the goal, one a step) of the start distance (m), the
     fastest and the last closing speed over PACE_WINDOW steps (m/s), and the share still closing faster than
-    STILL_CLOSING at the end; None for no episode."""
+    STILL_CLOSING at the end; the fastest episode's fastest closing speed; None for no episode."""
     if len(paths) == 0:
         return None
     closing = (paths[:, :-PACE_WINDOW] - paths[:, PACE_WINDOW:]) / (PACE_WINDOW * dt)
     return {"episodes": len(paths), "start_distance": float(paths[:, 0].mean()),
-            "peak_closing_speed": float(closing.max(axis=1).mean()), "last_closing_speed": float(closing[:, -1].mean()),
+            "peak_closing_speed": float(closing.max(axis=1).mean()), "fastest_closing_speed": float(closing.max()),
+            "last_closing_speed": float(closing[:, -1].mean()),
             "still_closing": float((closing[:, -1] > STILL_CLOSING).mean())}  # fmt: skip
 
 

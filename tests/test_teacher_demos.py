@@ -89,12 +89,16 @@ def test_the_pace_of_a_push_by_hand_and_on_the_v5_teacher():
     0.001 m a step to the end (0.02 m/s, so still closing); teacher_check's JSON splits episodes by outcome."""
     pushed = np.r_[np.linspace(0.30, 0.10, 41), np.full(60, 0.10)]
     slow = np.linspace(0.30, 0.20, 101)
-    got = teacher_check.pace(np.array([pushed, slow]), 0.05)
-    assert got["episodes"] == 2 and got["start_distance"] == pytest.approx(0.30)
-    assert got["peak_closing_speed"] == pytest.approx((0.1 + 0.02) / 2)
-    assert got["last_closing_speed"] == pytest.approx((0.0 + 0.02) / 2) and got["still_closing"] == 0.5
+    late = np.r_[np.full(91, 0.30), np.linspace(0.30, 0.27, 11)[1:]]  # still until step 90, then 0.003 m a step
+    got = teacher_check.pace(np.array([pushed, slow, late]), 0.05)
+    assert got["episodes"] == 3 and got["start_distance"] == pytest.approx(0.30)
+    assert got["peak_closing_speed"] == pytest.approx((0.1 + 0.02 + 0.06) / 3)
+    assert got["fastest_closing_speed"] == pytest.approx(0.1)
+    assert got["last_closing_speed"] == pytest.approx((0.0 + 0.02 + 0.06) / 3) and got["still_closing"] == 2 / 3
     assert teacher_check.pace(np.zeros((0, 101)), 0.05) is None
     teacher = os.path.join(REPO, "oracles", "Pusher-v5__sac_oracle.pt")
+    actor, env = isp.actor_from_checkpoint(teacher_check.read_teacher(teacher)), gym.make("Pusher-v5")
+    assert len(teacher_check.final_distance(actor, env, 7_000_000)[2]) == 101  # before each of 100 steps, and after
     checked = teacher_check.check(teacher_check.Args(teacher, episodes=4, fixed_seeds=[]))["random_starts"]
     split = [checked["pace"][k]["episodes"] if checked["pace"][k] else 0 for k in ("success", "failure")]
     assert split == [round(4 * checked["success_rate"]), 4 - round(4 * checked["success_rate"])]
