@@ -114,13 +114,15 @@ def check(args: Args) -> dict:
             "final_distance": float(distances.mean()),
             "final_distance_quantiles": {k: float(v) for k, v in quantiles.items()},
             "return": float(np.mean([r for _, r, _ in runs])),
-            "pace": {
+            "pace": {  # the object's (Pusher's obs[17:19]); other envs have none
                 outcome: pace(paths[ended], dt)
                 for outcome, ended in (
                     ("success", distances < SUCCESS_DISTANCE),
                     ("failure", distances >= SUCCESS_DISTANCE),
                 )
-            },
+            }
+            if ckpt["env_id"].startswith("Pusher-")
+            else None,
         },
         "fixed_starts": {str(seed): d for seed, d in fixed.items()},
         "fixed_start_successes": int(sum(d < SUCCESS_DISTANCE for d in fixed.values())),
