@@ -121,7 +121,7 @@ def check(args: Args) -> dict:
                     ("failure", distances >= SUCCESS_DISTANCE),
                 )
             }
-            if ckpt["env_id"].startswith("Pusher-")
+            if ckpt["env_id"] in isp.PUSHER_IDS
             else None,
         },
         "fixed_starts": {str(seed): d for seed, d in fixed.items()},
