@@ -197,8 +197,8 @@ def check_page_args(args: Args) -> None:
     if changed:
         raise isp.InputError(f"{', '.join(changed)}: the simulated teacher's; the page takes the person's answers as "
                              "they are (--credit-delay sets their window)")  # fmt: skip
-    if not args.env_id.startswith("Pusher"):
-        raise isp.InputError(f"--env-id {args.env_id}: the page shows the Pusher only (Pusher-v5, Pusher-v4)")
+    if args.env_id not in isp.PUSHER_IDS:
+        raise isp.InputError(f"--env-id {args.env_id}: the page shows the Pusher only ({', '.join(isp.PUSHER_IDS)})")
     if args.sleep_from is not None:
         raise isp.InputError("--sleep-from: a night on a saved day needs no person; run inform_sac_pusher.py")
     try:

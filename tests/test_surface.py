@@ -22,7 +22,7 @@ DECLARED = {
         "Night",  # the night, which the study subclasses
         "Evaluator", "evaluate", "obstacle_test", "obstacle_skipped", "object_xy", "check_video", "video_env",
         "mujoco_major", "read_checkpoint", "check_crc", "oracle_from_checkpoint", "actor_from_checkpoint",
-        "PUSHER_IDS",  # teacher_check reports the push's pace on Pusher only
+        "PUSHER_IDS",  # teacher_check reports the push's pace, the page shows the arm: Pusher only
     },
     "inform_dqn_gridworld": {
         "Args", "Sleep", "cli", "main", "check_args", "Evaluator", "StopSignals", "Teacher", "ReplayBuffer",
