@@ -229,6 +229,9 @@ class Args:
     mpc_ctrl_weight: float = 0.01
     """the MPC's weight on the torques' squares, against the object distance's 10 (the env's reward weighs them a
     tenth of the distance: 1.0 here); only with --demonstrator mpc"""
+    mpc_samples: int = 40
+    """action sequences the MPC tries at every step (its CPU grows with them: 160 costs about 4.5x); only with
+    --demonstrator mpc"""
     save_demos: str | None = None
     """write every step of the episodes to this .npz (new file) for a teacher to learn from (oracle_train.py
     --demos); pick reset seeds no evaluation uses (e.g. --first-seed 3000000)"""
@@ -236,7 +239,7 @@ class Args:
 
 def make_demonstrator(args: Args, env: gym.Env) -> PushingDemonstrator | MPPIDemonstrator:
     if args.demonstrator == "mpc":
-        return MPPIDemonstrator(env, w_ctrl=args.mpc_ctrl_weight)
+        return MPPIDemonstrator(env, samples=args.mpc_samples, w_ctrl=args.mpc_ctrl_weight)
     return PushingDemonstrator(env.unwrapped.model)
 
 
@@ -245,11 +248,17 @@ def main(args: Args) -> None:
         raise SystemExit(f"--save-demos {args.save_demos}: name a new file ending in .npz (it exists, or is no .npz)")
     if args.demonstrator != "mpc" and args.mpc_ctrl_weight != Args.mpc_ctrl_weight:
         raise SystemExit("--mpc-ctrl-weight weighs the MPC's torques: it needs --demonstrator mpc")
+    if args.demonstrator != "mpc" and args.mpc_samples != Args.mpc_samples:
+        raise SystemExit("--mpc-samples sets the MPC's rollouts: it needs --demonstrator mpc")
     if not args.mpc_ctrl_weight >= 0:
         raise SystemExit(f"--mpc-ctrl-weight {args.mpc_ctrl_weight}: a price of torque is 0 or more")
+    if args.mpc_samples < 2:
+        raise SystemExit(f"--mpc-samples {args.mpc_samples}: MPPI averages 2 or more action sequences")
     env = gym.make(args.env_id)
     demonstrator = make_demonstrator(args, env)
-    demonstrator_name = f"mpc (torques weighed {args.mpc_ctrl_weight:g})" if args.demonstrator == "mpc" else "scripted"
+    demonstrator_name = "scripted"
+    if args.demonstrator == "mpc":
+        demonstrator_name = f"mpc ({args.mpc_samples} samples, torques weighed {args.mpc_ctrl_weight:g})"
     seeds = range(args.first_seed, args.first_seed + args.episodes)
     cpu = time.process_time()
     record = {name: [] for name in DEMO_FIELDS} if args.save_demos else None

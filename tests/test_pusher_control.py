@@ -145,3 +145,15 @@ def test_the_mpc_torque_weight_reaches_the_mpc_and_only_it():
     assert isinstance(mpc, MPPIDemonstrator) and mpc.w_ctrl == 1.0
     with pytest.raises(SystemExit, match="--mpc-ctrl-weight weighs the MPC's torques: it needs --demonstrator mpc"):
         pusher_control.main(pusher_control.Args(episodes=1, mpc_ctrl_weight=1.0))
+
+
+def test_the_mpc_samples_reach_the_mpc_and_only_it():
+    """--mpc-samples is the number of action sequences the MPC draws at a step (the noise it draws has that many
+    rows); with the scripted demonstrator, or fewer than 2, it is refused in one line before any episode runs."""
+    env = gym.make("Pusher-v5")
+    mpc = pusher_control.make_demonstrator(pusher_control.Args(demonstrator="mpc", mpc_samples=7), env)
+    assert mpc.samples == 7 and mpc._noise().shape[0] == 7
+    with pytest.raises(SystemExit, match="--mpc-samples sets the MPC's rollouts: it needs --demonstrator mpc"):
+        pusher_control.main(pusher_control.Args(episodes=1, mpc_samples=160))
+    with pytest.raises(SystemExit, match="--mpc-samples 1: MPPI averages 2 or more"):
+        pusher_control.main(pusher_control.Args(episodes=1, demonstrator="mpc", mpc_samples=1))
