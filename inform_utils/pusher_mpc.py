@@ -25,7 +25,8 @@ contact, so the push it keeps is one that moves the object, and w_dist, weighted
 faster one. It touches the object at steps 13-25 and pushes with the fork's inner corner (the crossbar and a prong at
 once) at 0.055 m/s on average, up to 0.097 (starts 1000-1009). Measured on reset seeds 0-99 (docs/results.md, round
 four): Pusher-v5 success 0.69, final distance 0.076 m, return -47.1 (tuned on 1000-1029: 0.53); Pusher-v4 under
-MuJoCo 2.3.7, untuned, 0.99, 0.052 m. 7.2 s of CPU an episode (72 ms a step) on one thread.
+MuJoCo 2.3.7, untuned, 0.99, 0.052 m. 7.2 s of CPU an episode (72 ms a step) on one thread. With 160 samples
+(`--mpc-samples 160`): Pusher-v5 0.88, 0.059 m, 28 s of CPU an episode.
 
     python -m inform_utils.pusher_control --episodes 100 --demonstrator mpc     # on reset seeds 0-99
 """
