@@ -230,7 +230,7 @@ class Args:
     """the MPC's weight on the torques' squares, against the object distance's 10 (the env's reward weighs them a
     tenth of the distance: 1.0 here); only with --demonstrator mpc"""
     mpc_samples: int = 40
-    """action sequences the MPC tries at every step (its CPU grows with them: 160 costs about 4.5x); only with
+    """action sequences the MPC tries at every step (its CPU grows with them: 160 cost 3.9x, 28 s an episode); only with
     --demonstrator mpc"""
     save_demos: str | None = None
     """write every step of the episodes to this .npz (new file) for a teacher to learn from (oracle_train.py
