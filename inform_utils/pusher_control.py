@@ -246,10 +246,10 @@ def make_demonstrator(args: Args, env: gym.Env) -> PushingDemonstrator | MPPIDem
 def main(args: Args) -> None:
     if args.save_demos is not None and (os.path.exists(args.save_demos) or not args.save_demos.endswith(".npz")):
         raise SystemExit(f"--save-demos {args.save_demos}: name a new file ending in .npz (it exists, or is no .npz)")
-    if args.demonstrator != "mpc" and args.mpc_ctrl_weight != Args.mpc_ctrl_weight:
-        raise SystemExit("--mpc-ctrl-weight weighs the MPC's torques: it needs --demonstrator mpc")
-    if args.demonstrator != "mpc" and args.mpc_samples != Args.mpc_samples:
-        raise SystemExit("--mpc-samples sets the MPC's rollouts: it needs --demonstrator mpc")
+    mpc_only = {"mpc_ctrl_weight": "weighs the MPC's torques", "mpc_samples": "sets the MPC's rollouts"}
+    for field, what in mpc_only.items():
+        if args.demonstrator != "mpc" and getattr(args, field) != getattr(Args, field):
+            raise SystemExit(f"--{field.replace('_', '-')} {what}: it needs --demonstrator mpc")
     if not args.mpc_ctrl_weight >= 0:
         raise SystemExit(f"--mpc-ctrl-weight {args.mpc_ctrl_weight}: a price of torque is 0 or more")
     if args.mpc_samples < 2:
