@@ -44,6 +44,7 @@ import tyro
 
 from inform_utils.demos import FIELDS as DEMO_FIELDS
 from inform_utils.pusher_mpc import MPPIDemonstrator
+from inform_utils.teacher_check import pace
 
 ARM = 7  # the arm's joints lead qpos and qvel; the object's and the goal's slides follow
 SHOULDER_XY = np.array([0.0, -0.6])  # the shoulder pan's axis in the table's plane
@@ -181,13 +182,18 @@ class PushingDemonstrator:
 
 
 def run_episode(env: gym.Env, demonstrator: PushingDemonstrator | MPPIDemonstrator, seed: int,
-                record: dict | None = None) -> tuple[float, float]:  # fmt: skip
+                record: dict | None = None, path: list | None = None) -> tuple[float, float]:  # fmt: skip
     """(final object-to-goal distance, return) of one episode from reset(seed); the demonstrator is reset with the
-    same seed (MPPIDemonstrator seeds its sampler from it). `record`: lists per DEMO_FIELDS, each step appended."""
+    same seed (MPPIDemonstrator seeds its sampler from it). `record`: lists per DEMO_FIELDS, each step appended;
+    `path`: the object's distance to the goal in the table's plane appended before each step and after the last."""
     obs, _ = env.reset(seed=seed)
     demonstrator.reset(seed)
     ep_return, done, info = 0.0, False, {}
-    while not done:
+    while True:
+        if path is not None:  # the object's xy at obs[17:19], the goal's at obs[20:22]
+            path.append(float(np.linalg.norm(obs[17:19] - obs[20:22])))
+        if done:
+            break
         action = demonstrator(obs)
         next_obs, reward, terminated, truncated, info = env.step(action)
         if record is not None:  # the reward's terms too, so a teacher can re-weight them (--reward-dist-weight)
@@ -262,8 +268,12 @@ def main(args: Args) -> None:
     seeds = range(args.first_seed, args.first_seed + args.episodes)
     cpu = time.process_time()
     record = {name: [] for name in DEMO_FIELDS} if args.save_demos else None
-    results = np.array([run_episode(env, demonstrator, seed, record) for seed in seeds])
+    paths = [[] for _ in seeds]
+    results = np.array(
+        [run_episode(env, demonstrator, seed, record, path) for seed, path in zip(seeds, paths, strict=True)]
+    )
     cpu = time.process_time() - cpu
+    dt = env.unwrapped.dt
     env.close()
     distances, returns = results[:, 0], results[:, 1]
     print(f"success {np.mean(distances < args.success_distance):.2f}, final distance {distances.mean():.3f} m, "
@@ -275,6 +285,15 @@ def main(args: Args) -> None:
     ]
     if failed:
         print(f"failed (seed, final distance): {failed}")
+    for outcome, ended in (
+        ("successes", distances < args.success_distance),
+        ("failures", ~(distances < args.success_distance)),
+    ):
+        speeds = pace(np.array(paths)[ended], dt)  # teacher_check's measure of the push, for a teacher beside it
+        if speeds is not None:
+            print(f"pace of the {speeds['episodes']} {outcome}: the object closes on the goal at "
+                  f"{speeds['peak_closing_speed']:.3f} m/s at its fastest, {speeds['last_closing_speed']:.3f} at "
+                  f"the end; {speeds['still_closing']:.2f} still closing")  # fmt: skip
     if record is not None:
         save_demos(args.save_demos, record, args.env_id, demonstrator_name, seeds, distances, args.success_distance)
         print(f"{len(record['rew'])} steps of {args.episodes} episodes written to {args.save_demos}")

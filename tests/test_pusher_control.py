@@ -73,9 +73,20 @@ def test_demonstrator_runs_an_episode_within_the_limits(seed):
     obs, _ = env.reset(seed=seed)
     action = demonstrator(obs)
     assert action.shape == (7,) and np.all(np.abs(action) <= 2.0)
-    distance, ep_return = run_episode(env, demonstrator, seed)
+    path = []
+    distance, ep_return = run_episode(env, demonstrator, seed, path=path)
     assert np.isfinite(distance) and np.isfinite(ep_return)
+    # the object's distance to the goal before each of the 100 steps and after the last: in the table's plane, so
+    # within the object's and the goal's small height apart of the env's own distance
+    assert len(path) == 101 and abs(path[-1] - distance) < 0.02, (len(path), path[-1], distance)
     env.close()
+
+
+def test_the_command_prints_the_pace_of_the_push(capsys):
+    """pusher_control's summary gives teacher_check's pace, apart for successes and failures (here: all failed)."""
+    pusher_control.main(pusher_control.Args(episodes=2))
+    out = capsys.readouterr().out
+    assert "pace of the 2 failures: the object closes on the goal at" in out and "pace of the 0" not in out, out
 
 
 @pytest.mark.skipif(int(mujoco.__version__.split(".")[0]) < 3, reason="MuJoCo 2.3.7's contact is stiff: no ceiling")
