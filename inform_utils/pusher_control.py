@@ -42,6 +42,7 @@ import mujoco
 import numpy as np
 import tyro
 
+import inform_sac_pusher as isp
 from inform_utils.demos import FIELDS as DEMO_FIELDS
 from inform_utils.pusher_mpc import MPPIDemonstrator
 from inform_utils.teacher_check import pace
@@ -190,8 +191,8 @@ def run_episode(env: gym.Env, demonstrator: PushingDemonstrator | MPPIDemonstrat
     demonstrator.reset(seed)
     ep_return, done, info = 0.0, False, {}
     while True:
-        if path is not None:  # the object's xy at obs[17:19], the goal's at obs[20:22]
-            path.append(float(np.linalg.norm(obs[17:19] - obs[20:22])))
+        if path is not None:  # as teacher_check.final_distance measures it (the goal, fixed, at obs[20:22])
+            path.append(float(np.linalg.norm(isp.object_xy(obs) - obs[20:22])))
         if done:
             break
         action = demonstrator(obs)
@@ -276,19 +277,15 @@ def main(args: Args) -> None:
     dt = env.unwrapped.dt
     env.close()
     distances, returns = results[:, 0], results[:, 1]
-    print(f"success {np.mean(distances < args.success_distance):.2f}, final distance {distances.mean():.3f} m, "
+    succeeded = distances < args.success_distance
+    print(f"success {succeeded.mean():.2f}, final distance {distances.mean():.3f} m, "
           f"return {returns.mean():.1f} over {args.episodes} random starts (reset seeds {seeds[0]}-{seeds[-1]}) "
           f"on {args.env_id}, the {demonstrator_name} demonstrator "
           f"({cpu / args.episodes:.2f} s of CPU an episode)")  # fmt: skip
-    failed = [
-        (seed, round(float(d), 3)) for seed, d in zip(seeds, distances, strict=True) if d >= args.success_distance
-    ]
+    failed = [(seed, round(float(d), 3)) for seed, d, ok in zip(seeds, distances, succeeded, strict=True) if not ok]
     if failed:
         print(f"failed (seed, final distance): {failed}")
-    for outcome, ended in (
-        ("successes", distances < args.success_distance),
-        ("failures", ~(distances < args.success_distance)),
-    ):
+    for outcome, ended in (("successes", succeeded), ("failures", ~succeeded)):
         speeds = pace(np.array(paths)[ended], dt)  # teacher_check's measure of the push, for a teacher beside it
         if speeds is not None:
             print(f"pace of the {speeds['episodes']} {outcome}: the object closes on the goal at "
