@@ -10,12 +10,15 @@ copied at once to {results_dir}/{campaign}/{day}/{variant}__sleep{seed}/ (summar
 random_starts.json, and night.json: its day by content, day.pt's sha256, and every flag it ran with). A night of the
 campaign already there is not run again: the study resumes; a campaign that holds a night of another day.pt or other
 flags is refused before anything runs. --table prints the table from the results alone, each night it cannot read
-named with its cause. Exit 0; 1 if a night failed; 2 for bad input (or a night that refuses its input); 128 + the
-signal if stopped (the night in progress saves what finished and is not kept).
+named with its cause; --with-campaigns adds other campaigns (a campaign a budget) to the rule for the methods.
+Exit 0; 1 if a night failed; 2 for bad input (or a night that refuses its input); 128 + the signal if stopped (the
+night in progress saves what finished and is not kept).
 
     python inform_sac_pusher.py --env-id Pusher-v4 --seed 1 --save-buffer          # a day: runs/<day>/day.pt
     python -m inform_utils.sleep_study --days runs/<day> --campaign sleep_study    # the nights on it
     python -m inform_utils.sleep_study --table --campaign sleep_study               # the table
+    python -m inform_utils.sleep_study --table --campaign methods --with-campaigns methods_50k   # the methods' rule
+                                                                                    # at both budgets
     python -m inform_utils.sleep_study --script inform_dqn_gridworld.py --days runs/<maze day> --campaign maze_sleep \
         --sleep-seeds 1 2 3                                                         # the maze's nights
 
@@ -34,7 +37,7 @@ import statistics
 import subprocess
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
@@ -58,6 +61,7 @@ import tyro  # noqa: E402
 from inform_utils.files import BadFile, check_writable, copy, read_json, read_npz, sha256, write_json  # noqa: E402
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+FOLDER = r"[A-Za-z0-9][A-Za-z0-9._+=-]{0,99}"  # a campaign: one folder under results/ (no / or ..)
 # the variants of the sleep (docs/protocol.md, "Saved days and the sleep's variants"), in the order they run: the
 # default and the controls first
 PUSHER_VARIANTS = {
@@ -185,6 +189,9 @@ class Args:
     """episodes of the random-start test of each night's policies"""
     table: bool = False
     """print the table from results/{campaign} and run nothing"""
+    with_campaigns: list[str] = field(default_factory=list)
+    """with --table: campaigns of the same methods at other budgets (one campaign a budget), whose nights join the rule
+    for a night built for the data, a row per task, budget and method"""
 
 
 def night_dir(args: Args, day_name: str, variant: str, seed: int) -> str:
@@ -416,7 +423,8 @@ def scan(args: Args) -> tuple[list[dict], list[tuple[str, str]]]:
             continue
         variant, seed = os.path.basename(path).rsplit("__sleep", 1)
         day = os.path.basename(os.path.dirname(path))  # the summary's own "seed" is the day's
-        rows.append({**summary, "day": day, "dir": os.path.basename(path), "variant": variant, "sleep_seed": int(seed)})
+        rows.append({**summary, "day": day, "dir": os.path.basename(path), "variant": variant, "sleep_seed": int(seed),
+                     "campaign": args.campaign})  # fmt: skip
     rows.sort(key=lambda r: (r["day"], r["variant"] != "default", r["variant"], r["sleep_seed"]))
     return rows, left_out
 
@@ -609,7 +617,10 @@ def table(args: Args) -> str:
             lines.append(table_row(row))
     lines += ["", verdict(rows, ran, columns, spread, ("inform", "inform_selected") if study.pusher else ("inform",))]
     lines += ["", default_rule(args, rows, ran, noise)] if study.pusher else []
-    lines += ["", method_rule(args, rows, [v for v in ran if v in METHODS])] if study.pusher else []
+    if study.pusher:  # the methods at every budget: this campaign's nights and those of --with-campaigns
+        every = budgets(args, rows)
+        lines += ["", method_rule(args, every, [v for v in study.variants if any(r["variant"] == v for r in every)
+                                                and v in METHODS])]  # fmt: skip
     lines += ["", per_day(rows, ran)] if study.pusher else []
     return "\n".join([*lines, *notes])  # kept for their curves, left out of the table: say so
 
@@ -786,8 +797,8 @@ def return_spread(args: Args, rows: list[dict]) -> float | None:
     """TAMER's own sampling spread on the plain task: the largest range, over the days, of its sampled return between
     the day's streams (the run's own, which every night repeats, and tamer_streams()); None if a day has none."""
     spreads = []
-    for day in sorted({r["day"] for r in rows}):
-        path = os.path.join(args.results_dir, args.campaign, day, "tamer_streams.json")
+    for campaign, day in sorted({(r.get("campaign", args.campaign), r["day"]) for r in rows}):
+        path = os.path.join(args.results_dir, campaign, day, "tamer_streams.json")
         if not os.path.isfile(path):
             return None
         values = list(read_json(path).get("eval/tamer_return_sampled", {}).values())
@@ -819,6 +830,22 @@ def step_size(row: dict) -> str | None:
 
 def budget(row: dict) -> int | None:  # the night's gradient steps
     return row.get("args", {}).get("sleep_gradient_steps")
+
+
+def budgets(args: Args, rows: list[dict]) -> list[dict]:
+    """This campaign's nights (rows) and those of --with-campaigns, one campaign a budget: ValueError if a campaign
+    holds none, or a budget of nights another campaign holds too (their days would be pooled)."""
+    every, owner = list(rows), {budget(r): args.campaign for r in rows}
+    for other in args.with_campaigns:
+        theirs = scan(replace(args, campaign=other))[0]
+        if not theirs:
+            raise ValueError(f"--with-campaigns {other}: no completed nights under {args.results_dir}/{other}")
+        for steps in sorted({budget(r) for r in theirs}, key=str):
+            if owner.setdefault(steps, other) != other:
+                raise ValueError(f"--with-campaigns {other}: its nights of {steps} gradient steps are a budget of "
+                                 f"--campaign {owner[steps]} too; name one campaign a budget")  # fmt: skip
+        every += theirs
+    return every
 
 
 def matched_cloning(rows: list[dict], method: str) -> tuple[str, str | None]:
@@ -927,13 +954,17 @@ def rule_means(rows: list[dict], variants: list[str]) -> list[str]:
 
 def validate(args: Args) -> dict[str, str]:
     """Bad input, before anything runs: ValueError, one line. Returns {day: day.pt's sha256}."""
-    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._+=-]{0,99}", args.campaign):  # one folder under results/
+    if not re.fullmatch(FOLDER, args.campaign):
         raise ValueError(f"--campaign {args.campaign[:100]!r}: one folder name under {args.results_dir}/ (letters, "
                          "digits and ._+=-, no / or ..)")  # fmt: skip
     study = STUDIES[args.script]
     unknown = [v for v in args.variants or [] if v not in study.variants]
     if unknown:
         raise ValueError(f"unknown variant(s) {', '.join(unknown)}; choose from {', '.join(study.variants)}")
+    for other in args.with_campaigns:
+        if not args.table or not re.fullmatch(FOLDER, other):
+            raise ValueError(f"--with-campaigns {other[:100]!r}: campaigns (folder names under {args.results_dir}/) "
+                             "beside --table's, for the table only")  # fmt: skip
     if args.table:
         return {}
     if not args.sleep_seeds or args.random_start_episodes < 1 or (args.gradient_steps or 1) < 1:

@@ -106,6 +106,8 @@ CASES = [
          "more than this machine's"),
     case("sleep_study-campaign-outside-results", "inform_utils/sleep_study.py", "--table --campaign ../../../tmp/x",
          "--campaign '../../../tmp/x': one folder name"),
+    case("sleep_study-with-campaigns-without-table", "inform_utils/sleep_study.py", "--with-campaigns c50k",
+         "--with-campaigns 'c50k': campaigns (folder names under results/) beside --table's, for the table only"),
     case("run_seeds-missing-script", "inform_utils/run_seeds.py", "--script nope.py", "nope.py: no such script"),
     case("run_seeds-seed-not-an-int", "inform_utils/run_seeds.py", "--seeds x", "Error parsing --seeds", tyro=True),
     case("pusher-layout-not-a-choice", "inform_sac_pusher.py", "--obstacle-layout diagonal", "invalid choice",

@@ -175,6 +175,34 @@ def test_the_table_of_tiny_nights_without_an_offline_pick(tmp_path):
     assert "| default, offline pick |" not in text
 
 
+def test_the_rule_reads_each_budget_from_its_own_campaign(tmp_path):
+    """Issue 56: one --table prints the rule for the methods at every budget, a campaign a budget (--with-campaigns).
+    dwbc, bc and the sham on one day at 5,000 steps (campaign c) and at 50,000 (c50k), each with TAMER's other streams
+    in its own folder: c's range 1.0, c50k's 3.0, so the 50,000-step row's plain-task spread is read from c50k. A
+    campaign of no nights, or one holding a budget --campaign holds too, is refused in one line."""
+    for campaign, steps, streams in (("c", 5000, [-30.0, -29.0]), ("c50k", 50000, [-30.0, -27.0])):
+        for variant, distance in (("dwbc", 0.18), ("bc", 0.20), ("sham", 0.19)):
+            pusher_night(tmp_path / campaign / "day" / f"{variant}__sleep1",
+                         {**VALUES, "args": {"env_id": "Pusher-v4", "sleep_gradient_steps": steps},
+                          "sleep_variant": "policy_lr=0.0001", "eval/obstacle/inform_final_distance": distance,
+                          "eval/inform_return_sampled": -30.0, "eval/tamer_return_sampled": -30.0})  # fmt: skip
+        (tmp_path / campaign / "day" / "tamer_streams.json").write_text(json.dumps(
+            {"eval/tamer_return_sampled": {"2": streams[1]}}))  # fmt: skip
+    args = ss.Args(results_dir=str(tmp_path), campaign="c")
+    assert "| Pusher-v4 | 50000 |" not in ss.table(args)  # one campaign: its own budget only
+    text = ss.table(ss.Args(results_dir=str(tmp_path), campaign="c", with_campaigns=["c50k"]))
+    rows = {line.split(" | ")[1]: line for line in text.splitlines() if " | dwbc (0.0001) | " in line}  # the rule's
+    assert "| dwbc (0.0001) | 1 | -0.0200 m, p = -, closer on 1 of 1 |" in rows["5000"]
+    assert "(spread 1.00)" in rows["5000"] and "(spread 3.00)" in rows["50000"]
+    assert "Pusher-v4, 50000 gradient steps, the means over the 1 days" in text
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(ValueError, match="--with-campaigns empty: no completed nights under"):
+        ss.table(ss.Args(results_dir=str(tmp_path), campaign="c", with_campaigns=["empty"]))
+    shutil.copytree(tmp_path / "c", tmp_path / "c2")
+    with pytest.raises(ValueError, match="its nights of 5000 gradient steps are a budget of --campaign c too"):
+        ss.table(ss.Args(results_dir=str(tmp_path), campaign="c", with_campaigns=["c2"]))
+
+
 def test_the_table_leaves_out_nights_it_cannot_read_and_says_why(tmp_path):
     """Issue 55, item 9: a night folder without summary.json, a dangling `*__sleep*` link, a half-written summary, an
     unreadable random_starts.json or a truncated obstacle file: each was a traceback. The table prints the nights it
