@@ -961,10 +961,11 @@ def validate(args: Args) -> dict[str, str]:
     unknown = [v for v in args.variants or [] if v not in study.variants]
     if unknown:
         raise ValueError(f"unknown variant(s) {', '.join(unknown)}; choose from {', '.join(study.variants)}")
+    named = [args.campaign, *args.with_campaigns]
     for other in args.with_campaigns:
-        if not args.table or not re.fullmatch(FOLDER, other):
+        if not args.table or not re.fullmatch(FOLDER, other) or named.count(other) > 1:
             raise ValueError(f"--with-campaigns {other[:100]!r}: campaigns (folder names under {args.results_dir}/) "
-                             "beside --table's, for the table only")  # fmt: skip
+                             "beside --table's, for the table only, each named once")  # fmt: skip
     if args.table:
         return {}
     if not args.sleep_seeds or args.random_start_episodes < 1 or (args.gradient_steps or 1) < 1:

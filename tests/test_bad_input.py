@@ -108,6 +108,8 @@ CASES = [
          "--campaign '../../../tmp/x': one folder name"),
     case("sleep_study-with-campaigns-without-table", "inform_utils/sleep_study.py", "--with-campaigns c50k",
          "--with-campaigns 'c50k': campaigns (folder names under results/) beside --table's, for the table only"),
+    case("sleep_study-with-campaigns-the-campaign", "inform_utils/sleep_study.py",
+         "--table --campaign c --with-campaigns c", "--with-campaigns 'c': campaigns (folder names under results/)"),
     case("run_seeds-missing-script", "inform_utils/run_seeds.py", "--script nope.py", "nope.py: no such script"),
     case("run_seeds-seed-not-an-int", "inform_utils/run_seeds.py", "--seeds x", "Error parsing --seeds", tyro=True),
     case("pusher-layout-not-a-choice", "inform_sac_pusher.py", "--obstacle-layout diagonal", "invalid choice",
