@@ -9,8 +9,10 @@ criterion picked) is tested on 50 random starts by `inform_utils.evaluate_policy
 copied at once to {results_dir}/{campaign}/{day}/{variant}__sleep{seed}/ (summary.json, obstacle_distances.npz,
 random_starts.json, and night.json: its day by content, day.pt's sha256, and every flag it ran with). A night of the
 campaign already there is not run again: the study resumes; a campaign that holds a night of another day.pt or other
-flags is refused before anything runs. --table prints the table from the results alone, each night it cannot read
-named with its cause; --with-campaigns adds other campaigns (a campaign a budget) to the rule for the methods.
+flags is refused before anything runs (a day re-made by its command is the same day: its day.pt differs only in the
+wall-clock stats it keeps, and with a kept night's put back it is byte for byte that night's). --table prints the
+table from the results alone, each night it cannot read named with its cause; --with-campaigns adds other campaigns
+(a campaign a budget) to the rule for the methods.
 Exit 0; 1 if a night failed; 2 for bad input (or a night that refuses its input); 128 + the signal if stopped (the
 night in progress saves what finished and is not kept).
 
@@ -27,9 +29,13 @@ columns are the greedy path from S, the held-out start cells and all 29 cells.
 """
 
 import contextlib
+import functools
 import glob
+import hashlib
+import io
 import json
 import os
+import pickle
 import re
 import shutil
 import signal
@@ -286,25 +292,67 @@ def identity(args: Args, extra: list[str], day_sha: str, night_flags: list[str])
 CAMPAIGN_KEYS = ("script", "flags", "random_start_episodes", "gradient_steps")  # what every night of a campaign shares
 
 
+WALL_CLOCK = ("time/", "sps/")  # the saved day's stats that say how long it took: a re-made day does not repeat them
+
+
+@functools.lru_cache(maxsize=4)
+def sha256_with_clock(day_pt: str, clock: tuple[tuple[str, float], ...]) -> str | None:
+    """The sha256 day.pt would have had its day taken as long as `clock` says: its wall-clock stats put back and saved
+    as the scripts save it (torch.save gives the same bytes for the same values); None if `clock` lacks one."""
+    import torch  # here only: the study never reads a day but to tell a re-made one
+
+    day = torch.load(day_pt, weights_only=True, map_location="cpu")
+    clock = dict(clock)
+    timings = [key for key in day["day_stats"] if key.startswith(WALL_CLOCK)]
+    if any(key not in clock for key in timings):
+        return None
+    day["day_stats"].update({key: clock[key] for key in timings})
+    buffer = io.BytesIO()
+    torch.save(day, buffer)
+    return hashlib.sha256(buffer.getvalue()).hexdigest()
+
+
+def remade(day_pt: str, night: str, record: dict) -> bool:
+    """Is `day_pt` the day a kept night ran on, re-made by its command? A day is deterministic but for how long it
+    took, which day.pt keeps (day_stats' time/ and sps/) and every night copies into its summary: with the night's
+    put back, the re-made day.pt is byte for byte the night's (its day_sha256)."""
+    try:
+        summary = read_json(os.path.join(night, "summary.json"))
+        clock = tuple(sorted((k, v) for k, v in summary.items() if k.startswith(WALL_CLOCK)))
+        return sha256_with_clock(day_pt, clock) == record.get("day_sha256")
+    except (BadFile, OSError, RuntimeError, KeyError, TypeError, pickle.UnpicklingError):  # not a day this reads
+        return False
+
+
 def conflicts(args: Args, planned: dict[str, dict]) -> list[str]:
     """The nights already kept in the campaign that are not its own: kept by an older study (no night.json) or one
     whose record is damaged, run with other flags after `--` (or another script or random-start test), on another
-    day.pt in a folder of the same name, or with other flags of their own. `planned`: {night folder: its identity}."""
+    day.pt in a folder of the same name (a day re-made by its command is the same day, `remade`), or with other flags
+    of their own. `planned`: {night folder: its identity}."""
     mine = next(iter(planned.values()), None)
     days = {os.path.dirname(path): record["day_sha256"] for path, record in planned.items()}
-    found = []
+    day_files = {os.path.join(args.results_dir, args.campaign, day_name(day)): day for day in args.days}
+    found, told = [], set()
     for path in night_dirs(args):
         try:
             record = read_json(os.path.join(path, "night.json"))
         except BadFile as e:
             found.append(f"{path} has no readable record of its day and flags ({str(e).rsplit('(', 1)[-1]}")
             continue
+        folder = os.path.dirname(path)
+        same_day = folder not in days or record.get("day_sha256") == days[folder]
+        if not same_day and remade(os.path.join(day_files[folder], "day.pt"), path, record):
+            same_day = True
+            if folder not in told:
+                told.add(folder)
+                print(f"[study] {day_files[folder]}: re-made; its day.pt is the kept nights' but for how long the day "
+                      "took", flush=True)  # fmt: skip
         if mine is not None and any(record.get(k) != mine.get(k) for k in CAMPAIGN_KEYS):
             ran = " ".join(record.get("flags") or []) or "none"
             found.append(f"{path} ran with other flags after -- ({ran}) or another script or --random-start-episodes")
-        elif os.path.dirname(path) in days and record.get("day_sha256") != days[os.path.dirname(path)]:
+        elif not same_day:
             found.append(f"{path} is a night on another day.pt kept in a folder of the same name")
-        elif path in planned and record != planned[path]:
+        elif path in planned and {**record, "day_sha256": None} != {**planned[path], "day_sha256": None}:
             found.append(f"{path} ran with other flags ({' '.join(record.get('night_flags') or [])})")
     return found
 

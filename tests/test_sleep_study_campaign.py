@@ -78,6 +78,31 @@ def test_a_night_counts_only_for_its_own_day_and_flags(maze_days, tmp_path):
     assert older.returncode == 2 and "no readable record of its day and flags" in older.stderr
 
 
+def test_a_day_remade_by_its_command_resumes_its_campaign(maze_days, tmp_path):
+    """A day is deterministic, so it is re-made rather than kept; but day.pt keeps how long the day took, so the
+    re-made file has another sha256 and the campaign refused it as another day. Re-made, it resumes: its kept night is
+    not run again, the new night runs on it, and the first file is accepted again beside both."""
+    day_a = maze_days[0]
+    proc = subprocess.run([sys.executable, os.path.join(REPO, MAZE), "--seed", "3", *TINY_DAY, "--save-buffer"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=600)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    (run_dir,) = glob.glob(str(tmp_path / "runs" / "*"))
+    shutil.move(run_dir, tmp_path / "mday")
+    assert ss.sha256(str(tmp_path / "mday" / "day.pt")) != ss.sha256(str(day_a / "day.pt"))  # only the clock differs
+    base = ["--script", MAZE, "--campaign", "c", "--variants", "sham", "--", "--sleep-gradient-steps", "30"]
+
+    first = study(tmp_path, "--days", str(day_a), "--sleep-seeds", "1", *base)
+    assert first.returncode == 0, first.stderr[-2000:]
+    kept = (tmp_path / "results" / "c" / "mday" / "sham__sleep1" / "summary.json").read_text()
+    remade = study(tmp_path, "--days", "mday", "--sleep-seeds", "1", "2", *base)
+    assert remade.returncode == 0, remade.stderr[-2000:]
+    assert "mday: re-made" in remade.stdout and remade.stdout.count("sham sleep seed") == 1
+    assert "sham sleep seed 2" in remade.stdout
+    assert (tmp_path / "results" / "c" / "mday" / "sham__sleep1" / "summary.json").read_text() == kept
+    again = study(tmp_path, "--days", str(day_a), "--sleep-seeds", "1", "2", *base)
+    assert again.returncode == 0 and "sham sleep seed" not in again.stdout, again.stdout + again.stderr
+
+
 def test_a_study_whose_nights_refuse_their_input_exits_2(maze_days, tmp_path):
     """Issue 55, item 4: a maze day given to the Pusher's study: its night refuses it, and so would every night; the
     study stops there in one line (it exited 0 after "failed (2)" and "no completed nights")."""
