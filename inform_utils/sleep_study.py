@@ -339,6 +339,10 @@ def conflicts(args: Args, planned: dict[str, dict]) -> list[str]:
         except BadFile as e:
             found.append(f"{path} has no readable record of its day and flags ({str(e).rsplit('(', 1)[-1]}")
             continue
+        if mine is not None and any(record.get(k) != mine.get(k) for k in CAMPAIGN_KEYS):
+            ran = " ".join(record.get("flags") or []) or "none"
+            found.append(f"{path} ran with other flags after -- ({ran}) or another script or --random-start-episodes")
+            continue
         folder = os.path.dirname(path)
         same_day = folder not in days or record.get("day_sha256") == days[folder]
         if not same_day and remade(os.path.join(day_files[folder], "day.pt"), path, record):
@@ -347,10 +351,7 @@ def conflicts(args: Args, planned: dict[str, dict]) -> list[str]:
                 told.add(folder)
                 print(f"[study] {day_files[folder]}: re-made; its day.pt is the kept nights' but for how long the day "
                       "took", flush=True)  # fmt: skip
-        if mine is not None and any(record.get(k) != mine.get(k) for k in CAMPAIGN_KEYS):
-            ran = " ".join(record.get("flags") or []) or "none"
-            found.append(f"{path} ran with other flags after -- ({ran}) or another script or --random-start-episodes")
-        elif not same_day:
+        if not same_day:
             found.append(f"{path} is a night on another day.pt kept in a folder of the same name")
         elif path in planned and {**record, "day_sha256": None} != {**planned[path], "day_sha256": None}:
             found.append(f"{path} ran with other flags ({' '.join(record.get('night_flags') or [])})")
