@@ -352,7 +352,9 @@ def conflicts(args: Args, planned: dict[str, dict]) -> list[str]:
                 print(f"[study] {day_files[folder]}: re-made; its day.pt is the kept nights' but for how long the day "
                       "took", flush=True)  # fmt: skip
         if not same_day:
-            found.append(f"{path} is a night on another day.pt kept in a folder of the same name")
+            found.append(f"{path} is a night on another day.pt kept in a folder of the same name (re-made on another "
+                         "CPU? OpenBLAS's kernels can change the last bit of its final distances: re-make it with "
+                         "OPENBLAS_CORETYPE as where it was made: Haswell for the committed v4 days)")  # fmt: skip
         elif path in planned and {**record, "day_sha256": None} != {**planned[path], "day_sha256": None}:
             found.append(f"{path} ran with other flags ({' '.join(record.get('night_flags') or [])})")
     return found

@@ -65,6 +65,7 @@ def test_a_night_counts_only_for_its_own_day_and_flags(maze_days, tmp_path):
     assert again.returncode == 2 and "ran with other flags after -- (--sleep-gradient-steps 30)" in again.stderr
     another_day = study(tmp_path, "--days", str(day_b), *base, "--", "--sleep-gradient-steps", "30")
     assert another_day.returncode == 2 and "a night on another day.pt" in another_day.stderr, another_day.stderr
+    assert "OPENBLAS_CORETYPE" in another_day.stderr, another_day.stderr  # how to re-make it where it was made
     both = study(tmp_path, "--days", str(day_a), str(day_b), *base, "--", "--sleep-gradient-steps", "30")
     one_error_line(both, "two different days in folders of one name")
     assert both.returncode == 2
