@@ -70,6 +70,7 @@ import tyro  # noqa: E402
 from torch.utils.tensorboard import SummaryWriter  # noqa: E402
 
 PUSHER_IDS = ("Pusher-v5", "Pusher-v4")  # the paper's task; any other continuous-action env id works too
+CONTACTS = ("mujoco-2.3", "gymnasium")  # Pusher's object contact (make_env)
 POLICIES = ("oracle", "tamer", "inform")
 REPO_DIR = os.path.dirname(os.path.abspath(__file__))
 # the authors' settings (docs/protocol.md), constants rather than flags: change them here
@@ -128,7 +129,10 @@ class Args:
     track: bool = False
     """mirror the TensorBoard events to Weights & Biases (`pip install wandb`; WANDB_PROJECT, WANDB_MODE=offline)"""
     env_id: Annotated[str, DAY] = "Pusher-v5"
-    """Pusher-v5 (current MuJoCo), Pusher-v4 (the paper's; needs mujoco<3), or any continuous-action Gymnasium env"""
+    """Pusher-v5, Pusher-v4 (the paper's; on mujoco>=3 its model in its own class), or any continuous-action env"""
+    contact: Annotated[Literal[CONTACTS], DAY] = "mujoco-2.3"
+    """Pusher's contact: mujoco-2.3 as MuJoCo 2.3 made it (contact_as_mujoco23: the arm pushes the object); gymnasium:
+    as the installed MuJoCo makes it (on mujoco>=3 the arm passes through the object, Gymnasium #1576)"""
     random_starts: Annotated[bool, DAY] = False
     """random initial states (the standard task) instead of the paper's fixed start (reset with the run's seed)"""
     success_distance: Annotated[float, RATE, DAY] = 0.08
@@ -243,16 +247,36 @@ class Args:
         return Night(tamer_actor, device, **self.night_settings())
 
 
-def make_env(env_id: str, seed: int, obstacles=None, **render) -> gym.Env:
+def make_env(env_id: str, seed: int, obstacles=None, contact: str = "mujoco-2.3", **render) -> gym.Env:
     """The env, or Pusher with the obstacle test's boxes at the xy `obstacles`; `render` (render_mode, width, height)
-    adds Pusher's video camera. The boxes and the camera are built below main."""
-    if (obstacles is None and not render) or env_id not in PUSHER_IDS:
+    adds Pusher's video camera. The boxes and the camera are built below main, as Pusher-v4 on mujoco>=3 (which
+    Gymnasium refuses): its own model in its own class. Pusher's `contact`: see contact_as_mujoco23."""
+    v4_on_mujoco3 = env_id == "Pusher-v4" and mujoco_major() >= 3
+    if env_id not in PUSHER_IDS or (obstacles is None and not render and not v4_on_mujoco3):
         env = gym.make(env_id, **render)
     else:
         env = pusher_with_boxes(env_id, obstacles, **render)
+    if env_id in PUSHER_IDS and contact == "mujoco-2.3":
+        contact_as_mujoco23(env.unwrapped.model)
     env.action_space.seed(seed)
     env.observation_space.seed(seed)
     return env
+
+
+# held source-identical in inform_sac_pusher.py and oracle_train.py (a test): a change goes into both
+def contact_as_mujoco23(model) -> None:
+    """Every body's body_invweight0, which scales how soft its contacts are, set as MuJoCo 2.3 computed it: the mean
+    diagonal of J M^-1 J^T at qpos0 (armature in M), for the translation and the rotation of the body's centre of mass.
+    MuJoCo >= 3 takes a body that moves only on slide joints (Pusher's object) by its mass alone: ~1e5 times softer."""
+    import mujoco
+
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)  # at qpos0: the mass matrix and its factorisation
+    jac, solved = np.zeros((6, model.nv)), np.zeros((6, model.nv))
+    for body in range(1, model.nbody):
+        mujoco.mj_jacBodyCom(model, data, jac[:3], jac[3:], body)
+        mujoco.mj_solveM(model, data, solved, jac)
+        model.body_invweight0[body] = (jac * solved).sum(1).reshape(2, 3).mean(1)
 
 
 @dataclass(frozen=True)
@@ -882,9 +906,9 @@ class OneRow(nn.Module):
         return torch.baddbmm(bias.expand(n, 1, -1), x.unsqueeze(1), weight.t().expand(n, -1, -1)).squeeze(1)
 
 
-def env_copies(env_id: str, seed: int, episodes: int, obstacles=None) -> list[gym.Env]:
+def env_copies(env_id: str, seed: int, episodes: int, obstacles=None, contact="mujoco-2.3") -> list[gym.Env]:
     """Copies of one env, as many as `episodes` can use at once (evaluate runs them side by side)."""
-    return [make_env(env_id, seed, obstacles) for _ in range(max(1, min(episodes, SIDE_BY_SIDE)))]
+    return [make_env(env_id, seed, obstacles, contact) for _ in range(max(1, min(episodes, SIDE_BY_SIDE)))]
 
 
 def one_row_at_a_time(actor: Actor) -> Actor:
@@ -899,8 +923,9 @@ class Evaluator:
     """Evaluates a policy on the plain env with deterministic and sampled actions; logs and keeps eval/{name}_*.
     Episodes start from the run's seed (fixed start) or from fresh seeds (`--random-starts`), the same each time."""
 
-    def __init__(self, env_id: str, seed: int, random_starts: bool, outcome: Outcome, writer: SummaryWriter | None):
-        self.envs = env_copies(env_id, seed, SIDE_BY_SIDE)
+    def __init__(self, env_id: str, seed: int, random_starts: bool, outcome: Outcome, writer: SummaryWriter | None,
+                 contact: str = "mujoco-2.3"):  # fmt: skip
+        self.envs, self.contact = env_copies(env_id, seed, SIDE_BY_SIDE, contact=contact), contact
         self.writer, self.seed, self.random_starts, self.outcome = writer, seed, random_starts, outcome
         self.generator = torch.Generator().manual_seed(seed + 12345)  # sampled actions, off the training RNG
         self.seconds = 0.0  # spent evaluating
@@ -931,7 +956,7 @@ def final_evaluation(buffer, q_net, policies: dict, evaluator, writer, run_dir: 
     """After the sleep: Eq. 3 on the buffer (at the night's `temperature`), each policy's final evaluation, the
     obstacle test (Pusher only) and the authors' test (all logged at `end_step`), the obstacle files and the videos."""
     results = recovered_reward_stats(buffer, q_net, policies["inform"], temperature)
-    seed, outcome, boxes = evaluator.seed, evaluator.outcome, None
+    seed, outcome, contact, boxes = evaluator.seed, evaluator.outcome, evaluator.contact, None
     print("[eval] final evaluation", flush=True)
     for name, actor in policies.items():
         evaluator(name, actor, end_step, eval_episodes)
@@ -940,14 +965,14 @@ def final_evaluation(buffer, q_net, policies: dict, evaluator, writer, run_dir: 
         results["obstacle/skipped"] = obstacle_skipped(env_id, obstacle_episodes)
     else:
         test = (env_id, seed, obstacle_layout, obstacle_episodes, outcome)
-        obstacle, distances, paths = obstacle_test(*test, policies, evaluator.generator)
+        obstacle, distances, paths = obstacle_test(*test, policies, evaluator.generator, contact)
         results.update(obstacle)
         for name, arrays in (("distances", distances), ("paths", paths)):  # whole or not at all (a full disk)
             with atomic(f"{run_dir}/obstacle_{name}.npz") as tmp, open(tmp, "wb") as f:
                 np.savez(f, **arrays)
         boxes = paths["boxes"]
     if authors_test_episodes > 0:  # the authors' test: sampled actions, every episode from the run's start
-        envs = env_copies(env_id, seed, authors_test_episodes)
+        envs = env_copies(env_id, seed, authors_test_episodes, contact=contact)
         for name, actor in policies.items():
             res = evaluate(actor, envs, authors_test_episodes, lambda ep: seed, False, evaluator.generator, outcome)
             results.update(
@@ -960,7 +985,7 @@ def final_evaluation(buffer, q_net, policies: dict, evaluator, writer, run_dir: 
             writer.add_scalar(tag, value, end_step)
     evaluator.seconds += time.time() - t
     if capture_video:  # after every number is in: filming changes none of them
-        record_videos(env_id, seed, outcome, policies, boxes, evaluator.reset_seed(0), run_dir)
+        record_videos(env_id, seed, outcome, policies, boxes, evaluator.reset_seed(0), run_dir, contact)
     return results
 
 
@@ -974,10 +999,10 @@ def recovered_reward_stats(buffer: ReplayBuffer, q_net: QEnsemble, inform_actor:
 
 
 # the oracle: SAC on the environment reward (oracle_train.py runs the same SAC; a test keeps the two identical)
-def train_oracle(env_id: str, seed: int, n: int, outcome: Outcome, writer, device: torch.device):
+def train_oracle(env_id: str, seed: int, n: int, outcome: Outcome, writer, device: torch.device, contact="mujoco-2.3"):
     """SAC on the environment reward (CleanRL's, with the twin critics as one module), from random starts: the
     simulated teacher. Returns the actor, the twin critics and the steps per second."""
-    sac, env = ORACLE_SAC, make_env(env_id, seed)
+    sac, env = ORACLE_SAC, make_env(env_id, seed, contact=contact)
     obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
     actor = Actor(obs_dim, act_dim, HIDDEN_SIZE, env.action_space.low, env.action_space.high).to(device)
     qf = QEnsemble(obs_dim, act_dim, HIDDEN_SIZE, n=2).to(device)
@@ -1078,7 +1103,7 @@ def obstacle_skipped(env_id: str, episodes: int) -> str | None:  # why the obsta
     return "--obstacle-episodes 0" if episodes == 0 else None
 
 
-def obstacle_test(env_id, seed, layout, episodes, outcome, policies: dict, generator) -> tuple[dict, dict, dict]:
+def obstacle_test(env_id, seed, layout, episodes, outcome, policies: dict, generator, contact="mujoco-2.3"):
     """Each policy on the obstacle variant, every episode from the run's initial state, sampled actions. Returns the
     metrics, the final distances, and the object's xy path of one deterministic episode per policy with and without
     the boxes (Fig. 5a)."""
@@ -1087,8 +1112,8 @@ def obstacle_test(env_id, seed, layout, episodes, outcome, policies: dict, gener
     results = {"obstacle/box_positions": boxes.round(4).tolist()}
     results["obstacle/min_box_distance_to_path"] = min(distance_to_segment(b, start, goal) for b in boxes)
     distances, paths = {}, {"boxes": boxes, "start": start, "goal": goal}
-    envs = env_copies(env_id, seed, episodes, obstacles=boxes)
-    plain, at_start = make_env(env_id, seed), lambda episode: seed
+    envs = env_copies(env_id, seed, episodes, boxes, contact)
+    plain, at_start = make_env(env_id, seed, contact=contact), lambda episode: seed
     for name, actor in policies.items():
         res = evaluate(actor, envs, episodes, at_start, False, generator, outcome)
         det = evaluate(actor, envs[0], 1, at_start, True, generator, outcome)
@@ -1106,9 +1131,8 @@ def obstacle_test(env_id, seed, layout, episodes, outcome, policies: dict, gener
 
 def start_and_goal(env_id: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """The object's and the goal's xy after a reset with `seed` (obs[17:19] and obs[20:22])."""
-    env = gym.make(env_id)
-    obs, _ = env.reset(seed=seed)
-    env.close()
+    with make_env(env_id, seed) as env:
+        obs, _ = env.reset(seed=seed)
     return object_xy(obs).copy(), obs[20:22].copy()
 
 
@@ -1189,7 +1213,8 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
     status, failure, phase = "completed", None, "startup"
     try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
         run_dir = make_run_dir(f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}")
-        print(f"run directory: {run_dir}", flush=True)  # only now: bad input was refused, nothing half-written is left
+        contact = summary["contact"] = contact_of(args.env_id, args.contact)  # Pusher's contact, in the first line
+        print(f"run directory: {run_dir}" + (f" | the {contact} contact" if contact else ""), flush=True)
         mujoco_log_in(run_dir)
         StopSignals.check()  # a stop while starting ends here, with a summary in the run directory
         random.seed(args.seed)
@@ -1208,8 +1233,8 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
         writer = SummaryWriter(run_dir)
         table = "\n".join(f"|{k}|{v}|" for k, v in vars(args).items())
         writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + table)
-        env, outcome = make_env(args.env_id, args.seed), args.outcome()  # how episodes are judged
-        evaluator = Evaluator(args.env_id, args.seed, args.random_starts, outcome, writer)
+        env, outcome = make_env(args.env_id, args.seed, contact=args.contact), args.outcome()  # how episodes are judged
+        evaluator = Evaluator(args.env_id, args.seed, args.random_starts, outcome, writer, args.contact)
         obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
 
         # ---- oracle: the simulated teacher (docs/protocol.md, "Oracles and the expert bar")
@@ -1220,10 +1245,10 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
         else:
             print(f"[oracle] training SAC on the env reward for {args.oracle_total_timesteps} steps", flush=True)
             oracle_actor, oracle_qf, summary["sps/oracle"] = train_oracle(
-                args.env_id, args.seed, args.oracle_total_timesteps, outcome, writer, device
+                args.env_id, args.seed, args.oracle_total_timesteps, outcome, writer, device, args.contact
             )
             oracle_ckpt = oracle_checkpoint(oracle_actor, oracle_qf, args.env_id, args.oracle_total_timesteps,
-                                            args.seed)  # fmt: skip
+                                            args.seed, contact_of(args.env_id, args.contact))  # fmt: skip
             save_atomic(oracle_ckpt, f"{run_dir}/oracle.pt")  # and the saved day's teacher
         oracle_actor.requires_grad_(False)
         oracle_qf.requires_grad_(False)
@@ -1328,13 +1353,13 @@ def videos():  # --capture-video's plumbing, beside this script in the repositor
     return videos
 
 
-def video_env(env_id: str, seed: int, obstacles=None, size: int = VIDEO_SIZE) -> gym.Env:
+def video_env(env_id: str, seed: int, obstacles=None, size: int = VIDEO_SIZE, contact="mujoco-2.3") -> gym.Env:
     """The evaluation env, rendering every reset and step into a list (Gymnasium's RenderCollection)."""
-    env = make_env(env_id, seed, obstacles, render_mode="rgb_array", width=size, height=size)
+    env = make_env(env_id, seed, obstacles, contact, render_mode="rgb_array", width=size, height=size)
     return gym.wrappers.RenderCollection(env)
 
 
-def record_videos(env_id, seed, outcome, policies: dict, boxes, reset_seed: int, run_dir: str) -> None:
+def record_videos(env_id, seed, outcome, policies: dict, boxes, reset_seed: int, run_dir: str, contact) -> None:
     """--capture-video: each policy's deterministic episode as the final evaluation runs it (from `reset_seed`) and,
     with the boxes, as the obstacle test does, by the same `evaluate` with a generator of its own. Writes
     videos/{policy}[_obstacle].mp4 and videos/videos.json (frames, final distance, reset seed)."""
@@ -1342,7 +1367,7 @@ def record_videos(env_id, seed, outcome, policies: dict, boxes, reset_seed: int,
     record, t = {}, time.time()
     films = [("", None, reset_seed)] + ([("_obstacle", boxes, seed)] if boxes is not None else [])
     for suffix, obstacles, start in films:
-        env = video_env(env_id, seed, obstacles)
+        env = video_env(env_id, seed, obstacles, contact=contact)
         for name, actor in policies.items():
             res = evaluate(actor, env, 1, lambda ep, s=start: s, True, torch.Generator(), outcome)
             frames, key = env.render(), f"{name}{suffix}"
@@ -1383,7 +1408,7 @@ class Progress:
 
 
 def env_shapes(env_id: str) -> tuple[int, int]:
-    with gym.make(env_id) as env:
+    with make_env(env_id, 0) as env:
         return int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
 
 
@@ -1434,10 +1459,11 @@ def actor_from_checkpoint(ckpt: dict) -> Actor:  # a saved actor, or an oracle's
     return actor
 
 
-def load_oracle(env_id: str, path: str | None, train: bool, train_steps: int) -> dict | None:
-    """The oracle checkpoint to use (--oracle-path, else the shipped one), or None to train one here (--train-oracle,
-    or no shipped one found: then for `train_steps`)."""
-    name = os.path.join("oracles", f"{env_id}__sac_oracle.pt")
+def load_oracle(args: Args, path: str | None, train: bool, train_steps: int) -> dict | None:
+    """The oracle checkpoint to use (--oracle-path, else the shipped one of the run's contact), or None to train one
+    here (--train-oracle, or no shipped one found: then for `train_steps`)."""
+    env_id, contact = args.env_id, contact_of(args.env_id, args.contact)
+    name = os.path.join("oracles", f"{env_id}__sac_oracle{'_gymnasium_contact' if contact == 'gymnasium' else ''}.pt")
     if path is None and not train:  # oracles/ beside the script, in the cwd, then above either
         script_up, cwd_up = directories_up(REPO_DIR), directories_up(os.getcwd())
         places = list(dict.fromkeys(os.path.join(d, name) for d in [script_up[0], cwd_up[0], *script_up, *cwd_up]))
@@ -1447,7 +1473,11 @@ def load_oracle(env_id: str, path: str | None, train: bool, train_steps: int) ->
             say(f"[oracle] no shipped teacher found (looked for {name} beside the script, in the working directory and "
                 f"in every directory above them: {', '.join(places)}); training one here for {train_steps} env steps "
                 f"(~100 steps/s on one core). To skip this, {hint}", sys.stderr)  # fmt: skip
-    return None if path is None else {**read_checkpoint(path, "--oracle-path", env_id), "path": path}
+    if path is None:
+        return None
+    ckpt = read_checkpoint(path, "--oracle-path", env_id)
+    check_contact(ckpt.get("contact", legacy_contact(env_id)), args, f"--oracle-path {path}")
+    return {**ckpt, "path": path}
 
 
 def directories_up(path: str) -> list[str]:  # the directory and each one above it, to the root
@@ -1471,14 +1501,14 @@ def save_critic(path: str, q_net: QEnsemble, obs_dim: int, act_dim: int, **extra
     save_atomic({"state_dict": state_dict_cpu(q_net), "kwargs": kwargs, **extra}, path)
 
 
-def oracle_checkpoint(actor: Actor, qf: QEnsemble, env_id: str, steps: int, seed: int) -> dict:  # oracle_train's
+def oracle_checkpoint(actor: Actor, qf: QEnsemble, env_id: str, steps: int, seed: int, contact) -> dict:
     obs_dim, act_dim = actor.fc1.in_features, actor.fc_mean.out_features
     ckpt = {"algorithm": "sac", "env_id": env_id, "obs_shape": [obs_dim], "act_shape": [act_dim]}
     ckpt["kwargs"] = {"obs_dim": obs_dim, "act_dim": act_dim, "hidden": HIDDEN_SIZE}
     ckpt["action_low"] = (actor.action_bias - actor.action_scale).cpu()
     ckpt["action_high"] = (actor.action_bias + actor.action_scale).cpu()
     ckpt.update(actor_state_dict=state_dict_cpu(actor), qf_state_dict=state_dict_cpu(qf), random_starts=True)
-    return {**ckpt, "training_steps": steps, "training_seed": seed}
+    return {**ckpt, "training_steps": steps, "training_seed": seed, "contact": contact}
 
 
 # saved days (--save-buffer, --sleep-from): a day is deterministic, so it is saved once and slept on many times
@@ -1524,8 +1554,7 @@ def load_day(run_dir: str) -> dict:
         day["format"] = DAY_FORMAT
     if not isinstance(day, dict) or day.get("format") != DAY_FORMAT:  # this script's or a copy's, under any name
         raise InputError(f"--sleep-from {path}: not a day saved by this script's --save-buffer ({DAY_FORMAT})")
-    if day["env_id"] == "Pusher-v4" and mujoco_major() >= 3:
-        raise InputError(f"--sleep-from {path}: the day is on Pusher-v4, which needs mujoco<3 (a separate venv)")
+    day["day_args"].setdefault("contact", legacy_contact(day["env_id"]))  # saved before the setting
     ran = {k: day["day_args"].get(k, v) for k, v in DAY_CONSTANTS.items()}
     if ran != DAY_CONSTANTS:
         raise InputError(f"--sleep-from {path}: the day ran with {ran}, this script has {DAY_CONSTANTS}")
@@ -1601,9 +1630,6 @@ def check_args(args: Args) -> None:
         raise InputError(f"--num-threads {args.num_threads} is more than this machine's {cpus} CPUs")
     if args.track and importlib.util.find_spec("wandb") is None:
         raise InputError("--track needs Weights & Biases: `pip install wandb`, or run without --track")
-    if args.env_id == "Pusher-v4" and mujoco_major() >= 3:
-        raise InputError("Pusher-v4 needs mujoco<3 (Gymnasium issue 950); use --env-id Pusher-v5, or run in a separate "
-                         "venv with `pip install mujoco==2.3.7`")  # fmt: skip
     check_env(args)
     steps = f"--tamer-total-timesteps ({args.tamer_total_timesteps})"
     if args.tamer_learning_starts >= args.tamer_total_timesteps:
@@ -1638,7 +1664,7 @@ def check_env(args: Args) -> None:
     """--env-id: a Gymnasium env with a flat observation and continuous actions, whose episodes can be judged (one
     random step shows whether `info` has --success-info-key). Raises InputError."""
     try:
-        env = gym.make(args.env_id)
+        env = make_env(args.env_id, args.seed)
     except Exception as e:  # unknown id, a missing extra (box2d, ...), a version that needs other packages
         first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
         if os.environ.get("MUJOCO_GL") and re.search(r"\bgl[A-Z]|OSMesa|EGL|GLFW|MUJOCO_GL", str(e)):  # GL, not the id
@@ -1681,6 +1707,23 @@ def mujoco_major() -> int:
     return int(importlib.import_module("mujoco").__version__.split(".")[0])
 
 
+def contact_of(env_id: str, contact: str) -> str | None:
+    """The contact a run has, as recorded: none off Pusher; MuJoCo 2.3's under mujoco<3, where Gymnasium's is it."""
+    return None if env_id not in PUSHER_IDS else "mujoco-2.3" if mujoco_major() < 3 else contact
+
+
+def legacy_contact(env_id: str) -> str | None:  # a teacher or day saved before the setting: v4's on 2.3.7, v5's on 4
+    return {"Pusher-v4": "mujoco-2.3", "Pusher-v5": "gymnasium"}.get(env_id)
+
+
+def check_contact(made_under: str | None, args: Args, where: str) -> None:
+    """A teacher or a saved day runs only under the contact it was made under (InputError, one line, otherwise)."""
+    ours = contact_of(args.env_id, args.contact)
+    if None not in (made_under, ours) and made_under != ours:
+        raise InputError(f"{where}: made under the {made_under} contact, and this run's is {ours}; pass --contact "
+                         f"{made_under}, or a teacher or day made under {ours}")  # fmt: skip
+
+
 def print_results(summary: dict, run_dir: str) -> None:
     for p in POLICIES if summary["status"] == "completed" else ():
         e = {k[len("eval/") :].replace(p, "@"): v for k, v in summary.items() if k.startswith("eval/")}
@@ -1701,6 +1744,7 @@ def cli(args: Args, make_teacher=None) -> int:
     try:
         if args.sleep_from is not None:  # the day's flags replace this run's: its numbers are the day's
             saved = load_day(args.sleep_from)
+            check_contact(saved["day_args"]["contact"], args, f"--sleep-from {args.sleep_from}")
             flags = {f.name for f in fields(args)}
             args = dataclasses.replace(args, **{k: v for k, v in saved["day_args"].items() if k in flags})
             print(f"[day] sleeping on the day saved in {args.sleep_from} ({args.env_id}, seed {args.seed}, "
@@ -1712,7 +1756,7 @@ def cli(args: Args, make_teacher=None) -> int:
         if args.capture_video:
             check_video(args.env_id)
         if saved is None:
-            oracle_ckpt = load_oracle(args.env_id, args.oracle_path, args.train_oracle, args.oracle_total_timesteps)
+            oracle_ckpt = load_oracle(args, args.oracle_path, args.train_oracle, args.oracle_total_timesteps)
         check_writable("runs")
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)

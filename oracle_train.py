@@ -25,7 +25,7 @@ import sys
 import time
 import zipfile
 from dataclasses import asdict, dataclass, fields, replace
-from typing import Annotated, get_type_hints
+from typing import Annotated, Literal, get_type_hints
 
 import gymnasium as gym
 import numpy as np
@@ -99,6 +99,9 @@ class Args:
     # Oracle (SAC) arguments
     env_id: str = "Pusher-v5"
     """Pusher-v5, Pusher-v4 (where mujoco<3 is installed), any continuous-action Gymnasium env (SAC), or a maze id"""
+    contact: Literal["mujoco-2.3", "gymnasium"] = "mujoco-2.3"
+    """Pusher's contact: mujoco-2.3 as MuJoCo 2.3 made it (contact_as_mujoco23: the arm pushes the object); gymnasium:
+    as the installed MuJoCo makes it (on mujoco>=3 the arm passes through the object, Gymnasium #1576)"""
     reward_dist_weight: Annotated[float | None, POSITIVE] = None
     """the weight of the object-to-goal distance in the training env's reward (Pusher-v5's reward_dist_weight; None:
     the env's, 1): the teacher's Q then values that reward (docs/protocol.md). The evaluations that choose and judge
@@ -210,8 +213,10 @@ class Args:
         return Outcome(self.success_info_key, self.success_distance, self.success_return)
 
 
-def make_env(env_id: str, seed: int, reward_dist_weight: float | None = None) -> gym.Env:
-    env = gym.make(env_id, **env_kwargs(reward_dist_weight))
+def make_env(env_id: str, seed: int, reward_dist_weight: float | None = None, contact="mujoco-2.3", **render):
+    env = gym.make(env_id, **env_kwargs(reward_dist_weight), **render)
+    if env_id in PUSHER_IDS and contact == "mujoco-2.3":
+        contact_as_mujoco23(env.unwrapped.model)
     env.action_space.seed(seed)
     env.observation_space.seed(seed)
     return env
@@ -219,6 +224,28 @@ def make_env(env_id: str, seed: int, reward_dist_weight: float | None = None) ->
 
 def env_kwargs(reward_dist_weight: float | None) -> dict:
     return {} if reward_dist_weight is None else {"reward_dist_weight": reward_dist_weight}
+
+
+# held source-identical in inform_sac_pusher.py and oracle_train.py (a test): a change goes into both
+def contact_as_mujoco23(model) -> None:
+    """Every body's body_invweight0, which scales how soft its contacts are, set as MuJoCo 2.3 computed it: the mean
+    diagonal of J M^-1 J^T at qpos0 (armature in M), for the translation and the rotation of the body's centre of mass.
+    MuJoCo >= 3 takes a body that moves only on slide joints (Pusher's object) by its mass alone: ~1e5 times softer."""
+    import mujoco
+
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)  # at qpos0: the mass matrix and its factorisation
+    jac, solved = np.zeros((6, model.nv)), np.zeros((6, model.nv))
+    for body in range(1, model.nbody):
+        mujoco.mj_jacBodyCom(model, data, jac[:3], jac[3:], body)
+        mujoco.mj_solveM(model, data, solved, jac)
+        model.body_invweight0[body] = (jac * solved).sum(1).reshape(2, 3).mean(1)
+
+
+def contact_of(env_id: str, contact: str) -> str | None:
+    """The contact a run has, as recorded: none off Pusher; MuJoCo 2.3's under mujoco<3, where Gymnasium's is it."""
+    mujoco_major = int(importlib.import_module("mujoco").__version__.split(".")[0])
+    return None if env_id not in PUSHER_IDS else "mujoco-2.3" if mujoco_major < 3 else contact
 
 
 # ALGO LOGIC: the networks (copied verbatim from inform_sac_pusher.py, CleanRL style; a test keeps the copies alike)
@@ -482,7 +509,7 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
     torch.backends.cudnn.deterministic = args.torch_deterministic
     torch.use_deterministic_algorithms(args.torch_deterministic)
 
-    env = make_env(args.env_id, args.seed, args.reward_dist_weight)
+    env = make_env(args.env_id, args.seed, args.reward_dist_weight, args.contact)
     obs_dim, act_dim = int(np.prod(env.observation_space.shape)), int(np.prod(env.action_space.shape))
     acts_first = args.init_from is not None or args.clone_steps > 0  # the actor acts from the first step
     sac = SAC(obs_dim, act_dim, env.action_space.low, env.action_space.high, args.hidden_size, args.policy_lr,
@@ -560,8 +587,8 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
             writer.add_scalar("losses/ent_coef", sac.log_ent_coef.exp().item(), step)
             writer.add_scalar("charts/SPS", (step - step_last) / max(time.time() - t_last, 1e-9), step)
         if evaluated := step % args.eval_frequency == 0 or step == args.total_timesteps:
-            last_eval = evaluate(sac.actor, gym.make(args.env_id), args.eval_episodes, SELECTION_EVAL_SEED, device,
-                                 outcome)  # fmt: skip
+            last_eval = evaluate(sac.actor, make_env(args.env_id, args.seed, contact=args.contact), args.eval_episodes,
+                                 SELECTION_EVAL_SEED, device, outcome)  # fmt: skip
             selection.offer(last_eval, step, save_oracle, writer)
         if step % report_every == 0 or evaluated:
             print_progress(step, start_step, args.total_timesteps, t0, last_eval, selection)
@@ -587,8 +614,8 @@ def write_oracle(args: Args, sac: SAC, selection: Selection, run_dir: str, outpu
     best = torch.load(selection.path, weights_only=True, map_location="cpu")
     sac.actor.load_state_dict(best["actor_state_dict"])
     sac.qf.load_state_dict(best["qf_state_dict"])
-    final = evaluate(sac.actor, gym.make(args.env_id), args.final_eval_episodes, FINAL_EVAL_SEED, device,
-                     args.outcome())  # fmt: skip
+    final = evaluate(sac.actor, make_env(args.env_id, args.seed, contact=args.contact), args.final_eval_episodes,
+                     FINAL_EVAL_SEED, device, args.outcome())  # fmt: skip
     chosen = best["evaluation"]
     print(f"[oracle] best evaluation at step {best['training_steps']}: success rate {chosen['success_rate']:.2f}, "
           f"final distance {chosen['final_distance']:.4f} over {chosen['episodes']:.0f} episodes; held-out eval over "
@@ -879,7 +906,7 @@ def oracle_checkpoint(sac: SAC, args: Args, step: int, evaluation: dict) -> dict
             "qf_state_dict": {k: v.detach().cpu().clone() for k, v in sac.qf.state_dict().items()},
             "training_steps": int(step), "training_seed": args.seed, "random_starts": True,
             "bf16": bool(args.bf16), "num_threads": int(args.num_threads),
-            "reward_dist_weight": args.reward_dist_weight,
+            "reward_dist_weight": args.reward_dist_weight, "contact": contact_of(args.env_id, args.contact),
             "evaluation": {k: float(v) for k, v in evaluation.items()}}  # fmt: skip
 
 
@@ -1027,9 +1054,9 @@ VIDEO_SIZE = 480  # pixels, square; a multiple of 16, as H.264 wants
 VIDEO_EPISODES = 3
 
 
-def video_env(env_id: str, size: int = VIDEO_SIZE) -> gym.Env:
+def video_env(env_id: str, size: int = VIDEO_SIZE, contact: str = "mujoco-2.3") -> gym.Env:
     """The env, rendering every reset and step into one list; Pusher without shadows (3x faster in software GL)."""
-    env = gym.make(env_id, render_mode="rgb_array", width=size, height=size)
+    env = make_env(env_id, 0, contact=contact, render_mode="rgb_array", width=size, height=size)
     if env_id in PUSHER_IDS:  # both are read when the first frame creates the renderer
         camera = {**VIDEO_CAMERA, "lookat": np.array(VIDEO_CAMERA["lookat"]), "azimuth": 180.0, "trackbodyid": -1}
         env.unwrapped.mujoco_renderer.default_cam_config = camera
@@ -1052,7 +1079,7 @@ def record_teacher(args: Args, actor: Actor, run_dir: str, device: torch.device)
     """The oracle's first VIDEO_EPISODES held-out evaluation episodes, back to back in videos/oracle.mp4, and their
     evaluation (the held-out one's on its first episodes) in videos/videos.json."""
     os.makedirs(os.path.join(run_dir, "videos"), exist_ok=True)
-    env, t0 = video_env(args.env_id), time.time()
+    env, t0 = video_env(args.env_id, contact=args.contact), time.time()
     evaluation = evaluate(actor, env, VIDEO_EPISODES, FINAL_EVAL_SEED, device, args.outcome())
     frames = env.render()
     from inform_utils.videos import write_video  # checked by check_video
