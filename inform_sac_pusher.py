@@ -256,7 +256,7 @@ def make_env(env_id: str, seed: int, obstacles=None, contact: str = "mujoco-2.3"
         env = gym.make(env_id, **render)
     else:
         env = pusher_with_boxes(env_id, obstacles, **render)
-    if env_id in PUSHER_IDS and contact == "mujoco-2.3":
+    if env_id in PUSHER_IDS and contact == "mujoco-2.3" and mujoco_major() >= 3:  # mujoco<3 has it (to the last bit)
         contact_as_mujoco23(env.unwrapped.model)
     env.action_space.seed(seed)
     env.observation_space.seed(seed)
@@ -1213,8 +1213,11 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
     status, failure, phase = "completed", None, "startup"
     try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
         run_dir = make_run_dir(f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}")
-        contact = summary["contact"] = contact_of(args.env_id, args.contact)  # Pusher's contact, in the first line
-        print(f"run directory: {run_dir}" + (f" | the {contact} contact" if contact else ""), flush=True)
+        if contact := contact_of(args.env_id, args.contact):  # Pusher's contact, the run's first line
+            why = "the arm pushes the object" if contact == CONTACTS[0] else "on mujoco>=3 the arm passes through it"
+            print(f"[env] {args.env_id}, the {contact} contact ({why}; --contact {CONTACTS})", flush=True)
+        summary["contact"] = contact
+        print(f"run directory: {run_dir}", flush=True)  # only now: bad input was refused, nothing half-written is left
         mujoco_log_in(run_dir)
         StopSignals.check()  # a stop while starting ends here, with a summary in the run directory
         random.seed(args.seed)
@@ -1459,25 +1462,24 @@ def actor_from_checkpoint(ckpt: dict) -> Actor:  # a saved actor, or an oracle's
     return actor
 
 
-def load_oracle(args: Args, path: str | None, train: bool, train_steps: int) -> dict | None:
+def load_oracle(args: Args) -> dict | None:
     """The oracle checkpoint to use (--oracle-path, else the shipped one of the run's contact), or None to train one
-    here (--train-oracle, or no shipped one found: then for `train_steps`)."""
-    env_id, contact = args.env_id, contact_of(args.env_id, args.contact)
-    name = os.path.join("oracles", f"{env_id}__sac_oracle{'_gymnasium_contact' if contact == 'gymnasium' else ''}.pt")
-    if path is None and not train:  # oracles/ beside the script, in the cwd, then above either
+    here (--train-oracle, or no shipped one found: then for --oracle-total-timesteps)."""
+    env_id, path, gymnasium = args.env_id, args.oracle_path, contact_of(args.env_id, args.contact) == CONTACTS[1]
+    name = os.path.join("oracles", f"{env_id}__sac_oracle{'_gymnasium_contact' if gymnasium else ''}.pt")
+    if path is None and not args.train_oracle:  # oracles/ beside the script, in the cwd, then above either
         script_up, cwd_up = directories_up(REPO_DIR), directories_up(os.getcwd())
         places = list(dict.fromkeys(os.path.join(d, name) for d in [script_up[0], cwd_up[0], *script_up, *cwd_up]))
         path = next((p for p in places if os.path.isfile(p)), None)
         if path is None:  # a copied script far from the repository: say so before an hour of training starts
             hint = "pass --oracle-path PATH (a checkpoint of oracle_train.py, as in oracles/), or --train-oracle"
             say(f"[oracle] no shipped teacher found (looked for {name} beside the script, in the working directory and "
-                f"in every directory above them: {', '.join(places)}); training one here for {train_steps} env steps "
-                f"(~100 steps/s on one core). To skip this, {hint}", sys.stderr)  # fmt: skip
-    if path is None:
-        return None
-    ckpt = read_checkpoint(path, "--oracle-path", env_id)
-    check_contact(ckpt.get("contact", legacy_contact(env_id)), args, f"--oracle-path {path}")
-    return {**ckpt, "path": path}
+                f"in every directory above them: {', '.join(places)}); training one here for "
+                f"{args.oracle_total_timesteps} env steps (~100 steps/s on one core). To skip this, {hint}",
+                sys.stderr)  # fmt: skip
+    if path is not None:
+        check_contact(ckpt := read_checkpoint(path, "--oracle-path", env_id), args, f"--oracle-path {path}")
+        return {**ckpt, "path": path}
 
 
 def directories_up(path: str) -> list[str]:  # the directory and each one above it, to the root
@@ -1554,7 +1556,6 @@ def load_day(run_dir: str) -> dict:
         day["format"] = DAY_FORMAT
     if not isinstance(day, dict) or day.get("format") != DAY_FORMAT:  # this script's or a copy's, under any name
         raise InputError(f"--sleep-from {path}: not a day saved by this script's --save-buffer ({DAY_FORMAT})")
-    day["day_args"].setdefault("contact", legacy_contact(day["env_id"]))  # saved before the setting
     ran = {k: day["day_args"].get(k, v) for k, v in DAY_CONSTANTS.items()}
     if ran != DAY_CONSTANTS:
         raise InputError(f"--sleep-from {path}: the day ran with {ran}, this script has {DAY_CONSTANTS}")
@@ -1712,16 +1713,18 @@ def contact_of(env_id: str, contact: str) -> str | None:
     return None if env_id not in PUSHER_IDS else "mujoco-2.3" if mujoco_major() < 3 else contact
 
 
-def legacy_contact(env_id: str) -> str | None:  # a teacher or day saved before the setting: v4's on 2.3.7, v5's on 4
-    return {"Pusher-v4": "mujoco-2.3", "Pusher-v5": "gymnasium"}.get(env_id)
+def made_under(record: dict, env_id: str) -> str | None:
+    """The contact a teacher or a day was made under; one saved before the setting: Pusher-v4's on mujoco 2.3.7,
+    Pusher-v5's on mujoco 4."""
+    return record.get("contact", {"Pusher-v4": CONTACTS[0], "Pusher-v5": CONTACTS[1]}.get(env_id))
 
 
-def check_contact(made_under: str | None, args: Args, where: str) -> None:
-    """A teacher or a saved day runs only under the contact it was made under (InputError, one line, otherwise)."""
-    ours = contact_of(args.env_id, args.contact)
-    if None not in (made_under, ours) and made_under != ours:
-        raise InputError(f"{where}: made under the {made_under} contact, and this run's is {ours}; pass --contact "
-                         f"{made_under}, or a teacher or day made under {ours}")  # fmt: skip
+def check_contact(record: dict, args: Args, where: str) -> None:
+    """A teacher or a saved day runs only under the contact it was made under: InputError, one line, if not."""
+    ours, theirs = contact_of(args.env_id, args.contact), made_under(record, args.env_id)
+    if None not in (theirs, ours) and theirs != ours:
+        raise InputError(f"{where}: made under the {theirs} contact, and this run's is {ours}; pass --contact "
+                         f"{theirs}, or a teacher or day made under {ours}")  # fmt: skip
 
 
 def print_results(summary: dict, run_dir: str) -> None:
@@ -1744,9 +1747,9 @@ def cli(args: Args, make_teacher=None) -> int:
     try:
         if args.sleep_from is not None:  # the day's flags replace this run's: its numbers are the day's
             saved = load_day(args.sleep_from)
-            check_contact(saved["day_args"]["contact"], args, f"--sleep-from {args.sleep_from}")
-            flags = {f.name for f in fields(args)}
-            args = dataclasses.replace(args, **{k: v for k, v in saved["day_args"].items() if k in flags})
+            flags = {f.name for f in fields(args)}  # but the contact: a day under another one is refused, below
+            args = dataclasses.replace(args, **{k: v for k, v in saved["day_args"].items() if k in flags - {"contact"}})
+            check_contact(saved["day_args"], args, f"--sleep-from {args.sleep_from}")
             print(f"[day] sleeping on the day saved in {args.sleep_from} ({args.env_id}, seed {args.seed}, "
                   f"{saved['obs'].shape[0]} steps); its day flags replace this run's", flush=True)  # fmt: skip
             unknown = {k: v for k, v in saved["day_args"].items() if k not in flags and k not in DAY_CONSTANTS}
@@ -1756,7 +1759,7 @@ def cli(args: Args, make_teacher=None) -> int:
         if args.capture_video:
             check_video(args.env_id)
         if saved is None:
-            oracle_ckpt = load_oracle(args, args.oracle_path, args.train_oracle, args.oracle_total_timesteps)
+            oracle_ckpt = load_oracle(args)
         check_writable("runs")
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)

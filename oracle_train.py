@@ -215,7 +215,7 @@ class Args:
 
 def make_env(env_id: str, seed: int, reward_dist_weight: float | None = None, contact="mujoco-2.3", **render):
     env = gym.make(env_id, **env_kwargs(reward_dist_weight), **render)
-    if env_id in PUSHER_IDS and contact == "mujoco-2.3":
+    if contact_of(env_id, contact) == "mujoco-2.3" and mujoco_major() >= 3:  # mujoco<3 has it (to the last bit)
         contact_as_mujoco23(env.unwrapped.model)
     env.action_space.seed(seed)
     env.observation_space.seed(seed)
@@ -244,8 +244,11 @@ def contact_as_mujoco23(model) -> None:
 
 def contact_of(env_id: str, contact: str) -> str | None:
     """The contact a run has, as recorded: none off Pusher; MuJoCo 2.3's under mujoco<3, where Gymnasium's is it."""
-    mujoco_major = int(importlib.import_module("mujoco").__version__.split(".")[0])
-    return None if env_id not in PUSHER_IDS else "mujoco-2.3" if mujoco_major < 3 else contact
+    return None if env_id not in PUSHER_IDS else "mujoco-2.3" if mujoco_major() < 3 else contact
+
+
+def mujoco_major() -> int:
+    return int(importlib.import_module("mujoco").__version__.split(".")[0])
 
 
 # ALGO LOGIC: the networks (copied verbatim from inform_sac_pusher.py, CleanRL style; a test keeps the copies alike)

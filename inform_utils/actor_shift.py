@@ -84,7 +84,7 @@ def shift(run_dir: str, perturbations: int, generator: torch.Generator) -> dict:
         path = os.path.join(run_dir, f"{name}_actor.pt")
         actors[name] = isp.actor_from_checkpoint(isp.read_checkpoint(path, "actor", run["env_id"]))
     tamer, inform = actors["tamer"], actors["inform"]
-    env = isp.make_env(run["env_id"], summary["seed"])
+    env = isp.make_env(run["env_id"], summary["seed"], contact=isp.made_under(run, run["env_id"]) or isp.CONTACTS[0])
     outcome = isp.Outcome(run.get("success_info_key", "reward_dist"), run["success_distance"],
                           run.get("success_return"))  # fmt: skip
     tamer_episode = episode(tamer, env, summary["seed"], outcome, keep_states=True)

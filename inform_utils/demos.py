@@ -10,6 +10,7 @@ clones); and the pretraining that --clone-steps runs before SAC's first step.
 import hashlib
 import zipfile
 
+import mujoco
 import numpy as np
 import torch
 
@@ -30,10 +31,13 @@ def read_demos(path: str, env, args, resume_state: dict | None, error: type[Exce
     try:
         with np.load(path, allow_pickle=False) as npz:
             data = {name: npz[name] for name in (*FIELDS, *EPISODE_FIELDS, "env_id")}
+            contact = str(npz["contact"]) if "contact" in npz else "gymnasium"  # saved before the setting: mujoco 4's
     except (OSError, ValueError, KeyError, zipfile.BadZipFile, EOFError) as e:
         raise error(f"--demos {path}: not demonstrations of pusher_control --save-demos ({type(e).__name__})") from None
     if str(data["env_id"]) != env_id:
         raise error(f"--demos {path}: demonstrations of {data['env_id']}, not {env_id}")
+    if contact != (ours := args.contact if int(mujoco.__version__.split(".")[0]) >= 3 else "mujoco-2.3"):
+        raise error(f"--demos {path}: made under the {contact} contact, this run's is {ours}; pass --contact {contact}")
     steps, episodes = len(data["rew"]), len(data["episode_seed"])
     obs_shape, act_shape = (steps, *env.observation_space.shape), (steps, *env.action_space.shape)
     fits = [

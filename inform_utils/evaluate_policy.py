@@ -58,6 +58,8 @@ class Pusher:
     """as the run's --success-info-key"""
     success_return: float | None = None
     """as the run's --success-return"""
+    contact: Literal["mujoco-2.3", "gymnasium"] = "mujoco-2.3"
+    """Pusher's contact, as the run's --contact (runs before the setting: Pusher-v4 mujoco-2.3, Pusher-v5 gymnasium)"""
     num_threads: int = 1
     """torch CPU threads"""
     stream: int = 0
@@ -100,7 +102,7 @@ def evaluate_pusher(args: Pusher) -> dict:
     torch.set_num_threads(run.num_threads)
     actor = isp.actor_from_checkpoint(isp.read_checkpoint(args.policy, "policy", run.env_id))
     outcome = run.outcome()
-    evaluator = isp.Evaluator(run.env_id, run.seed, run.random_starts, outcome, writer=None)
+    evaluator = isp.Evaluator(run.env_id, run.seed, run.random_starts, outcome, None, run.contact)
     if args.stream:
         if args.stream < 0:
             raise isp.InputError(f"--stream {args.stream}: must be >= 0 (0: the run's own stream)")
@@ -109,7 +111,7 @@ def evaluate_pusher(args: Pusher) -> dict:
     obstacle = {"obstacle/skipped": isp.obstacle_skipped(run.env_id, run.obstacle_episodes)}
     if obstacle["obstacle/skipped"] is None:
         test = (run.env_id, run.seed, run.obstacle_layout, run.obstacle_episodes, outcome)
-        obstacle, _, _ = isp.obstacle_test(*test, {"policy": actor}, evaluator.generator)
+        obstacle, _, _ = isp.obstacle_test(*test, {"policy": actor}, evaluator.generator, run.contact)
     evaluator.close()
     return {**metrics, **obstacle}
 

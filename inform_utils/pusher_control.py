@@ -205,13 +205,14 @@ def run_episode(env: gym.Env, demonstrator: PushingDemonstrator | MPPIDemonstrat
     return abs(float(info["reward_dist"])), ep_return
 
 
-def save_demos(path: str, record: dict, env_id: str, demonstrator: str, seeds, distances, success_distance) -> None:
+def save_demos(path: str, record: dict, env_id: str, demonstrator: str, seeds, distances, success_distance,
+               contact: str | None) -> None:  # fmt: skip
     """The demonstrations as one .npz of plain arrays (np.load(..., allow_pickle=False) reads it): DEMO_FIELDS per
     step (float32), per episode its reset seed, final distance and success; written whole or not at all."""
     arrays = {name: np.asarray(values, dtype=np.float32) for name, values in record.items()}
     episodes = {"episode_seed": np.asarray(seeds, dtype=np.int64), "episode_distance": np.asarray(distances),
                 "episode_success": np.asarray(distances) < success_distance}  # fmt: skip
-    meta = {"env_id": np.str_(env_id), "demonstrator": np.str_(demonstrator)}
+    meta = {"env_id": np.str_(env_id), "demonstrator": np.str_(demonstrator), "contact": np.str_(contact)}
     tmp = f"{path}.tmp{os.getpid()}.npz"
     try:
         np.savez_compressed(tmp, **arrays, **episodes, **meta)
@@ -224,7 +225,9 @@ def save_demos(path: str, record: dict, env_id: str, demonstrator: str, seeds, d
 @dataclass
 class Args:
     env_id: str = "Pusher-v5"
-    """the Gymnasium env (Pusher-v4 needs mujoco 2.3.7: the .venv-v4)"""
+    """the Gymnasium env (Pusher-v4 on mujoco>=3: its model in its own class, as inform_sac_pusher.py builds it)"""
+    contact: Literal[isp.CONTACTS] = "mujoco-2.3"
+    """Pusher's contact (inform_sac_pusher.py --contact); the MPC plans on the env's own model, so on it too"""
     episodes: int = 100
     """episodes, from reset seeds first_seed .. first_seed + episodes - 1"""
     first_seed: int = 0
@@ -261,7 +264,7 @@ def main(args: Args) -> None:
         raise SystemExit(f"--mpc-ctrl-weight {args.mpc_ctrl_weight}: a price of torque is 0 or more")
     if args.mpc_samples < 2:
         raise SystemExit(f"--mpc-samples {args.mpc_samples}: MPPI averages 2 or more action sequences")
-    env = gym.make(args.env_id)
+    env = isp.make_env(args.env_id, 0, contact=args.contact)
     demonstrator = make_demonstrator(args, env)
     demonstrator_name = "scripted"
     if args.demonstrator == "mpc":
@@ -292,7 +295,9 @@ def main(args: Args) -> None:
                   f"{speeds['peak_closing_speed']:.3f} m/s at its fastest, {speeds['last_closing_speed']:.3f} at "
                   f"the end; {speeds['still_closing']:.2f} still closing")  # fmt: skip
     if record is not None:
-        save_demos(args.save_demos, record, args.env_id, demonstrator_name, seeds, distances, args.success_distance)
+        contact = isp.contact_of(args.env_id, args.contact)
+        save_demos(args.save_demos, record, args.env_id, demonstrator_name, seeds, distances, args.success_distance,
+                   contact)  # fmt: skip
         print(f"{len(record['rew'])} steps of {args.episodes} episodes written to {args.save_demos}")
 
 

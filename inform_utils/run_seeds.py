@@ -228,17 +228,24 @@ def campaign_args(args: Args, point: Point) -> dict | None:
     return _campaign_args[key]
 
 
+# a setting whose default is not what runs before it ran under: Pusher's contact (Pusher-v4's runs were made on mujoco
+# 2.3.7, whose contact the 2.3 one is; Pusher-v5's on mujoco 4's own)
+BEFORE_THE_SETTING = {"contact": lambda recorded: {"Pusher-v5": "gymnasium"}.get(recorded.get("env_id"), "mujoco-2.3")}
+
+
 def is_campaigns(recorded: dict, campaign: dict) -> bool:
     """A run's recorded args against the campaign's: every field both know is equal (but the seed, checked by the
     caller); a field the run does not record (added to the script later) must be at the script's default, as it was
-    then; one the script no longer has is passed over."""
+    then (or at BEFORE_THE_SETTING's value); one the script no longer has is passed over."""
     for name, value in campaign["args"].items():
         if name == "seed":
             continue
         if name in recorded:
             if recorded[name] != value:
                 return False
-        elif value != campaign["defaults"].get(name):
+        elif value != (
+            BEFORE_THE_SETTING[name](recorded) if name in BEFORE_THE_SETTING else campaign["defaults"].get(name)
+        ):
             return False
     return True
 

@@ -1,7 +1,8 @@
 """Check a Pusher teacher against the expert bar (docs/protocol.md, "Oracles and the expert bar"), on starts it was
 neither trained nor chosen on: deterministic (mean-action) episodes from random starts on a block of reset seeds of
 its own, and from the fixed start of each seed the results use. Prints one JSON object: success rate, the final
-distances' mean and quantiles, the return, and each fixed start's final distance; --out writes it too. And the pace
+distances' mean and quantiles, the return, and each fixed start's final distance; --out writes it too. Under the
+contact it was trained under (as recorded), or --contact's. And the pace
 of the push: how fast the object closes on the goal, in the successful and the failed episodes apart (on Pusher-v5,
 under MuJoCo 4's soft contact, a failure is mostly a push still under way when the episode ends).
 
@@ -13,6 +14,7 @@ import os
 import sys
 import warnings
 from dataclasses import dataclass, field
+from typing import Literal
 
 import gymnasium as gym
 import numpy as np
@@ -40,6 +42,8 @@ class Args:
     """seeds whose fixed start (reset with the seed, the paper's protocol) is tested too"""
     out: str | None = None
     """also write the JSON here"""
+    contact: Literal[isp.CONTACTS] | None = None
+    """Pusher's contact to check it under (inform_sac_pusher.py --contact); None: the one it was trained under"""
 
 
 @torch.no_grad()
@@ -94,7 +98,9 @@ def read_teacher(path: str) -> dict:
 def check(args: Args) -> dict:
     ckpt = read_teacher(args.checkpoint)
     actor = isp.actor_from_checkpoint(ckpt)  # the kwargs may hold the critics' too (layer_norm)
-    env = gym.make(ckpt["env_id"])
+    trained_under = isp.made_under(ckpt, ckpt["env_id"])
+    contact = isp.contact_of(ckpt["env_id"], args.contact or trained_under or isp.CONTACTS[0])
+    env = isp.make_env(ckpt["env_id"], 0, contact=contact)
     runs = [final_distance(actor, env, args.reset_seed + ep) for ep in range(args.episodes)]
     distances, paths = np.array([d for d, _, _ in runs]), np.array([path for _, _, path in runs])
     fixed = {seed: final_distance(actor, env, seed)[0] for seed in args.fixed_seeds}
@@ -107,6 +113,8 @@ def check(args: Args) -> dict:
         "checkpoint": args.checkpoint,
         "env_id": ckpt["env_id"],
         "training_steps": int(ckpt.get("training_steps", -1)),
+        "contact": contact,
+        "trained_under": trained_under,
         "random_starts": {
             "episodes": args.episodes,
             "first_reset_seed": args.reset_seed,

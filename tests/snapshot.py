@@ -27,6 +27,8 @@ BASE = "cdfc757"  # the code before the core scripts were cut down to CleanRL's 
 VALUES = os.path.join(REPO, "tests", "snapshot_values.json")
 # a flag renamed since BASE: old name -> new name (the value is kept). Filled in by a change that renames a flag.
 RENAMED: dict[str, str] = {}
+# Pusher-v5's values were recorded under MuJoCo 4's own contact: a flag since the 2.3 contact became the default
+GYMNASIUM_CONTACT = ["--contact", "gymnasium"]
 
 PUSHER = "inform_sac_pusher.py"
 MAZE = "inform_dqn_gridworld.py"
@@ -412,7 +414,7 @@ def run_case(c: dict, code_dir: str, cwd: str, python: str, done: dict, form: st
     needed = done.get(c["needs"], "")
     cmd = [arg.replace("{day}", needed).replace("{file}", needed) for arg in c[form]]
     if form == "new":
-        cmd = [RENAMED.get(arg, arg) for arg in cmd]
+        cmd = [RENAMED.get(arg, arg) for arg in cmd] + (GYMNASIUM_CONTACT if c["name"].startswith("pusher_") else [])
     if cmd[0] != "-m":
         cmd[0] = os.path.join(code_dir, cmd[0])
     env = {**os.environ, "PYTHONPATH": code_dir, "OMP_NUM_THREADS": "1"}

@@ -11,6 +11,7 @@ of one seed.
 
 import contextlib
 import ctypes
+import importlib
 import json
 import os
 import random
@@ -27,6 +28,8 @@ import oracle_train as ot
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PUSHER_ORACLE = os.path.join(REPO, "oracles", "Pusher-v5__sac_oracle.pt")
+V5_SOFT_TEACHER = os.path.join(REPO, "oracles", "Pusher-v5__sac_oracle_890k_below_bar.pt")  # mujoco 4's own contact
+V4_TEACHER = os.path.join(REPO, "oracles", "Pusher-v4__sac_oracle.pt")  # trained under mujoco 2.3.7
 EVALUATE = "inform_utils/evaluate_policy.py"  # python -m inform_utils.evaluate_policy
 PWNED = "PWNED"  # the file the pickle payload would create if it were ever unpickled
 
@@ -93,6 +96,13 @@ CASES = [
     case("pusher-oracle-pickle-with-code", "inform_sac_pusher.py", "--oracle-path evil.pt",
          "--oracle-path evil.pt: cannot be read as a weights-only torch checkpoint (UnpicklingError)"),
     case("pusher-maze-oracle", "inform_sac_pusher.py", "--oracle-path maze_oracle.pt", "not an oracle checkpoint"),
+    case("pusher-teacher-of-mujoco-4s-contact", "inform_sac_pusher.py", f"--oracle-path {shlex.quote(V5_SOFT_TEACHER)}",
+         "made under the gymnasium contact, and this run's is mujoco-2.3; pass --contact gymnasium"),
+    case("pusher-v4-teacher-under-mujoco-4s-contact", "inform_sac_pusher.py",
+         f"--env-id Pusher-v4 --contact gymnasium --oracle-path {shlex.quote(V4_TEACHER)}",
+         "made under the mujoco-2.3 contact, and this run's is gymnasium; pass --contact mujoco-2.3"),
+    case("teacher_check-contact-not-a-choice", "inform_utils/teacher_check.py", f"{V4_TEACHER} --contact soft",
+         "invalid choice", tyro=True),
     case("pusher-oracle-wrong-shapes", "inform_sac_pusher.py", "--oracle-path bad_shape.pt",
          "shapes obs 5 act 7 do not match Pusher-v5 (obs 23, act 7)"),
     case("qlearning-reward-pickle-with-code", "q_learning_recovered_reward.py", "--reward-path evil.pt",
@@ -233,3 +243,31 @@ def test_an_unreadable_day_is_said_so(tmp_path, script):
     assert result.returncode == 2 and len(lines) == 1 and "Traceback" not in result.stderr, result.stderr[-2000:]
     assert lines[0] == "error: --sleep-from day/day.pt: cannot read it (Permission denied)", lines[0]
     assert sorted(os.listdir(tmp_path)) == ["day"]
+
+
+def test_a_day_made_under_the_other_contact_is_refused_and_slept_on_under_its_own(run_script):
+    """A day of mujoco 4's own contact (recorded in the day and the summary): a night under the 2.3 contact (the
+    default) is refused in one line that names the flag; with it, the night runs and records it."""
+    if int(importlib.import_module("mujoco").__version__.split(".")[0]) < 3:
+        pytest.skip("mujoco<3 has one contact")
+    tiny = ["--tamer-total-timesteps", "400", "--tamer-learning-starts", "200", "--tamer-batch-size", "32",
+            "--sleep-gradient-steps", "20", "--sleep-batch-size", "32", "--eval-episodes", "1",
+            "--obstacle-episodes", "1", "--authors-test-episodes", "1"]  # fmt: skip
+    made = run_script("inform_sac_pusher.py", *tiny, "--contact", "gymnasium", "--oracle-path", V5_SOFT_TEACHER,
+                      "--save-buffer")  # fmt: skip
+    assert made.returncode == 0, made.stderr[-2000:]
+    assert made.stdout.splitlines()[0].startswith("[env] Pusher-v5, the gymnasium contact ("), made.stdout[:300]
+    (day,) = (run_script.cwd / "runs").glob("*")
+    assert json.loads((day / "summary.json").read_text())["contact"] == "gymnasium"
+    assert torch.load(day / "day.pt", weights_only=True)["day_args"]["contact"] == "gymnasium"
+    before = snapshot(run_script.cwd)
+    refused = run_script("inform_sac_pusher.py", "--sleep-from", str(day), "--sleep-gradient-steps", "20")
+    lines = refused.stderr.strip().splitlines()
+    assert refused.returncode == 2 and len(lines) == 1, refused.stderr[-2000:]
+    assert lines[0] == (f"error: --sleep-from {day}: made under the gymnasium contact, and this run's is mujoco-2.3; "
+                        "pass --contact gymnasium, or a teacher or day made under mujoco-2.3")  # fmt: skip
+    assert snapshot(run_script.cwd) == before
+    night = run_script("inform_sac_pusher.py", "--sleep-from", str(day), "--contact", "gymnasium", *tiny[6:])
+    assert night.returncode == 0, night.stderr[-2000:]
+    (summary,) = [p for p in (run_script.cwd / "runs").glob("*/summary.json") if p.parent != day]
+    assert json.loads(summary.read_text())["contact"] == "gymnasium"

@@ -133,7 +133,7 @@ def pusher(tmp_path_factory):
         mp.setattr(isp, "PERIODIC_EVAL_EPISODES", 1)  # evaluation draws from its own generator: no number moves
         rec.summary = isp.main(
             args,
-            isp.load_oracle(args.env_id, args.oracle_path, args.train_oracle, args.oracle_total_timesteps),
+            isp.load_oracle(args),
             isp.StopSignals(),
         )
     assert rec.summary["status"] == "completed", rec.summary.get("error")

@@ -315,11 +315,9 @@ def test_the_working_directorys_teacher_comes_before_one_above_the_script(tmp_pa
     shutil.copy(SHIPPED, tmp_path / "cwd" / "oracles")
     monkeypatch.setattr(isp, "REPO_DIR", str(tmp_path / "home" / "project"))
     monkeypatch.chdir(tmp_path / "cwd")
-    assert isp.load_oracle("Pusher-v5", None, False, 1)["path"] == str(
-        tmp_path / "cwd" / "oracles" / "Pusher-v5__sac_oracle.pt"
-    )
+    assert isp.load_oracle(isp.Args())["path"] == str(tmp_path / "cwd" / "oracles" / "Pusher-v5__sac_oracle.pt")
     shutil.copy(SHIPPED, tmp_path / "home" / "project" / "oracles")  # beside the script comes first
-    assert isp.load_oracle("Pusher-v5", None, False, 1)["path"] == str(
+    assert isp.load_oracle(isp.Args())["path"] == str(
         tmp_path / "home" / "project" / "oracles" / "Pusher-v5__sac_oracle.pt"
     )
 
@@ -525,7 +523,7 @@ def test_bad_input_messages(tmp_path):
         args = tyro.cli(isp.Args, args=flags)
         with pytest.raises(isp.InputError) as err:
             isp.check_args(args)
-            isp.load_oracle(args.env_id, args.oracle_path, args.train_oracle, args.oracle_total_timesteps)
+            isp.load_oracle(args)
         message = str(err.value)
         assert "\n" not in message and needle in message, (flags, message)
 

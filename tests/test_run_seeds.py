@@ -350,6 +350,15 @@ def test_recorded_args_against_the_campaigns():
     assert not run_seeds.is_campaigns({"seed": 7, "exp_name": "c", "noise": 0.1}, changed)  # made before "new"
 
 
+def test_a_pusher_v5_run_from_before_the_contact_setting_ran_under_mujoco_4s_own():
+    """Its default now is the 2.3 contact: an old Pusher-v5 run is not the default campaign's; Pusher-v4's (made on
+    mujoco 2.3.7) and other tasks' are."""
+    for env_id, old_contact in (("Pusher-v5", "gymnasium"), ("Pusher-v4", "mujoco-2.3"), ("Reacher-v5", "mujoco-2.3")):
+        for contact in ("mujoco-2.3", "gymnasium"):
+            campaign = {"args": {"env_id": env_id, "contact": contact}, "defaults": {"contact": "mujoco-2.3"}}
+            assert run_seeds.is_campaigns({"env_id": env_id}, campaign) == (contact == old_contact), (env_id, contact)
+
+
 def test_unreadable_summaries_of_the_campaign_do_not_stop_it(tmp_path, monkeypatch, fake_script, capsys):
     """Issue 55, item 8: a matching summary.json that is truncated, a dangling link or unreadable (here a directory)
     crashed run_seeds before any run, so the campaign could never resume. Such a run is not a finished one: it is run
