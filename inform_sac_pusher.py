@@ -4,17 +4,14 @@ IQ-Learn on the remembered transitions ("sleep") gives a far-sighted policy and 
 Tarakli & Di Nuovo, "Learning while Sleeping" (ICDL 2024): Algorithm 1, Fig. 3 and the obstacle test (Fig. 5); what
 the paper leaves open is in docs/protocol.md. Episodes start from the run's seed (the paper's protocol) unless
 --random-starts. The teacher: the shipped oracles/{env_id}__sac_oracle.pt, --oracle-path, or SAC trained here
-(--train-oracle). Read top to bottom: Args, make_env, the networks, Eq. 1-4 and the teacher, the buffer, the day, the
-night, main; below main the evaluation protocol, then the plumbing. Other continuous-action tasks run from their id
-(`--env-id Reacher-v5`), judged by a final distance in `info` or by --success-return; the obstacle test is Pusher's.
-The sleep study's variants of the night are in inform_utils/sleep_variants_pusher.py, which imports this script;
-inform_utils/evaluate_policy.py re-evaluates a saved policy; inform_utils/browser_pusher.py lets a person teach
-through a web page.
-
-inform_utils/ imports only the names that tests/test_surface.py declares for this script.
+(--train-oracle). Pusher's contact is MuJoCo 2.3's (--contact, make_env). Read top to bottom: Args, make_env, the
+networks, Eq. 1-4 and the teacher, the buffer, the day, the night, main; below main the evaluation protocol, then the
+plumbing. Other continuous-action tasks run from their id, judged by a final distance in `info` or by --success-return.
+inform_utils/ holds the sleep study's nights, re-evaluation and the web page, and imports only the names that
+tests/test_surface.py declares for this script.
 
     python inform_sac_pusher.py --seed 1                            # Pusher-v5, the authors' budget
-    python inform_sac_pusher.py --env-id Pusher-v4 --seed 1         # the paper's Pusher (needs mujoco==2.3.7)
+    python inform_sac_pusher.py --env-id Pusher-v4 --seed 1         # the paper's Pusher
     python inform_sac_pusher.py --env-id Reacher-v5 --success-distance 0.02 --random-starts \
         --tamer-total-timesteps 30000                               # another task, its teacher in oracles/
 """
@@ -251,8 +248,7 @@ def make_env(env_id: str, seed: int, obstacles=None, contact: str = "mujoco-2.3"
     """The env, or Pusher with the obstacle test's boxes at the xy `obstacles`; `render` (render_mode, width, height)
     adds Pusher's video camera. The boxes and the camera are built below main, as Pusher-v4 on mujoco>=3 (which
     Gymnasium refuses): its own model in its own class. Pusher's `contact`: see contact_as_mujoco23."""
-    v4_on_mujoco3 = env_id == "Pusher-v4" and mujoco_major() >= 3
-    if env_id not in PUSHER_IDS or (obstacles is None and not render and not v4_on_mujoco3):
+    if env_id not in PUSHER_IDS or (obstacles is None and not render and (env_id == "Pusher-v5" or mujoco_major() < 3)):
         env = gym.make(env_id, **render)
     else:
         env = pusher_with_boxes(env_id, obstacles, **render)
@@ -923,8 +919,7 @@ class Evaluator:
     """Evaluates a policy on the plain env with deterministic and sampled actions; logs and keeps eval/{name}_*.
     Episodes start from the run's seed (fixed start) or from fresh seeds (`--random-starts`), the same each time."""
 
-    def __init__(self, env_id: str, seed: int, random_starts: bool, outcome: Outcome, writer: SummaryWriter | None,
-                 contact: str = "mujoco-2.3"):  # fmt: skip
+    def __init__(self, env_id: str, seed: int, random_starts: bool, outcome: Outcome, writer, contact="mujoco-2.3"):
         self.envs, self.contact = env_copies(env_id, seed, SIDE_BY_SIDE, contact=contact), contact
         self.writer, self.seed, self.random_starts, self.outcome = writer, seed, random_starts, outcome
         self.generator = torch.Generator().manual_seed(seed + 12345)  # sampled actions, off the training RNG
@@ -1713,9 +1708,7 @@ def contact_of(env_id: str, contact: str) -> str | None:
     return None if env_id not in PUSHER_IDS else "mujoco-2.3" if mujoco_major() < 3 else contact
 
 
-def made_under(record: dict, env_id: str) -> str | None:
-    """The contact a teacher or a day was made under; one saved before the setting: Pusher-v4's on mujoco 2.3.7,
-    Pusher-v5's on mujoco 4."""
+def made_under(record: dict, env_id: str) -> str | None:  # before the setting: Pusher-v4 on 2.3.7, Pusher-v5 on 4
     return record.get("contact", {"Pusher-v4": CONTACTS[0], "Pusher-v5": CONTACTS[1]}.get(env_id))
 
 

@@ -36,6 +36,7 @@ import tyro
 from torch.utils.tensorboard import SummaryWriter
 
 import gridworld_env
+import inform_sac_pusher as isp  # Pusher's env as the core script builds it (make_env: the contact, Pusher-v4)
 
 PUSHER_IDS = ("Pusher-v5", "Pusher-v4")
 MAZE_IDS = tuple(gridworld_env.ENV_IDS)
@@ -214,41 +215,12 @@ class Args:
 
 
 def make_env(env_id: str, seed: int, reward_dist_weight: float | None = None, contact="mujoco-2.3", **render):
-    env = gym.make(env_id, **env_kwargs(reward_dist_weight), **render)
-    if contact_of(env_id, contact) == "mujoco-2.3" and mujoco_major() >= 3:  # mujoco<3 has it (to the last bit)
-        contact_as_mujoco23(env.unwrapped.model)
-    env.action_space.seed(seed)
-    env.observation_space.seed(seed)
-    return env
+    """The core script's make_env: Pusher on MuJoCo 2.3's contact (or MuJoCo's own), Pusher-v4 on any MuJoCo."""
+    return isp.make_env(env_id, seed, None, contact, **env_kwargs(reward_dist_weight), **render)
 
 
 def env_kwargs(reward_dist_weight: float | None) -> dict:
     return {} if reward_dist_weight is None else {"reward_dist_weight": reward_dist_weight}
-
-
-# held source-identical in inform_sac_pusher.py and oracle_train.py (a test): a change goes into both
-def contact_as_mujoco23(model) -> None:
-    """Every body's body_invweight0, which scales how soft its contacts are, set as MuJoCo 2.3 computed it: the mean
-    diagonal of J M^-1 J^T at qpos0 (armature in M), for the translation and the rotation of the body's centre of mass.
-    MuJoCo >= 3 takes a body that moves only on slide joints (Pusher's object) by its mass alone: ~1e5 times softer."""
-    import mujoco
-
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)  # at qpos0: the mass matrix and its factorisation
-    jac, solved = np.zeros((6, model.nv)), np.zeros((6, model.nv))
-    for body in range(1, model.nbody):
-        mujoco.mj_jacBodyCom(model, data, jac[:3], jac[3:], body)
-        mujoco.mj_solveM(model, data, solved, jac)
-        model.body_invweight0[body] = (jac * solved).sum(1).reshape(2, 3).mean(1)
-
-
-def contact_of(env_id: str, contact: str) -> str | None:
-    """The contact a run has, as recorded: none off Pusher; MuJoCo 2.3's under mujoco<3, where Gymnasium's is it."""
-    return None if env_id not in PUSHER_IDS else "mujoco-2.3" if mujoco_major() < 3 else contact
-
-
-def mujoco_major() -> int:
-    return int(importlib.import_module("mujoco").__version__.split(".")[0])
 
 
 # ALGO LOGIC: the networks (copied verbatim from inform_sac_pusher.py, CleanRL style; a test keeps the copies alike)
@@ -473,11 +445,8 @@ class Selection:
     every evaluation is logged, and a row of eval_curve.csv."""
 
     def __init__(self, run_dir: str, outcome: Outcome):
-        self.run_dir, self.path, self.by_return = (
-            run_dir,
-            os.path.join(run_dir, "best.pt"),
-            outcome.min_return is not None,
-        )
+        self.run_dir, self.path = run_dir, os.path.join(run_dir, "best.pt")
+        self.by_return = outcome.min_return is not None
         self.key, self.step = (-1.0, -math.inf), None
         if os.path.isfile(self.path):
             best = torch.load(self.path, weights_only=True, map_location="cpu")
@@ -831,9 +800,6 @@ def check_args(args: Args) -> None:
         raise InputError(f"--exp-name {args.exp_name!r} must name one directory under runs/ (no '/', not '..')")
     if len(run_name(args).encode()) > 240:  # a file name has at most 255 bytes; room for new_run_dir's suffix
         raise InputError(f"--exp-name is too long: the run directory's name would be {len(run_name(args))} characters")
-    if args.env_id == "Pusher-v4" and int((mujoco := importlib.import_module("mujoco")).__version__.split(".")[0]) >= 3:
-        raise InputError(f"Pusher-v4 needs mujoco<3 (installed: {mujoco.__version__}); use --env-id Pusher-v5 or "
-                         "`pip install mujoco==2.3.7` in a separate venv")  # fmt: skip
     if not maze:
         check_env(args)
 
@@ -842,7 +808,7 @@ def check_env(args: Args) -> None:
     """--env-id for SAC: a Gymnasium env with a flat observation and continuous actions, whose episodes can be judged
     (one random step shows whether `info` has --success-info-key). Raises InputError."""
     try:
-        env = gym.make(args.env_id)
+        env = make_env(args.env_id, args.seed, contact=args.contact)
     except Exception as e:  # unknown id, a missing extra (box2d, ...), a version that needs other packages
         first = (str(e).strip() or type(e).__name__).splitlines()[0][:160]
         raise InputError(f"--env-id {args.env_id}: Gymnasium cannot make it ({first}); mazes: {', '.join(MAZE_IDS)}"
@@ -850,7 +816,7 @@ def check_env(args: Args) -> None:
     obs_space, act_space = env.observation_space, env.action_space
     if args.reward_dist_weight is not None:
         try:
-            gym.make(args.env_id, **env_kwargs(args.reward_dist_weight)).close()
+            make_env(args.env_id, args.seed, args.reward_dist_weight).close()
         except TypeError:
             raise InputError(f"--reward-dist-weight: {args.env_id} has no reward_dist_weight (Pusher-v5 has)") from None
     if not isinstance(act_space, gym.spaces.Box):
@@ -909,7 +875,7 @@ def oracle_checkpoint(sac: SAC, args: Args, step: int, evaluation: dict) -> dict
             "qf_state_dict": {k: v.detach().cpu().clone() for k, v in sac.qf.state_dict().items()},
             "training_steps": int(step), "training_seed": args.seed, "random_starts": True,
             "bf16": bool(args.bf16), "num_threads": int(args.num_threads),
-            "reward_dist_weight": args.reward_dist_weight, "contact": contact_of(args.env_id, args.contact),
+            "reward_dist_weight": args.reward_dist_weight, "contact": isp.contact_of(args.env_id, args.contact),
             "evaluation": {k: float(v) for k, v in evaluation.items()}}  # fmt: skip
 
 
@@ -1051,19 +1017,14 @@ def print_progress(step: int, start_step: int, total: int, t0: float, evaluation
 
 
 # --capture-video: the oracle's episodes rendered headless (MUJOCO_GL) by Gymnasium's RenderCollection, Pusher seen
-# from above (the free camera at VIDEO_CAMERA, the view inform_sac_pusher.py films), mp4 by imageio-ffmpeg
-VIDEO_CAMERA = {"lookat": (0.42, -0.2, -0.3), "distance": 1.0, "elevation": -75.0}  # metres, degrees
+# from above (make_env's camera: inform_sac_pusher.py's), mp4 by imageio-ffmpeg
 VIDEO_SIZE = 480  # pixels, square; a multiple of 16, as H.264 wants
 VIDEO_EPISODES = 3
 
 
 def video_env(env_id: str, size: int = VIDEO_SIZE, contact: str = "mujoco-2.3") -> gym.Env:
-    """The env, rendering every reset and step into one list; Pusher without shadows (3x faster in software GL)."""
+    """The env, rendering every reset and step into one list (Pusher from above, no shadows: the core script's)."""
     env = make_env(env_id, 0, contact=contact, render_mode="rgb_array", width=size, height=size)
-    if env_id in PUSHER_IDS:  # both are read when the first frame creates the renderer
-        camera = {**VIDEO_CAMERA, "lookat": np.array(VIDEO_CAMERA["lookat"]), "azimuth": 180.0, "trackbodyid": -1}
-        env.unwrapped.mujoco_renderer.default_cam_config = camera
-        env.unwrapped.model.vis.quality.shadowsize = 0
     return gym.wrappers.RenderCollection(env, reset_clean=False)
 
 

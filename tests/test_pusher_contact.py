@@ -1,8 +1,6 @@
 """Pusher's contact as MuJoCo 2.3 made it (contact_as_mujoco23, applied by make_env): on mujoco 4 a push carries the
 object only with it, its values are MuJoCo 2.3.7's own (the CI step in the 2.3.7 venv), and a hand-computed case."""
 
-import inspect
-
 import numpy as np
 import pytest
 
@@ -67,8 +65,17 @@ def test_a_body_on_two_slides_by_hand():
     np.testing.assert_allclose(model.body_invweight0[1], [2 / (3 * 0.75), 0.0], rtol=1e-12)
 
 
-def test_both_scripts_hold_the_same_function():
-    assert inspect.getsource(isp.contact_as_mujoco23) == inspect.getsource(ot.contact_as_mujoco23)
+def test_the_teacher_trains_on_the_env_the_core_script_builds():
+    """oracle_train.py's envs are make_env's: the contact the flag names (recorded in the teacher), Pusher-v4 too."""
+    for contact in isp.CONTACTS:
+        for env_id in isp.PUSHER_IDS:
+            ours, its = isp.make_env(env_id, 0, contact=contact), ot.make_env(env_id, 0, contact=contact)
+            assert type(ours.unwrapped).__qualname__ == type(its.unwrapped).__qualname__
+            np.testing.assert_array_equal(ours.unwrapped.model.body_invweight0, its.unwrapped.model.body_invweight0)
+    weighted = ot.make_env("Pusher-v5", 0, reward_dist_weight=3.0).unwrapped
+    assert (
+        weighted._reward_dist_weight == 3.0 and weighted.model.body_invweight0[weighted.model.body("object").id, 0] < 20
+    )
 
 
 @pytest.mark.pusher_v4
