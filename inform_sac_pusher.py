@@ -244,14 +244,12 @@ class Args:
         return Night(tamer_actor, device, **self.night_settings())
 
 
-def make_env(env_id: str, seed: int, obstacles=None, contact: str = "mujoco-2.3", **render) -> gym.Env:
-    """The env, or Pusher with the obstacle test's boxes at the xy `obstacles`; `render` (render_mode, width, height)
-    adds Pusher's video camera. The boxes and the camera are built below main, as Pusher-v4 on mujoco>=3 (which
-    Gymnasium refuses): its own model in its own class. Pusher's `contact`: see contact_as_mujoco23."""
-    if env_id not in PUSHER_IDS or (obstacles is None and not render and (env_id == "Pusher-v5" or mujoco_major() < 3)):
-        env = gym.make(env_id, **render)
-    else:
-        env = pusher_with_boxes(env_id, obstacles, **render)
+def make_env(env_id: str, seed: int, obstacles=None, contact: str = "mujoco-2.3", **kwargs) -> gym.Env:
+    """The env, or Pusher with the obstacle test's boxes at the xy `obstacles`; `kwargs` go to the env (render_mode,
+    width, height: with Pusher's video camera). The boxes and the camera are built below main, as Pusher-v4 on
+    mujoco>=3 (which Gymnasium refuses): its own model in its own class. Pusher's `contact`: see contact_as_mujoco23."""
+    own = obstacles is not None or "render_mode" in kwargs or (env_id == "Pusher-v4" and mujoco_major() >= 3)
+    env = pusher_with_boxes(env_id, obstacles, **kwargs) if env_id in PUSHER_IDS and own else gym.make(env_id, **kwargs)
     if env_id in PUSHER_IDS and contact == "mujoco-2.3" and mujoco_major() >= 3:  # mujoco<3 has it (to the last bit)
         contact_as_mujoco23(env.unwrapped.model)
     env.action_space.seed(seed)
@@ -259,7 +257,6 @@ def make_env(env_id: str, seed: int, obstacles=None, contact: str = "mujoco-2.3"
     return env
 
 
-# held source-identical in inform_sac_pusher.py and oracle_train.py (a test): a change goes into both
 def contact_as_mujoco23(model) -> None:
     """Every body's body_invweight0, which scales how soft its contacts are, set as MuJoCo 2.3 computed it: the mean
     diagonal of J M^-1 J^T at qpos0 (armature in M), for the translation and the rotation of the body's centre of mass.
@@ -1171,8 +1168,9 @@ def obstacle_xml(env_id: str, positions, camera: bool = False) -> str:
 
 def pusher_with_boxes(env_id: str, obstacles, **render) -> gym.Env:
     """Pusher's own model plus the boxes at the xy `obstacles` (None: none) and, with `render`, the videos' camera."""
-    render = {**render, "camera_name": "inform_video"} if render else render
-    xml = obstacle_xml(env_id, obstacles, camera=bool(render))
+    camera = "render_mode" in render
+    render = {**render, "camera_name": "inform_video"} if camera else render
+    xml = obstacle_xml(env_id, obstacles, camera)
     if env_id == "Pusher-v5":
         return gym.make(env_id, xml_file=xml, **render)
     from gymnasium.envs.mujoco.mujoco_env import MujocoEnv  # Pusher-v4 has no xml_file: its class, another model

@@ -23,7 +23,7 @@ DECLARED = {
         "Evaluator", "evaluate", "obstacle_test", "obstacle_skipped", "object_xy", "check_video", "video_env",
         "mujoco_major", "read_checkpoint", "check_crc", "oracle_from_checkpoint", "actor_from_checkpoint",
         "PUSHER_IDS",  # teacher_check reports the push's pace, the page shows the arm: Pusher only
-        "CONTACTS", "contact_of", "made_under",  # Pusher's contact, as a run records it
+        "CONTACTS", "contact_of", "made_under", "contact_as_mujoco23",  # Pusher's contact; contact_check applies it
     },
     "inform_dqn_gridworld": {
         "Args", "Sleep", "cli", "main", "check_args", "Evaluator", "StopSignals", "Teacher", "ReplayBuffer",
