@@ -72,6 +72,7 @@ PUSHER_RUN = [
     "--obstacle-episodes", "0",
     "--authors-test-episodes", "0",
     "--oracle-path", TEACHER,
+    "--contact", "gymnasium",  # the teacher's (MuJoCo 4's own)
 ]  # fmt: skip
 
 
