@@ -382,9 +382,9 @@ def completed(path: str, pusher: bool = False) -> bool:
     return read_night(path, pusher)[0] is not None
 
 
-def random_starts(run_dir: str, seed: int, env_id: str, episodes: int, stop: Stop) -> dict:
+def random_starts(run_dir: str, seed: int, env_id: str, episodes: int, stop: Stop, contact: str | None) -> dict:
     """inform_utils.evaluate_policy of each saved policy on random starts (deterministic actions; a short obstacle
-    part)."""
+    part), under the night's Pusher contact, as its summary records it."""
     out = {}
     for name in ("tamer", "inform", "inform_selected"):
         path = os.path.join(run_dir, f"{name}_actor.pt")
@@ -392,6 +392,7 @@ def random_starts(run_dir: str, seed: int, env_id: str, episodes: int, stop: Sto
             continue
         cmd = [sys.executable, "-m", "inform_utils.evaluate_policy", "pusher", path, "--env-id", env_id]
         cmd += ["--seed", str(seed), "--random-starts", "--eval-episodes", str(episodes), "--obstacle-episodes", "1"]
+        cmd += ["--contact", contact] if contact else []
         metrics = last_json(run_child(cmd, stop), f"the random-start test of {path}")
         for key in ("return", "final_distance", "success_rate"):
             out[f"random_starts/{name}_{key}"] = metrics[f"eval/policy_{key}"]
@@ -429,7 +430,7 @@ def run_night(args: Args, day: str, variant: str, seed: int, record: dict, stop:
         tested = {}
         if study.pusher:
             tested = random_starts(run_dir, summary["seed"], summary["args"]["env_id"], args.random_start_episodes,
-                                   stop)  # fmt: skip
+                                   stop, summary.get("contact"))  # fmt: skip
     except (NightFailed, BadFile) as e:
         print(f"[study] failed ({e})", flush=True)
         return False
