@@ -40,7 +40,7 @@ from typing import Literal
 import numpy as np
 import tyro
 
-from inform_utils.scripted_person_browser import REPO, Child, check_before_writing, each_seed, new_run, runs_in
+from inform_utils.scripted_person_browser import Child, check_before_writing, each_seed, new_run, runs_in
 
 POLICIES = ("tamer", "inform", "bc", "sham", "core")  # the day's two, then the nights on the saved day
 CONTROLS = ("bc", "sham", "core")  # --sleep-control bc, sham, none
@@ -337,20 +337,23 @@ def act(page, acts: list, driving: bool, given: dict) -> None:
             driving = True
 
 
+def run_flag(run_flags: list[str], flag: str, default: str) -> str:
+    """A flag's value in the runs' flags (`default`, the core script's, otherwise)."""
+    return next((run_flags[i + 1] for i, f in enumerate(run_flags[:-1]) if f == flag), default)
+
+
 def run_env_id(run_flags: list[str]) -> str:
-    """The --env-id of the runs' flags (the core script's default otherwise)."""
-    return next((run_flags[i + 1] for i, f in enumerate(run_flags[:-1]) if f == "--env-id"), "Pusher-v5")
+    return run_flag(run_flags, "--env-id", "Pusher-v5")
 
 
 def load_oracle(run_flags: list[str]):
-    """The oracle the runs load (the shipped one of the --env-id in `run_flags`), to judge as it does."""
+    """The oracle the runs load (the shipped one of the --env-id and --contact in `run_flags`), to judge as it does."""
     import torch
 
     import inform_sac_pusher as isp
 
-    env_id = run_env_id(run_flags)
-    ckpt = isp.read_checkpoint(os.path.join(REPO, "oracles", f"{env_id}__sac_oracle.pt"), "--oracle-path", env_id)
-    return isp.oracle_from_checkpoint(ckpt, torch.device("cpu"))
+    run = isp.Args(env_id=run_env_id(run_flags), contact=run_flag(run_flags, "--contact", "mujoco-2.3"))
+    return isp.oracle_from_checkpoint(isp.load_oracle(run), torch.device("cpu"))
 
 
 def run_seed(seed: int, args: Args, browser, oracle, work: str, out: str, say) -> dict:
@@ -444,12 +447,11 @@ def rehearse(args: Args) -> dict[int, list[float]]:
     each from its first look (the agent's steps before the take are idle here, not TAMER's) and, as at the page,
     letting go once the object is at the goal. What it leaves out: the page's frames and timing, arrow presses taking
     time. Returns {seed: final distances}."""
-    import gymnasium as gym
-
+    import inform_sac_pusher as isp
     from inform_utils.pusher_control import FingertipController
 
     env_id = run_env_id(shlex.split(args.flags))
-    env = gym.make(env_id)
+    env = isp.make_env(env_id, 0, contact=run_flag(shlex.split(args.flags), "--contact", "mujoco-2.3"))
     controller = FingertipController(env.unwrapped.model)
     finals = {}
     for seed in args.seeds:

@@ -24,6 +24,7 @@ DECLARED = {
         "mujoco_major", "read_checkpoint", "check_crc", "oracle_from_checkpoint", "actor_from_checkpoint",
         "PUSHER_IDS",  # teacher_check reports the push's pace, the page shows the arm: Pusher only
         "CONTACTS", "contact_of", "made_under", "contact_as_mujoco23",  # Pusher's contact; contact_check applies it
+        "load_oracle",  # the scripted person judges with the teacher the runs load
     },
     "inform_dqn_gridworld": {
         "Args", "Sleep", "cli", "main", "check_args", "Evaluator", "StopSignals", "Teacher", "ReplayBuffer",
