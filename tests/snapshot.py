@@ -414,7 +414,8 @@ def run_case(c: dict, code_dir: str, cwd: str, python: str, done: dict, form: st
     needed = done.get(c["needs"], "")
     cmd = [arg.replace("{day}", needed).replace("{file}", needed) for arg in c[form]]
     if form == "new":
-        cmd = [RENAMED.get(arg, arg) for arg in cmd] + (GYMNASIUM_CONTACT if c["name"].startswith("pusher_") else [])
+        pusher = c["name"].startswith("pusher_") or "Pusher-v5" in cmd
+        cmd = [RENAMED.get(arg, arg) for arg in cmd] + (GYMNASIUM_CONTACT if pusher else [])
     if cmd[0] != "-m":
         cmd[0] = os.path.join(code_dir, cmd[0])
     env = {**os.environ, "PYTHONPATH": code_dir, "OMP_NUM_THREADS": "1"}
