@@ -1747,6 +1747,8 @@ def cli(args: Args, make_teacher=None) -> int:
             if unknown:  # a copy's day: its settings are recorded, never dropped
                 print(f"[day] the day's settings that are not this script's flags, kept in summary.json: {unknown}")
         check_args(args)
+        if contact_of(args.env_id, args.contact):  # under mujoco<3 Gymnasium's contact is 2.3's: recorded as what runs
+            args = dataclasses.replace(args, contact=contact_of(args.env_id, args.contact))
         if args.capture_video:
             check_video(args.env_id)
         if saved is None:
