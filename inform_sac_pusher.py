@@ -1208,7 +1208,7 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
         run_dir = make_run_dir(f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}")
         if contact := contact_of(args.env_id, args.contact):  # Pusher's contact, the run's first line
             why = "the arm pushes the object" if contact == CONTACTS[0] else "on mujoco>=3 the arm passes through it"
-            print(f"[env] {args.env_id}, the {contact} contact ({why}; --contact {CONTACTS})", flush=True)
+            print(f"[env] {args.env_id}, the {contact} contact ({why}; --contact {'|'.join(CONTACTS)})", flush=True)
         summary["contact"] = contact
         print(f"run directory: {run_dir}", flush=True)  # only now: bad input was refused, nothing half-written is left
         mujoco_log_in(run_dir)
