@@ -100,7 +100,7 @@ class Args:
     # Oracle (SAC) arguments
     env_id: str = "Pusher-v5"
     """Pusher-v5, Pusher-v4 (where mujoco<3 is installed), any continuous-action Gymnasium env (SAC), or a maze id"""
-    contact: Literal["mujoco-2.3", "gymnasium"] = "mujoco-2.3"
+    contact: Literal[isp.CONTACTS] = "mujoco-2.3"
     """Pusher's contact: mujoco-2.3 as MuJoCo 2.3 made it (contact_as_mujoco23: the arm pushes the object); gymnasium:
     as the installed MuJoCo makes it (on mujoco>=3 the arm passes through the object, Gymnasium #1576)"""
     reward_dist_weight: Annotated[float | None, POSITIVE] = None

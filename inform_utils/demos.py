@@ -10,9 +10,10 @@ clones); and the pretraining that --clone-steps runs before SAC's first step.
 import hashlib
 import zipfile
 
-import mujoco
 import numpy as np
 import torch
+
+import inform_sac_pusher as isp
 
 # a step of pusher_control --save-demos: the transition, then the reward's terms (to re-weight it)
 FIELDS = ("obs", "act", "next_obs", "rew", "term", "reward_dist", "reward_ctrl", "reward_near")
@@ -36,7 +37,7 @@ def read_demos(path: str, env, args, resume_state: dict | None, error: type[Exce
         raise error(f"--demos {path}: not demonstrations of pusher_control --save-demos ({type(e).__name__})") from None
     if str(data["env_id"]) != env_id:
         raise error(f"--demos {path}: demonstrations of {data['env_id']}, not {env_id}")
-    if contact != (ours := args.contact if int(mujoco.__version__.split(".")[0]) >= 3 else "mujoco-2.3"):
+    if contact != (ours := isp.contact_of(env_id, args.contact)):
         raise error(f"--demos {path}: made under the {contact} contact, this run's is {ours}; pass --contact {contact}")
     steps, episodes = len(data["rew"]), len(data["episode_seed"])
     obs_shape, act_shape = (steps, *env.observation_space.shape), (steps, *env.action_space.shape)
