@@ -542,11 +542,10 @@ def tamer_spread(args: Args, rows: list[dict]) -> float | None:
     between one day's sampling streams (every night tests TAMER again in its own stream, and so did the day's run,
     kept as <day>/day/). A margin smaller than this is within noise. None where every day had one stream."""
     spreads = []
-    for day in sorted({r["day"] for r in rows}):
-        paths = [os.path.join(args.results_dir, args.campaign, day, r["dir"]) for r in rows if r["day"] == day]
-        paths.append(os.path.join(args.results_dir, args.campaign, day, "day"))
+    for campaign, day in sorted({(r.get("campaign", args.campaign), r["day"]) for r in rows}):
+        nights = [r["dir"] for r in rows if r["day"] == day and r.get("campaign", args.campaign) == campaign]
         means = []
-        for path in paths:
+        for path in (os.path.join(args.results_dir, campaign, day, name) for name in (*nights, "day")):
             if os.path.isfile(os.path.join(path, "obstacle_distances.npz")):
                 tamer = read_npz(os.path.join(path, "obstacle_distances.npz"), ("tamer",))["tamer"]
                 means.append(float(np.mean(tamer)))
@@ -586,8 +585,47 @@ def obstacle_test(args: Args, nights: list[dict], policy: str, noise: float | No
         "beyond_noise": None if noise is None else sum(m > noise + TOLERANCE for m in margins),
         "noise": noise,
         "p_day": float(ttest_rel(tamer, means).pvalue) if len(by_day) > 1 else None,
+        "interval": paired_interval(margins),
         "p_pooled": pooled,
     }
+
+
+def paired_interval(diffs: list[float]) -> dict | None:
+    """What paired differences over days can say: their mean, its 95% interval (Student's t on the n - 1 degrees of
+    freedom of the days' differences: paired, so what varies from day to day cancels), the two-sided p of a mean of 0,
+    and the smallest true difference the test detects at 80% power (p < 0.05), (t_0.975 + t_0.8) standard errors, the
+    usual approximation of the noncentral t's. None on one day."""
+    from scipy.stats import t
+
+    n = len(diffs)
+    if n < 2:
+        return None
+    mean, se, df = statistics.mean(diffs), statistics.stdev(diffs) / n**0.5, n - 1
+    crit = float(t.ppf(0.975, df))
+    p = (0.0 if mean else 1.0) if se == 0 else float(2 * t.sf(abs(mean) / se, df))  # se 0: the same every day
+    detectable = (crit + float(t.ppf(0.8, df))) * se
+    return {"mean": mean, "low": mean - crit * se, "high": mean + crit * se, "p": p, "detectable": detectable}
+
+
+def interval_text(stats: dict | None, unit: str = "", digits: int = 4) -> str:
+    """paired_interval() in words: the 95% interval and the smallest effect detectable at 80% power."""
+    if stats is None:
+        return ""
+    return (f"95% interval {stats['low']:+.{digits}f} to {stats['high']:+.{digits}f}{unit}, detectable "
+            f"{stats['detectable']:.{digits}f}{unit}")  # fmt: skip
+
+
+def interval_verdict(stats: dict | None, spread: float | None, headroom: float | None) -> str:
+    """A difference too small or too uncertain to call: 'equivalent' where the whole 95% interval lies within
+    +-`spread` (TAMER's own sampling spread), 'cannot tell' where the interval is wider than `headroom` (the room a
+    night has to gain: the control's value minus the expert's); else ''."""
+    if stats is None:
+        return ""
+    if spread is not None and -spread <= stats["low"] and stats["high"] <= spread:
+        return "equivalent"
+    if headroom is not None and stats["high"] - stats["low"] > headroom:
+        return "cannot tell"
+    return ""
 
 
 def obstacle_text(test: dict) -> str:
@@ -595,6 +633,7 @@ def obstacle_text(test: dict) -> str:
     side = "closer" if test["margin"] > 0 else "farther"
     noise = test["noise"] is not None and abs(test["margin"]) < test["noise"]
     per_day = "one day" if test["p_day"] is None else f"p = {test['p_day']:.2g} over {test['days']} days"
+    per_day += f" (the margin's {interval_text(test['interval'], ' m')})" if test.get("interval") else ""
     beyond = "" if test["beyond_noise"] is None else f", {test['beyond_noise']} beyond noise"
     return (
         f"{side} by {abs(test['margin']):.4f} m{' (within noise)' if noise else ''}; {per_day}; pooled p = "
@@ -671,8 +710,8 @@ def table(args: Args) -> str:
     lines += ["", default_rule(args, rows, ran, noise)] if study.pusher else []
     if study.pusher:  # the methods at every budget: this campaign's nights and those of --with-campaigns
         every = budgets(args, rows)
-        lines += ["", method_rule(args, every, [v for v in study.variants if any(r["variant"] == v for r in every)
-                                                and v in METHODS])]  # fmt: skip
+        judged = [v for v in study.variants if v in ("default", *METHODS) and any(r["variant"] == v for r in every)]
+        lines += ["", method_rule(args, every, judged)]
     lines += ["", per_day(rows, ran)] if study.pusher else []
     return "\n".join([*lines, *notes])  # kept for their curves, left out of the table: say so
 
@@ -861,17 +900,19 @@ def return_spread(args: Args, rows: list[dict]) -> float | None:
     return max(spreads) if spreads else None
 
 
-def versus(mine: dict, theirs: dict, days: list[str]) -> tuple[str, bool]:
+def versus(mine: dict, theirs: dict, days: list[str], spread=None, headroom=None) -> tuple[str, bool]:
     """One control of the rule for a night built for the data: the mean of the method's day means minus the
-    control's (negative: closer), the paired t-test over the days (two-sided), the days closer; and whether it passes
-    (p < METHOD_P, closer on average)."""
-    from scipy.stats import ttest_rel
-
-    diff = statistics.mean(mine[d] - theirs[d] for d in days)
-    p = float(ttest_rel([mine[d] for d in days], [theirs[d] for d in days]).pvalue) if len(days) > 1 else None
+    control's (negative: closer), the paired t-test over the days (two-sided) with its 95% interval and the smallest
+    effect it detects at 80% power, the days closer, and 'equivalent' or 'cannot tell' (interval_verdict(): `spread`,
+    TAMER's own; `headroom`, the control's distance minus the expert's); and whether it passes (p < METHOD_P, closer on
+    average)."""
+    diffs = [mine[d] - theirs[d] for d in days]
+    stats = paired_interval(diffs)
+    p = None if stats is None else stats["p"]
     closer = sum(mine[d] < theirs[d] - TOLERANCE for d in days)
-    text = f"{diff:+.4f} m, p = {'-' if p is None else f'{p:.2g}'}, closer on {closer} of {len(days)}"
-    return text, p is not None and p < METHOD_P and diff < 0
+    text = f"{statistics.mean(diffs):+.4f} m, p = {'-' if p is None else f'{p:.2g}'}, closer on {closer} of {len(days)}"
+    said = ", ".join(w for w in (interval_text(stats, " m"), interval_verdict(stats, spread, headroom)) if w)
+    return text + (f"; {said}" if said else ""), p is not None and p < METHOD_P and statistics.mean(diffs) < 0
 
 
 def step_size(row: dict) -> str | None:
@@ -938,14 +979,23 @@ def method_rule(args: Args, rows: list[dict], methods: list[str]) -> str:
             lr, matched = matched_cloning(on_task, method)
             mine = day_means(on_task, method, OBSTACLE)
             controls = {c: day_means(on_task, c, OBSTACLE) for c in ("bc", "sham") + ((matched,) if matched else ())}
-            days = [d for d in mine if all(d in controls[c] for c in ("bc", "sham"))]
+            ret, tamer = day_means(on_task, method, SAMPLED), day_means(on_task, method, SAMPLED, "tamer")
+            days = [d for d in mine if all(d in controls[c] for c in ("bc", "sham")) and d in ret and d in tamer]
             if not days:
                 continue
-            tests = {c: versus(mine, controls[c], days) for c in ("bc", "sham")}
+            noise = tamer_spread(args, [r for r in on_task if r["day"] in days])  # TAMER's, with the boxes
+            oracle = day_means(on_task, "oracle", OBSTACLE)  # the expert's distance with the boxes: the floor
             matched_days = [d for d in days if matched and d in controls[matched]]
-            tests["matched"] = versus(mine, controls[matched], matched_days) if matched_days else ("not run", False)
+            tests = {"matched": ("not run", False)}
+            for name, control, on in (("bc", "bc", days), ("sham", "sham", days), ("matched", matched, matched_days)):
+                if on:  # the room a night has to gain: the control's distance minus the expert's
+                    room = (
+                        statistics.mean(controls[control][d] - oracle[d] for d in on)
+                        if set(on) <= set(oracle)
+                        else None
+                    )
+                    tests[name] = versus(mine, controls[control], on, noise, room)
             spread = return_spread(args, [r for r in on_task if r["day"] in days])  # over the rule's days only
-            ret, tamer = day_means(on_task, method, SAMPLED), day_means(on_task, method, SAMPLED, "tamer")
             gap = statistics.mean(ret[d] - tamer[d] for d in days)
             spread_text = "no tamer_streams.json" if spread is None else f"{spread:.2f}"
             plain = (f"{gap:+.2f} (spread {spread_text})", spread is not None and gap >= -spread - TOLERANCE)

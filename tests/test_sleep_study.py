@@ -252,7 +252,10 @@ def test_the_obstacle_test_is_over_days_with_tamer_counted_once_in_the_pooled_te
     twice = np.concatenate([tamer[d] for d in tamer for _ in range(2)])
     assert abs(test["p_pooled"] - ss_welch(mine, twice)) > 1e-3  # counting TAMER in every night would differ
     text = ss.obstacle_text(test)
-    head = "closer by 0.0600 m; p = 0.059 over 3 days; pooled p = "
+    # the margins' 95% interval by hand: sd sqrt(0.0007), se 0.01528, t_0.975 with 2 degrees of freedom 4.303:
+    # 0.06 -+ 0.0657; detectable at 80% power (4.303 + t_0.8 = 1.061) x 0.01528 = 0.0819
+    interval = "(the margin's 95% interval -0.0057 to +0.1257 m, detectable 0.0819 m)"
+    head = f"closer by 0.0600 m; p = 0.059 over 3 days {interval}; pooled p = "
     assert text == f"{head}{test['p_pooled']:.2g}; closer on 3 of 3 days, 2 beyond noise"
     assert "(within noise)" in ss.obstacle_text(ss.obstacle_test(args, nights, "inform", noise=0.07))
     one_day = ss.obstacle_test(args, nights[:2], "inform")
@@ -329,7 +332,8 @@ def test_the_per_seed_table_reads_each_runs_summary():
 
 
 def method_night(task, day, variant, seed, distance, ret, tamer_ret, lr=5e-6, steps=5000):
-    return {"day": day, "variant": variant, "sleep_seed": seed, "args": {"env_id": task, "sleep_gradient_steps": steps},
+    return {"day": day, "variant": variant, "sleep_seed": seed, "dir": f"{variant}__sleep{seed}",
+            "args": {"env_id": task, "sleep_gradient_steps": steps},
             "sleep_variant": f"method=x control=x policy_lr={lr}", "eval/obstacle/inform_final_distance": distance,
             "eval/obstacle/inform_final_distance_deterministic": distance - 0.05, "eval/inform_return_sampled": ret,
             "eval/tamer_return_sampled": tamer_ret}  # fmt: skip
@@ -388,7 +392,10 @@ def test_the_rule_for_a_night_built_for_the_data_per_task_and_budget_against_the
     assert longer[3] == "1" and longer[8] == "open: 1 of 5 days"
     v5 = table[("Pusher-v5", "5000", "dwbc (5e-06)")]
     assert v5[3] == "2" and v5[8] == "open: 2 of 5 days" and v5[5].startswith("bc: ")  # bc shares its step size
-    assert "| Pusher-v4 | 5000 | oril | 5 | -0.0378 m, p = 0.0093, closer on 5 of 5 | -0.0098 m" in deterministic
+    # oril's deterministic distances minus bc's: -0.03, -0.029, -0.03, -0.03, -0.07: mean -0.0378, sd 0.0180, se
+    # 0.00805; t_0.975 with 4 degrees of freedom 2.776: -0.0378 -+ 0.0224; detectable (2.776 + 0.941) x se = 0.0299
+    oril_vs_bc = "-0.0378 m, p = 0.0093, closer on 5 of 5; 95% interval -0.0602 to -0.0154 m, detectable 0.0299 m"
+    assert f"| Pusher-v4 | 5000 | oril | 5 | {oril_vs_bc} | -0.0098 m" in deterministic
     assert "Pusher-v4, 5000 gradient steps, the means over the 5 days" in text
     assert "Pusher-v5, 5000 gradient steps, the means over the 2 days" in text
     os.remove(tmp_path / "c" / "d3" / "tamer_streams.json")
@@ -431,3 +438,28 @@ def test_the_per_day_table_averages_a_variants_nights_and_counts_their_successes
     lines = ss.per_day(rows, ["default", "bc"]).splitlines()
     assert lines[3] == "| 2 | -30.00 (0/1), 0.200 m | -20.00 (1/1), 0.050 m | - |"  # days by seed; no bc on day 2
     assert lines[4] == "| 7 | -30.00 (0/1), 0.200 m | -40.00 (0/1), 0.300 m | -27.00 (1/2), 0.150 m |"
+
+
+def test_the_interval_beside_each_p_is_paired_over_the_days():
+    """Issue 70: beside each p, the 95% interval and the smallest effect detectable at 80% power, both from the days'
+    paired differences. Days far apart (the control at 0.10, 0.20 and 0.30 m) with the night 0.010, 0.012 and 0.011 m
+    closer each day: paired, mean -0.011, sd 0.001, se 0.000577, t_0.975 with 2 degrees of freedom 4.303, so the
+    interval is -0.0135 to -0.0085 and the detectable effect (4.303 + t_0.8 = 1.061) x se = 0.0031; on the two sets
+    unpaired the interval would span +-0.25 m and include 0. Then the words: 'equivalent' when the interval lies within
+    TAMER's spread, 'cannot tell' when it is wider than the room left."""
+    theirs = {"a": 0.10, "b": 0.20, "c": 0.30}
+    mine = {"a": 0.090, "b": 0.188, "c": 0.289}
+    text, passes = ss.versus(mine, theirs, ["a", "b", "c"])
+    assert text == "-0.0110 m, p = 0.0027, closer on 3 of 3; 95% interval -0.0135 to -0.0085 m, detectable 0.0031 m"
+    assert passes
+    stats = ss.paired_interval([mine[d] - theirs[d] for d in theirs])
+    from scipy.stats import ttest_ind
+
+    unpaired = ttest_ind(list(mine.values()), list(theirs.values()))
+    assert unpaired.pvalue > 0.8 and stats["high"] < 0  # what pairing keeps: the interval excludes 0
+    assert ss.interval_verdict(stats, spread=0.02, headroom=None) == "equivalent"
+    assert ss.interval_verdict(stats, spread=0.005, headroom=0.004) == "cannot tell"
+    assert ss.interval_verdict(stats, spread=0.005, headroom=0.01) == ""
+    assert ss.versus(mine, theirs, ["a", "b", "c"], 0.02, None)[0].endswith("detectable 0.0031 m, equivalent")
+    assert ss.paired_interval([0.01]) is None
+    assert ss.versus(mine, theirs, ["a"])[0] == "-0.0100 m, p = -, closer on 1 of 1"  # one day: no interval
