@@ -68,6 +68,7 @@ def test_a_rehearsal_without_the_page_pushes_the_object_nearer_the_goal():
     assert abs(still - start) < 0.01 and final < still - 0.01, (start, still, final)  # (the arm drifts from its reset)
 
 
+@pytest.mark.slow  # Chromium
 def test_the_driving_person_takes_the_arm_pushes_and_its_steps_are_marked(tmp_path, monkeypatch):
     why = browser_missing()
     if why:
