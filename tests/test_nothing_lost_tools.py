@@ -382,6 +382,24 @@ def test_an_answer_about_frame_minus_7_is_refused(pusher_page):
     assert [row["step"] for row in lines(page)] == [1]
 
 
+def test_a_spent_budget_ends_the_pages_day_as_such(pusher_page):
+    """The person's last yes of the budget ends the page's day then, and its record says why (it said "day done"
+    once the night was over)."""
+    from types import SimpleNamespace
+
+    from inform_utils.browser_pusher import PageTeacher
+
+    page, person = pusher_page
+    teacher = object.__new__(PageTeacher)  # its day's part, without the arm and the camera
+    arm = SimpleNamespace(unwrapped=SimpleNamespace(_get_obs=lambda: np.zeros(23)))
+    teacher.__dict__.update(page=page, env=arm, budget=1, last_step=100, every=10**6, frame=np.zeros((4, 4, 3)),
+                            credited={}, positives=0, perfect_positives=0, drove=False)  # fmt: skip
+    teacher(3, 0.0)
+    assert person.answer("yes", None, "y1", seq=4) == (200, {"taken": True})
+    teacher(4, 0.0)
+    assert teacher.gone and [row["why"] for row in lines(page, "end")] == ["the budget of yes answers is spent"]
+
+
 def test_an_interrupted_days_record_says_so(tmp_path, monkeypatch):
     """The page's answers.jsonl ended `"why": "day done"` for a day stopped by Ctrl-C: it ends with the run's own
     account (the core's summary). The run itself is stood in for: a page, then the summary of a stop in the day."""
