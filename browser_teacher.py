@@ -47,7 +47,6 @@ import hashlib
 import http.cookies
 import io
 import json
-import math
 import os
 import re
 import secrets
@@ -109,6 +108,16 @@ def credit_weights(
         if overlap > 0:
             weights[step] = weights.get(step, 0.0) + overlap / (high - low)
     return weights
+
+
+def is_number(value, bound: float) -> bool:
+    """A JSON number smaller than `bound` in size: not a bool (True is an int to Python), not NaN or inf, and a huge
+    integer compared as it is (float() of a 4,000-digit one overflows)."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and abs(value) < bound
+
+
+def is_count(value) -> bool:  # a question's id or a frame's sequence number: 0 or more (0: none shown yet)
+    return is_number(value, 2**53) and isinstance(value, int) and value >= 0
 
 
 def host_and_port(address: str) -> tuple[str, int]:
@@ -548,9 +557,9 @@ class BrowserTeacher:
         seq, waited_ms = body.get("seq"), body.get("waited_ms", 0)
         if not (isinstance(nonce, str) and NONCE.fullmatch(nonce)) or label not in LABELS:
             return 400, {"error": "an answer needs a nonce and one of yes, no, none"}
-        if question is not None and not isinstance(question, int) or seq is not None and not isinstance(seq, int):
-            return 400, {"error": "question and seq are integers"}
-        if not isinstance(waited_ms, int | float) or not 0 <= waited_ms < 3.6e6:
+        if not all(value is None or is_count(value) for value in (question, seq)):  # seq -7 was the oldest frame's
+            return 400, {"error": "question and seq are integers, 0 or more"}
+        if not is_number(waited_ms, 3.6e6) or waited_ms < 0:
             waited_ms = 0
         with self._cond:
             if nonce in self._nonces:
@@ -596,16 +605,15 @@ class BrowserTeacher:
         if kind not in ("take", "target", "release"):
             return 400, {"error": "drive is one of take, target, release"}
         if kind != "release" and not (
-            isinstance(target, list) and len(target) == 2
-            and all(isinstance(v, int | float) and math.isfinite(v) and abs(v) < 5 for v in target)
-        ):  # fmt: skip
+            isinstance(target, list) and len(target) == 2 and all(is_number(v, 5) for v in target)
+        ):
             return 400, {"error": "a take or a target needs target: [x, y], metres in the table's plane"}
         with self._cond:
             if self.ended is not None:
                 return 409, {"driving": False, "why": "the day is over"}
             if self.task != "pusher" or self._mode != "stream":
                 return 409, {"driving": False, "why": "the arm is not streaming now"}
-            if kind == "target" and not self.driving:
+            if kind != "take" and not self.driving:  # a target or a release of an arm not taken: nothing to log
                 return 409, {"driving": False, "why": "take the arm first"}
             self.driving = kind != "release"
             self.target = (float(target[0]), float(target[1])) if kind != "release" else self.target

@@ -506,9 +506,9 @@ def train_sac(args: Args, resume_state: dict | None = None) -> None:
         env.action_space.seed(args.seed + start_step)
         print(f"resumed from {args.resume} at step {start_step}", flush=True)
     else:
-        run_dir = new_run_dir(args)
         if args.clone_steps:  # the actor cloned from the successful demonstrations, then the critics warmed on all
-            pretrain(sac, clone_rb, demo_rb, args, amp, Stop.check)
+            pretrain(sac, clone_rb, demo_rb, args, amp, Stop.check)  # a stop here leaves no folder: nothing to keep
+        run_dir = new_run_dir(args)
     output_path = args.output_path or os.path.join(run_dir, "oracle.pt")
     writer = open_writer(args, run_dir)
     print(f"run directory: {run_dir}", flush=True)
@@ -742,13 +742,12 @@ def main() -> None:
     except OSError as e:  # a full or read-only disk: one line, what could not be written; nothing partial is left
         if e.errno not in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES):
             raise
-        resume = " (--resume <run dir>/training_state.pt continues from the last one saved)" if is_sac else ""
+        resume = f"; {resumable()}" if is_sac else ""
         print(f"failed: cannot write {e.filename}: {e.strerror}; no partial file is left{resume}", file=sys.stderr)
         sys.exit(1)
     except KeyboardInterrupt:  # nothing half-written: every file is saved atomically
         Stop.raised = True
-        print(f"interrupted ({(Stop.signals or ['SIGINT'])[0]}); no oracle checkpoint was written. SAC training "
-              "continues from its last saved state with --resume <run dir>/training_state.pt",
+        print(f"interrupted ({(Stop.signals or ['SIGINT'])[0]}); no oracle checkpoint was written; {resumable()}",
               file=sys.stderr)  # fmt: skip
     if Stop.signals and not Stop.raised:  # after the last loop: the oracle is complete, and the caller asked to stop
         print(f"{Stop.signals[0]} received after training finished; the oracle checkpoint is complete", file=sys.stderr)
@@ -784,9 +783,12 @@ def check_args(args: Args) -> None:
                              "it (a shipped teacher is replaced only on purpose)")  # fmt: skip
     for flag, path in (("init-from", args.init_from), ("resume", args.resume), ("demos", args.demos)):
         if path is not None and (maze or not os.path.isfile(path)):  # SAC's files: the maze's teachers have none
-            raise InputError(f"--{flag} {path}: " + ("the maze trains no SAC to read it" if maze else "no such file"))
+            why = "a directory, not a file" if os.path.isdir(path) else "no such file"
+            raise InputError(f"--{flag} {path}: " + ("the maze trains no SAC to read it" if maze else why))
     if args.clone_steps and (args.demos is None or args.init_from is not None):
         raise InputError("--clone-steps clones demonstrations into a new actor: it needs --demos, not --init-from")
+    if args.demos is None and args.demo_ratio != Args.demo_ratio:  # else recorded as a share of batches no one drew
+        raise InputError(f"--demo-ratio {args.demo_ratio} is the share of --demos in each batch: it needs --demos")
     if args.batch_size > args.total_timesteps:
         raise InputError(f"--batch-size {args.batch_size} is larger than --total-timesteps {args.total_timesteps}")
     if args.maze_dqn_batch_size > args.maze_dqn_timesteps:
@@ -795,11 +797,11 @@ def check_args(args: Args) -> None:
     if args.maze_dqn_learning_starts >= args.maze_dqn_timesteps:
         raise InputError(f"--maze-dqn-learning-starts {args.maze_dqn_learning_starts} leaves no step of "
                          f"--maze-dqn-timesteps {args.maze_dqn_timesteps} to learn in")  # fmt: skip
+    if len(run_name(args).encode()) > 240:  # 255 bytes a file name, less a suffix; first: a name echoed below is short
+        raise InputError(f"--exp-name is too long: the run directory's name would be {len(run_name(args))} characters")
     if not args.exp_name or any(c in args.exp_name for c in "/\\") or not args.exp_name.isprintable() or \
             args.exp_name in (".", ".."):  # fmt: skip
         raise InputError(f"--exp-name {args.exp_name!r} must name one directory under runs/ (no '/', not '..')")
-    if len(run_name(args).encode()) > 240:  # a file name has at most 255 bytes; room for new_run_dir's suffix
-        raise InputError(f"--exp-name is too long: the run directory's name would be {len(run_name(args))} characters")
     if not maze:
         check_env(args)
 
@@ -836,13 +838,17 @@ class Stop:
     """The stop signals received (main's handler only records them); check() acts on them once, at a loop's head: in
     our own code, never inside a library call (TensorBoard's writer, a checkpoint being written)."""
 
-    signals, raised = [], False
+    signals, raised, state = [], False, None  # state: the newest training_state.pt saved or resumed from
 
     @classmethod
     def check(cls) -> None:
         if cls.signals and not cls.raised:
             cls.raised = True
             raise KeyboardInterrupt
+
+
+def resumable() -> str:  # what a stopped run can go on from, named: a training state only if one exists
+    return f"--resume {Stop.state} continues from it" if Stop.state else "no training state was saved to resume from"
 
 
 def atomic_save(obj, path: str) -> None:
@@ -911,6 +917,7 @@ def save_training_state(path: str, sac: SAC, rb: ReplayBuffer, step: int, args: 
     state.update(log_ent_coef=sac.log_ent_coef.detach().clone(), buf_n=rb.n, global_step=step,
                  torch_rng=torch.get_rng_state(), args=asdict(args), **extra)  # fmt: skip
     atomic_save(state, path)
+    Stop.state = path
 
 
 def read_training_state(path: str) -> dict:
@@ -919,6 +926,7 @@ def read_training_state(path: str) -> dict:
     keys = (*SAC.MODULES, "log_ent_coef", "buf_n", *(f"buf_{f}" for f in ReplayBuffer.FIELDS), "global_step")
     if not isinstance(state, dict) or any(key not in state for key in (*keys, "torch_rng")):
         raise InputError(f"--resume {path}: not a training_state.pt of oracle_train.py")
+    Stop.state = path
     return state
 
 

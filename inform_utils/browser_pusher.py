@@ -136,6 +136,8 @@ class PageTeacher:
             self.page.end_day("the day's steps are done")
         answers = [a for a in self.page.answers() if a.value is not None]
         self.positives += sum(a.value > 0 for a in answers)
+        if self.budget is not None and self.positives >= self.budget:  # the page's record says so, not "day done"
+            self.page.end_day("the budget of yes answers is spent")
         labels = weighted_labels(self.credited, [(a.value, self.page.credit(a)) for a in answers])
         if self.drove:  # the person's own step: a yes, weighed with any answer about it
             labels.update(weighted_labels(self.credited, [(1.0, {step: 1.0})]))
@@ -180,6 +182,15 @@ def outcome(run_dir: str, args: Args, summary: dict) -> tuple[str, list]:
         env.close()
     n = min(map(len, films))
     return "\n".join(lines), [np.concatenate([films[0][i], films[1][i]], axis=1) for i in range(n)]
+
+
+def how_the_day_ended(summary: dict) -> str:
+    """Why the day ended, for answers.jsonl, when the page had not ended it itself (the button, a closed page, the
+    day's steps, the budget): the run's status, "interrupted (SIGINT) during the tamer phase" and the like."""
+    status = summary.get("status")
+    if status == "interrupted":
+        return f"interrupted ({summary.get('signal')}) during the {summary.get('phase')} phase"
+    return "day done" if status == "completed" else f"the run {status} during the {summary.get('phase')} phase"
 
 
 def check_page_args(args: Args) -> None:
@@ -227,9 +238,12 @@ def main() -> int:
         teacher, run_dir = teachers[0]
         try:
             with open(f"{run_dir}/summary.json") as f:
-                text, frames = outcome(run_dir, args, json.load(f))
+                summary = json.load(f)
+            teacher.page.end_day(how_the_day_ended(summary))  # if the day was still on (a stop, a failure)
+            text, frames = outcome(run_dir, args, summary)
             teacher.page.show_outcome(text, image=frames or None)
         except (OSError, ValueError, KeyboardInterrupt) as e:  # no summary (a stop at once), or a second stop
+            teacher.page.end_day(f"the run ended without a summary ({type(e).__name__})")
             teacher.page.show_outcome(f"the run ended without an outcome to show ({type(e).__name__})")
         finally:
             teacher.page.close()

@@ -7,13 +7,11 @@ clones); and the pretraining that --clone-steps runs before SAC's first step.
     python oracle_train.py --env-id Pusher-v5 --demos d.npz --layer-norm --total-timesteps 1000000
 """
 
-import hashlib
-import zipfile
-
 import numpy as np
 import torch
 
 import inform_sac_pusher as isp
+from inform_utils.files import BadFile, read_npz, sha256
 
 # a step of pusher_control --save-demos: the transition, then the reward's terms (to re-weight it)
 FIELDS = ("obs", "act", "next_obs", "rew", "term", "reward_dist", "reward_ctrl", "reward_near")
@@ -25,16 +23,17 @@ def read_demos(path: str, env, args, resume_state: dict | None, error: type[Exce
     (oracle_train's InputError), one line, for a file that is not such demonstrations, not the resumed run's, or
     not usable by the run (`args`: oracle_train's: --env-id, --reward-dist-weight, --total-timesteps, --clone-steps)."""
     env_id, reward_dist_weight = args.env_id, args.reward_dist_weight
-    with open(path, "rb") as f:
-        sha256 = hashlib.sha256(f.read()).hexdigest()
-    if resume_state is not None and resume_state.get("demos_sha256") != sha256:
+    try:  # the shared reader: a directory, an .npy, a damaged archive, a missing array: each one line
+        digest, data = sha256(path), read_npz(path, (*FIELDS, *EPISODE_FIELDS, "env_id"))
+    except BadFile as e:
+        raise error(f"--demos {e}: not demonstrations of pusher_control --save-demos") from None
+    if resume_state is not None and resume_state.get("demos_sha256") != digest:
         raise error(f"--demos {path}: not the demonstrations this run was trained with (their SHA-256 differs)")
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            data = {name: npz[name] for name in (*FIELDS, *EPISODE_FIELDS, "env_id")}
-            contact = str(npz["contact"]) if "contact" in npz else "gymnasium"  # saved before the setting: mujoco 4's
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile, EOFError) as e:
-        raise error(f"--demos {path}: not demonstrations of pusher_control --save-demos ({type(e).__name__})") from None
+    numbers = (*FIELDS, *EPISODE_FIELDS)  # each an array of numbers, one row a step or an episode
+    if not_numbers := [k for k in numbers if data[k].ndim == 0 or data[k].dtype.kind not in "biuf"]:
+        raise error(f"--demos {path}: {', '.join(not_numbers)}: not an array of numbers with a row a step or an "
+                    "episode; not demonstrations of pusher_control --save-demos")  # fmt: skip
+    contact = str(data.get("contact", "gymnasium"))  # saved before the setting: mujoco 4's
     if str(data["env_id"]) != env_id:
         raise error(f"--demos {path}: demonstrations of {data['env_id']}, not {env_id}")
     if contact != (ours := isp.contact_of(env_id, args.contact)):
@@ -65,7 +64,7 @@ def read_demos(path: str, env, args, resume_state: dict | None, error: type[Exce
     if steps >= args.total_timesteps or (args.clone_steps and not success_rows.any()):
         raise error(f"--demos {path}: its {steps} steps " + ("leave none of --total-timesteps" if
                     steps >= args.total_timesteps else "hold no successful episode to clone"))  # fmt: skip
-    return {"all": tensors, "success": {name: t[success_rows] for name, t in tensors.items()}, "sha256": sha256,
+    return {"all": tensors, "success": {name: t[success_rows] for name, t in tensors.items()}, "sha256": digest,
             "steps": steps}  # fmt: skip
 
 

@@ -1,19 +1,29 @@
 """The files the tools of inform_utils/ read and write, checked and atomic: a file that is missing, a dangling link,
 unreadable, half-written or damaged is one line (BadFile, a ValueError, so a tool's `error:` line and exit 2), and a
-file a tool writes appears whole or not at all (written beside its place, then os.replace)."""
+file a tool writes appears whole or not at all (written beside its place, then os.replace). And how a tool ends
+(run_tool): bad input in one `error:` line with exit 2, a stop signal between two steps in one line with exit 128 +
+the signal, never half-way through a write."""
 
 import contextlib
 import hashlib
 import json
 import os
+import secrets
 import shutil
+import signal
+import sys
 import tempfile
 import zipfile
 
 import numpy as np
 
 
-class BadFile(ValueError):
+class BadInput(ValueError):
+    """Bad input to a tool (a flag's value, a file): one line that says what is wrong and how to put it right, raised
+    before any work; run_tool prints it as `error: ...` and exits 2."""
+
+
+class BadFile(BadInput):
     """A file a tool reads is missing, unreadable, half-written or damaged: one line that names it and says why."""
 
 
@@ -46,8 +56,13 @@ def read_npz(path: str, keys: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
     """Every array of an .npz, read whole (each member's CRC-32 is checked as it is read; nothing is unpickled);
     BadFile, one line, for a file that is missing, truncated or damaged, or that lacks one of `keys`."""
     try:
-        with np.load(path, allow_pickle=False) as data:
+        loaded = np.load(path, allow_pickle=False)
+        if not isinstance(loaded, np.lib.npyio.NpzFile):  # np.load reads an .npy (whatever its name) as one array
+            raise BadFile(f"{path}: one .npy array, not an .npz archive of named arrays")
+        with loaded as data:
             arrays = {name: data[name] for name in data.files}
+    except BadFile:
+        raise
     except Exception as e:  # a damaged archive fails in many ways (BadZipFile, EOFError, zlib.error, ValueError)
         raise BadFile(f"{path}: cannot read it ({why_unreadable(path, e)})") from None
     missing = [k for k in keys if k not in arrays]
@@ -83,9 +98,16 @@ def sha256(path: str) -> str:
 @contextlib.contextmanager
 def atomic(path: str, mode: str = "w"):
     """Open a temporary file beside `path` for writing; on success it replaces `path` whole, on any error it is
-    removed and `path` is as it was."""
+    removed and `path` is as it was. The file gets the mode open() gives a new one (the umask's: mkstemp's 0600 would
+    hide a teacher's demonstrations or a check's JSON from the group)."""
     folder, name = os.path.split(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=folder)
+    while True:
+        tmp = os.path.join(folder, f".{name}.{secrets.token_hex(6)}.tmp")
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+            break
+        except FileExistsError:  # 48 random bits: a leftover of the same name, at most
+            continue
     try:
         with os.fdopen(fd, mode) as f:
             yield f
@@ -111,15 +133,76 @@ def copy(src: str, dest: str) -> None:
 
 def check_writable(folder: str, flag: str) -> None:
     """Before any work: `folder` (made later if it does not exist) can receive files. Tries a temporary file in it,
-    or in its nearest existing parent, and leaves nothing behind; ValueError, one line, if it cannot."""
+    or in its nearest existing parent, and leaves nothing behind; BadInput, one line, if it cannot."""
     probe = os.path.abspath(folder)
     while not os.path.lexists(probe):
         probe = os.path.dirname(probe)
     if not os.path.isdir(probe):
         what = "a dangling link" if os.path.islink(probe) else "a file"
-        raise ValueError(f"{flag} {folder}: {probe} is {what}, not a directory")
+        raise BadInput(f"{flag} {folder}: {probe} is {what}, not a directory")
     try:
         with tempfile.TemporaryFile(dir=probe):
             pass
     except OSError as e:
-        raise ValueError(f"{flag} {folder}: cannot write into {probe} ({why_unreadable(probe, e)})") from None
+        raise BadInput(f"{flag} {folder}: cannot write into {probe} ({why_unreadable(probe, e)})") from None
+
+
+def cut(text, limit: int = 200) -> str:
+    """`text` on one line, whole if it fits in `limit` characters; else the whole words (names, quoted keys) that fit
+    and how long it was: a value echoed in an error line is never 5,000 characters, nor a name cut in two."""
+    text = " ".join(str(text).split())
+    if len(text) <= limit:
+        return text
+    head = text[:limit]
+    if text[limit] != " " and " " in head[limit // 2 :]:  # drop the word the limit cuts; one long word is cut
+        head = head[: head.rindex(" ")]
+    return f"{head.rstrip(' ,;:')} ... ({len(text):,} characters)"
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# how a tool ends: run_tool
+
+
+class Stopped(Exception):
+    """A stop signal came: raised by Stop.check() at a step of the tool's own loop, never inside a library's call or a
+    write (a tool that stops so writes its files at the end only)."""
+
+
+class Stop:
+    """The first stop signal (SIGINT, SIGTERM, SIGHUP) a tool run by run_tool(..., stops=True) received. The handler
+    only records it; the tool calls Stop.check() between its steps."""
+
+    signum: int | None = None
+
+    @staticmethod
+    def record(signum, frame) -> None:
+        Stop.signum = Stop.signum or signum
+
+    @classmethod
+    def check(cls) -> None:
+        if cls.signum is not None:
+            raise Stopped
+
+
+def run_tool(main, *args, stops: bool = False):
+    """A tool's command line: main(*args), whose return value, if an int, is the exit code (else 0). BadInput (BadFile
+    too) is one line `error: ...` on stderr and exit 2. With `stops` a stop signal is recorded and main stops at its
+    next Stop.check(): one line, exit 128 + the signal (130 SIGINT, 143 SIGTERM); one that comes after main's last
+    check (during its save) lets the save finish whole, then the same exit."""
+    if stops:
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+            if signal.getsignal(sig) is not signal.SIG_IGN:  # nohup, `&`: an ignored signal stays ignored
+                signal.signal(sig, Stop.record)
+    try:
+        code = main(*args)
+    except BadInput as e:
+        print(f"error: {cut(e, 2000)}", file=sys.stderr)
+        sys.exit(2)
+    except Stopped:
+        print(f"interrupted ({signal.Signals(Stop.signum).name}) before the work was done; nothing was written",
+              file=sys.stderr)  # fmt: skip
+        sys.exit(128 + Stop.signum)
+    if Stop.signum is not None:
+        print(f"{signal.Signals(Stop.signum).name} received at the end; what was written is whole", file=sys.stderr)
+        sys.exit(128 + Stop.signum)
+    sys.exit(code if isinstance(code, int) else 0)

@@ -32,6 +32,7 @@ MPPIDemonstrator (pusher_mpc.py, `--demonstrator mpc`) does both by sampling MPC
     python -m inform_utils.pusher_control --episodes 200 --demonstrator mpc --first-seed 3000000 --save-demos demos.npz
 """
 
+import math
 import os
 import time
 from dataclasses import dataclass
@@ -44,6 +45,7 @@ import tyro
 
 import inform_sac_pusher as isp
 from inform_utils.demos import FIELDS as DEMO_FIELDS
+from inform_utils.files import BadInput, Stop, atomic, check_writable, cut, run_tool
 from inform_utils.pusher_mpc import MPPIDemonstrator
 from inform_utils.teacher_check import pace
 
@@ -56,6 +58,8 @@ CLEAR_HEIGHT = -0.16  # the fingertip's height when passing over the object (its
 POSTURE = np.array([0.0, 0.9, 1.2, -1.4, 0.5, -0.4, -1.2])
 PAN_OFFSET = 0.1  # radians: the pan's posture is the target's bearing plus this
 UP = np.array([0.0, 0.0, 1.0])
+MAX_SEED = 2**63 - 1  # the reset seeds are saved as int64
+MAX_SAMPLES = 10_000  # MPPI's rollouts a step: ~2 ms of CPU each, so 10,000 are 20 s a step (and 14 MB of plans)
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -191,6 +195,7 @@ def run_episode(env: gym.Env, demonstrator: PushingDemonstrator | MPPIDemonstrat
     demonstrator.reset(seed)
     ep_return, done, info = 0.0, False, {}
     while True:
+        Stop.check()  # a stop signal ends the run between two steps (pusher_control's command line)
         if path is not None:  # as teacher_check.final_distance measures it (the goal, fixed, at obs[20:22])
             path.append(float(np.linalg.norm(isp.object_xy(obs) - obs[20:22])))
         if done:
@@ -208,18 +213,18 @@ def run_episode(env: gym.Env, demonstrator: PushingDemonstrator | MPPIDemonstrat
 def save_demos(path: str, record: dict, env_id: str, demonstrator: str, seeds, distances, success_distance,
                contact: str | None) -> None:  # fmt: skip
     """The demonstrations as one .npz of plain arrays (np.load(..., allow_pickle=False) reads it): DEMO_FIELDS per
-    step (float32), per episode its reset seed, final distance and success; written whole or not at all."""
+    step (float32), per episode its reset seed, final distance and success; written whole or not at all (its folder
+    made if need be), never with NaN or inf in a step (BadInput: what a teacher would refuse to read)."""
     arrays = {name: np.asarray(values, dtype=np.float32) for name, values in record.items()}
+    if not all(np.isfinite(arrays[name]).all() for name in DEMO_FIELDS[:5]):  # demos.py's check of a step
+        raise BadInput(f"--save-demos {path}: the demonstrator's steps hold NaN or inf (its actions diverged); "
+                       "nothing was written")  # fmt: skip
     episodes = {"episode_seed": np.asarray(seeds, dtype=np.int64), "episode_distance": np.asarray(distances),
                 "episode_success": np.asarray(distances) < success_distance}  # fmt: skip
     meta = {"env_id": np.str_(env_id), "demonstrator": np.str_(demonstrator), "contact": np.str_(contact)}
-    tmp = f"{path}.tmp{os.getpid()}.npz"
-    try:
-        np.savez_compressed(tmp, **arrays, **episodes, **meta)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    with atomic(path, "wb") as f:
+        np.savez_compressed(f, **arrays, **episodes, **meta)
 
 
 @dataclass
@@ -253,17 +258,37 @@ def make_demonstrator(args: Args, env: gym.Env) -> PushingDemonstrator | MPPIDem
     return PushingDemonstrator(env.unwrapped.model)
 
 
-def main(args: Args) -> None:
-    if args.save_demos is not None and (os.path.exists(args.save_demos) or not args.save_demos.endswith(".npz")):
-        raise SystemExit(f"--save-demos {args.save_demos}: name a new file ending in .npz (it exists, or is no .npz)")
+def check_args(args: Args) -> None:
+    """Before the first episode: the env, every flag's range and where the demonstrations go; BadInput, one line."""
+    if args.env_id not in isp.PUSHER_IDS:
+        raise BadInput(f"--env-id {cut(args.env_id, 80)}: the demonstrators push Pusher's object; pass one of "
+                       f"{', '.join(isp.PUSHER_IDS)}")  # fmt: skip
+    if args.episodes < 1:
+        raise BadInput(f"--episodes must be >= 1, got {args.episodes}")
+    last = MAX_SEED - args.episodes + 1  # the last first seed whose episodes' seeds all fit
+    if not 0 <= args.first_seed <= last:
+        raise BadInput(f"--first-seed {args.first_seed}: the reset seeds lie in 0 .. 2**63 - 1 (saved as int64); with "
+                       f"--episodes {args.episodes} the first is at most {last}")  # fmt: skip
+    if not 0 < args.success_distance < math.inf:
+        raise BadInput(f"--success-distance must be a distance above 0 (metres), got {args.success_distance}")
     mpc_only = {"mpc_ctrl_weight": "weighs the MPC's torques", "mpc_samples": "sets the MPC's rollouts"}
     for field, what in mpc_only.items():
         if args.demonstrator != "mpc" and getattr(args, field) != getattr(Args, field):
-            raise SystemExit(f"--{field.replace('_', '-')} {what}: it needs --demonstrator mpc")
-    if not args.mpc_ctrl_weight >= 0:
-        raise SystemExit(f"--mpc-ctrl-weight {args.mpc_ctrl_weight}: a price of torque is 0 or more")
-    if args.mpc_samples < 2:
-        raise SystemExit(f"--mpc-samples {args.mpc_samples}: MPPI averages 2 or more action sequences")
+            raise BadInput(f"--{field.replace('_', '-')} {what}: it needs --demonstrator mpc")
+    if not 0 <= args.mpc_ctrl_weight < math.inf:
+        raise BadInput(f"--mpc-ctrl-weight {args.mpc_ctrl_weight}: a price of torque is 0 or more, and finite")
+    if not 2 <= args.mpc_samples <= MAX_SAMPLES:
+        raise BadInput(f"--mpc-samples {args.mpc_samples}: MPPI averages 2 or more action sequences, at most "
+                       f"{MAX_SAMPLES:,} here (each costs ~2 ms of CPU a step)")  # fmt: skip
+    if args.save_demos is not None:
+        if os.path.lexists(args.save_demos) or not args.save_demos.endswith(".npz"):
+            raise BadInput(f"--save-demos {cut(args.save_demos, 200)}: name a new file ending in .npz (it exists, or "
+                           "is no .npz)")  # fmt: skip
+        check_writable(os.path.dirname(args.save_demos) or ".", "--save-demos")
+
+
+def main(args: Args) -> None:
+    check_args(args)
     env = isp.make_env(args.env_id, 0, contact=args.contact)
     demonstrator = make_demonstrator(args, env)
     demonstrator_name = "scripted"
@@ -302,4 +327,4 @@ def main(args: Args) -> None:
 
 
 if __name__ == "__main__":
-    main(tyro.cli(Args))
+    run_tool(main, tyro.cli(Args), stops=True)

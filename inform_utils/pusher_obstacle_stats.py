@@ -20,6 +20,7 @@ TAMER's per-seed mean (2 sd / sqrt(episodes), averaged over the seeds).
 import io
 import os
 import sys
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -88,13 +89,15 @@ def aggregate(runs: list[dict]) -> dict:
     out["within_noise"] = bool(abs(out["margin"]) < out["tamer_sampling_spread"])
     tamer = np.concatenate([r["distances"]["tamer"] for r in runs])
     inform = np.concatenate([r["distances"]["inform"] for r in runs])
-    welch = stats.ttest_ind(tamer, inform, equal_var=False)
-    out["welch_t_episodes"], out["welch_p_episodes"] = float(welch.statistic), float(welch.pvalue)
-    if len(runs) > 1:
-        paired = stats.ttest_rel(out["tamer_seed_means"], out["inform_seed_means"])
-        out["paired_t_seed_means"], out["paired_p_seed_means"] = float(paired.statistic), float(paired.pvalue)
-        welch = stats.ttest_ind(out["tamer_seed_means"], out["inform_seed_means"], equal_var=False)
-        out["welch_t_seed_means"], out["welch_p_seed_means"] = float(welch.statistic), float(welch.pvalue)
+    with warnings.catch_warnings():  # near-identical distances: t and p say it (inf, 0), not a warning on stderr
+        warnings.filterwarnings("ignore", "Precision loss occurred in moment calculation", RuntimeWarning)
+        welch = stats.ttest_ind(tamer, inform, equal_var=False)
+        out["welch_t_episodes"], out["welch_p_episodes"] = float(welch.statistic), float(welch.pvalue)
+        if len(runs) > 1:
+            paired = stats.ttest_rel(out["tamer_seed_means"], out["inform_seed_means"])
+            out["paired_t_seed_means"], out["paired_p_seed_means"] = float(paired.statistic), float(paired.pvalue)
+            welch = stats.ttest_ind(out["tamer_seed_means"], out["inform_seed_means"], equal_var=False)
+            out["welch_t_seed_means"], out["welch_p_seed_means"] = float(welch.statistic), float(welch.pvalue)
     return out
 
 

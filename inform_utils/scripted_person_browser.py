@@ -32,6 +32,8 @@ from typing import Literal
 
 import tyro
 
+from inform_utils.files import BadInput, check_writable, run_tool
+
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = ["--no-sandbox", "--headless", "--disable-gpu", "--disable-background-networking",
@@ -332,14 +334,16 @@ def say(text: str, err: bool = False) -> None:
 
 
 def check_before_writing(args) -> None:
-    """What a scripted person's run needs before it writes anything: a browser, a new --out-dir and --work-dir (else
-    one error line), and the repository's modules importable."""
+    """What a scripted person's run needs before it writes anything: a browser, a new --out-dir and --work-dir where
+    they can be made (else BadInput, one line), and the repository's modules importable."""
     why = browser_missing()
     if why:
-        sys.exit(f"error: the scripted person needs a browser: {why}")
+        raise BadInput(f"the scripted person needs a browser: {why}")
     for flag, path in (("--out-dir", args.out_dir), ("--work-dir", args.work_dir)):
-        if path is not None and os.path.exists(path):
-            sys.exit(f"error: {flag} {path} exists; give a new directory (nothing is overwritten)")
+        if path is not None and os.path.lexists(path):
+            raise BadInput(f"{flag} {path} exists; give a new directory (nothing is overwritten)")
+        if path is not None:
+            check_writable(path, flag)
     if REPO not in sys.path:
         sys.path.insert(0, REPO)
 
@@ -392,4 +396,4 @@ def main(args: Args) -> dict:
 
 
 if __name__ == "__main__":
-    main(tyro.cli(Args))
+    run_tool(main, tyro.cli(Args))

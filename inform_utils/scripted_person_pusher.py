@@ -27,6 +27,7 @@ removed, or kept in --work-dir. Neither directory may exist: nothing is overwrit
 
 import contextlib
 import json
+import math
 import os
 import random
 import shlex
@@ -40,6 +41,7 @@ from typing import Literal
 import numpy as np
 import tyro
 
+from inform_utils.files import BadInput, cut, run_tool
 from inform_utils.scripted_person_browser import Child, check_before_writing, each_seed, new_run, runs_in
 
 POLICIES = ("tamer", "inform", "bc", "sham", "core")  # the day's two, then the nights on the saved day
@@ -338,8 +340,15 @@ def act(page, acts: list, driving: bool, given: dict) -> None:
 
 
 def run_flag(run_flags: list[str], flag: str, default: str) -> str:
-    """A flag's value in the runs' flags (`default`, the core script's, otherwise)."""
-    return next((run_flags[i + 1] for i, f in enumerate(run_flags[:-1]) if f == flag), default)
+    """A flag's value in the runs' flags, `--flag VALUE` or `--flag=VALUE`, the last one as tyro reads it (`default`,
+    the core script's, otherwise)."""
+    value = default
+    for i, word in enumerate(run_flags):
+        if word == flag and i + 1 < len(run_flags):
+            value = run_flags[i + 1]
+        elif word.startswith(f"{flag}="):
+            value = word.split("=", 1)[1]
+    return value
 
 
 def run_env_id(run_flags: list[str]) -> str:
@@ -489,7 +498,37 @@ def say(text: str) -> None:
     print(text, flush=True)
 
 
+def check_args(args: Args) -> None:
+    """Before the rehearsal or the page: every flag's range and the runs' flags; BadInput, one line."""
+    import inform_sac_pusher as isp
+
+    if args.rehearse is not None and not args.drive:
+        raise BadInput("--rehearse rehearses the driving person's push: it needs --drive")
+    if args.rehearse is not None and args.rehearse < 1:
+        raise BadInput(f"--rehearse must be >= 1 episode, got {args.rehearse}")
+    if not args.seeds or min(args.seeds) < 0:
+        raise BadInput(f"--seeds must be one or more seeds >= 0, got {' '.join(map(str, args.seeds)) or 'none'}")
+    if min(args.steps, args.drive_every) < 1:
+        raise BadInput(f"--steps and --drive-every must be >= 1, got {args.steps} and {args.drive_every}")
+    if not (0 < args.pace <= 100 and 0 < args.period < math.inf and 0 < args.timeout < math.inf):  # the page's pace
+        raise BadInput(f"--pace must be in (0, 100] steps a second, --period and --timeout above 0 seconds, got "
+                       f"{args.pace}, {args.period}, {args.timeout}")  # fmt: skip
+    low, high = args.reaction
+    if not 0 <= low <= high < math.inf:
+        raise BadInput(f"--reaction must be LOW HIGH seconds with 0 <= LOW <= HIGH, got {low} {high}")
+    if not (0 <= args.aim_noise < math.inf and math.isfinite(args.push_lead)):
+        raise BadInput(f"--aim-noise must be 0 or more and --push-lead finite, got {args.aim_noise}, {args.push_lead}")
+    try:
+        env_id = run_env_id(shlex.split(args.flags))
+    except ValueError as e:  # an unclosed quote
+        raise BadInput(f"--flags {cut(repr(args.flags), 200)}: {e} (one string of a command line's words)") from None
+    if env_id not in isp.PUSHER_IDS:
+        raise BadInput(f"--flags: --env-id {cut(env_id, 80)}: the person pushes Pusher's object at the page; pass one "
+                       f"of {', '.join(isp.PUSHER_IDS)}")  # fmt: skip
+
+
 def main(args: Args) -> list[dict] | dict:
+    check_args(args)
     if args.rehearse is not None:
         return rehearse(args)
     check_before_writing(args)
@@ -510,4 +549,4 @@ def main(args: Args) -> list[dict] | dict:
 
 
 if __name__ == "__main__":
-    main(tyro.cli(Args))
+    run_tool(main, tyro.cli(Args))

@@ -22,6 +22,7 @@ import torch
 import tyro
 
 import inform_sac_pusher as isp
+from inform_utils.files import atomic, cut
 from oracle_train import EXPERT_FINAL_DISTANCE, EXPERT_SUCCESS_RATE
 
 SUCCESS_DISTANCE = 0.08  # the paper's success tag, on v4 and v5 alike
@@ -79,7 +80,7 @@ def pace(paths: np.ndarray, dt: float) -> dict | None:
 
 def read_teacher(path: str) -> dict:
     """The SAC teacher at `path`, checked as --oracle-path checks it (its CRCs, weights only, its keys, its env's
-    shapes); isp.InputError, one line, otherwise."""
+    shapes); isp.InputError, one line that names it as this tool takes it (CHECKPOINT, not --oracle-path), otherwise."""
     if not os.path.isfile(path):
         what = "a directory, not a file" if os.path.isdir(path) else "no such file"
         raise isp.InputError(f"{path}: {what} (a teacher of oracle_train.py: oracles/Pusher-v5__sac_oracle.pt)")
@@ -92,7 +93,26 @@ def read_teacher(path: str) -> dict:
         raise isp.InputError(f"{path}: refused, not a weights-only torch checkpoint ({type(e).__name__})") from None
     if not isinstance(ckpt, dict) or ckpt.get("algorithm") != "sac":
         raise isp.InputError(f"{path}: not a SAC teacher of oracle_train.py (a maze teacher has no episodes to check)")
-    return isp.read_checkpoint(path, "--oracle-path", str(ckpt.get("env_id")))
+    try:
+        return isp.read_checkpoint(path, "--oracle-path", str(ckpt.get("env_id")))
+    except isp.InputError as e:
+        why = str(e).removeprefix(f"--oracle-path {path}: ")
+        if why.startswith("the networks do not load"):  # the core cuts its reason at 80 characters: say it whole
+            why = f"the networks do not load ({networks_error(ckpt)})"
+        raise isp.InputError(f"{path}: {why}") from None
+
+
+def networks_error(ckpt: dict) -> str:
+    """Why a teacher's networks do not load, on one line with whole key names (a long list cut between names)."""
+    try:
+        isp.oracle_from_checkpoint(ckpt, torch.device("cpu"))
+    except Exception as e:
+        why = cut(f"{type(e).__name__}: {e}", 400)
+        critics = ckpt["qf_state_dict"]
+        if not ckpt["kwargs"].get("layer_norm") and isinstance(critics, dict) and "norm" in critics:
+            why += "; its critics are a LayerNorm's (the marker norm) but its kwargs lack layer_norm: True"
+        return why
+    return "they load here"
 
 
 def check(args: Args) -> dict:
@@ -143,9 +163,12 @@ def check(args: Args) -> dict:
 
 
 def main(args: Args) -> int:
-    try:
+    try:  # the ranges before the teacher loads: a seed below 0 was a traceback of gymnasium's reset
         if args.episodes < 1:
             raise isp.InputError(f"--episodes must be >= 1, got {args.episodes}")
+        if args.reset_seed < 0 or min(args.fixed_seeds, default=0) < 0:
+            seeds = " ".join(map(str, args.fixed_seeds))
+            raise isp.InputError(f"--reset-seed and --fixed-seeds are seeds >= 0, got {args.reset_seed} and {seeds}")
         if args.out is not None and (os.path.isdir(args.out) or not os.path.isdir(os.path.dirname(args.out) or ".")):
             raise isp.InputError(f"--out {args.out}: must name a file in an existing directory")
         result = check(args)
@@ -155,9 +178,8 @@ def main(args: Args) -> int:
     text = json.dumps(result, indent=1)
     print(text)
     if args.out:
-        with open(args.out + ".tmp", "w") as f:
+        with atomic(args.out) as f:
             f.write(text + "\n")
-        os.replace(args.out + ".tmp", args.out)
     return 0
 
 

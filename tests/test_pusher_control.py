@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from inform_utils import pusher_control
+from inform_utils.files import BadInput
 from inform_utils.pusher_contact import PUSHERS, push
 from inform_utils.pusher_control import SHOULDER_XY, WORK_HEIGHT, FingertipController, PushingDemonstrator, run_episode
 from inform_utils.pusher_mpc import MPPIDemonstrator
@@ -154,7 +155,7 @@ def test_the_mpc_torque_weight_reaches_the_mpc_and_only_it():
     env = gym.make("Pusher-v5")
     mpc = pusher_control.make_demonstrator(pusher_control.Args(demonstrator="mpc", mpc_ctrl_weight=1.0), env)
     assert isinstance(mpc, MPPIDemonstrator) and mpc.w_ctrl == 1.0
-    with pytest.raises(SystemExit, match="--mpc-ctrl-weight weighs the MPC's torques: it needs --demonstrator mpc"):
+    with pytest.raises(BadInput, match="--mpc-ctrl-weight weighs the MPC's torques: it needs --demonstrator mpc"):
         pusher_control.main(pusher_control.Args(episodes=1, mpc_ctrl_weight=1.0))
 
 
@@ -164,7 +165,7 @@ def test_the_mpc_samples_reach_the_mpc_and_only_it():
     env = gym.make("Pusher-v5")
     mpc = pusher_control.make_demonstrator(pusher_control.Args(demonstrator="mpc", mpc_samples=7), env)
     assert mpc.samples == 7 and mpc._noise().shape[0] == 7
-    with pytest.raises(SystemExit, match="--mpc-samples sets the MPC's rollouts: it needs --demonstrator mpc"):
+    with pytest.raises(BadInput, match="--mpc-samples sets the MPC's rollouts: it needs --demonstrator mpc"):
         pusher_control.main(pusher_control.Args(episodes=1, mpc_samples=160))
-    with pytest.raises(SystemExit, match="--mpc-samples 1: MPPI averages 2 or more"):
+    with pytest.raises(BadInput, match="--mpc-samples 1: MPPI averages 2 or more"):
         pusher_control.main(pusher_control.Args(episodes=1, demonstrator="mpc", mpc_samples=1))

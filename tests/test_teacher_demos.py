@@ -17,6 +17,7 @@ import inform_sac_pusher as isp
 import oracle_train as ot
 from inform_utils import pusher_control, teacher_check
 from inform_utils.demos import clone_step, read_demos
+from inform_utils.files import BadInput
 
 DEMO_EPISODES = 2  # the scripted demonstrator: 200 steps in a fraction of a second
 TINY = ["--env-id", "Pusher-v5", "--batch-size", "64", "--hidden-size", "32", "--eval-frequency", "200",
@@ -61,7 +62,7 @@ def test_the_demonstrations_are_written_whole_and_read_back(tmp_path, capsys):
         weighted = read_demos(str(path), env, ot.Args(reward_dist_weight=3.0), None, ot.InputError)["all"]["rew"]
         expected = 3 * npz["reward_dist"] + npz["reward_ctrl"] + npz["reward_near"]
         np.testing.assert_allclose(weighted.numpy(), expected, rtol=1e-5)
-    with pytest.raises(SystemExit, match="name a new file"):  # never over a file
+    with pytest.raises(BadInput, match="name a new file"):  # never over a file
         pusher_control.main(pusher_control.Args(episodes=1, save_demos=str(path)))
 
 
