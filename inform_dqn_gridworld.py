@@ -751,7 +751,7 @@ class Evaluator:
 
     def __init__(self, env_id: str, success_max_steps: int, eval_episodes: int, seed: int, writer=None):
         self.writer, self.success_max_steps, self.maze = writer, success_max_steps, env_id in MAZE_IDS
-        self.seconds, self.final = 0.0, {}
+        self.seconds, self.final, self.checks = 0.0, {}, {}  # the final tests'; each policy's last periodic check
         if self.maze:
             self.envs = {name: gym.make(f"KnoxStoneMaze{suffix}-v0") for name, suffix in
                          (("plain", ""), ("wall", "Wall"), ("start_set", "StartSet"))}  # fmt: skip
@@ -770,7 +770,7 @@ class Evaluator:
             self.optimum = evaluate(optimal_q(self.envs["plain"]).argmax(1), self.envs["plain"], resets,
                                     success_max_steps)[0]  # fmt: skip
 
-    def __call__(self, name: str, policy: np.ndarray, step: int) -> dict:
+    def __call__(self, name: str, policy: np.ndarray, step: int, final: bool = False) -> dict:
         t0 = time.time()
         results, metrics = {}, {}
         for tag, (maze, starts, which) in self.tests.items():
@@ -780,7 +780,7 @@ class Evaluator:
             metrics[tag.format(name)] = results[maze, id(starts)][which]
         for tag, value in metrics.items() if self.writer is not None else ():
             self.writer.add_scalar(tag, value, step)
-        self.final.update(metrics)
+        (self.final if final else self.checks).update(metrics if final else {**metrics, f"eval/{name}_step": step})
         self.seconds += time.time() - t0
         return metrics
 
@@ -835,15 +835,14 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", saved: di
                 save_day(f"{run_dir}/day.pt", day, buffer, q_star, {**stats, "time/tamer_s": summary["time/tamer_s"]})
         else:  # --sleep-from: a saved day's oracle, memories and H, its random streams where that day left them
             q_star, buffer, day = restore_day(saved, device)
-            summary.update(saved["day_stats"], day_settings=saved["day_args"])  # its settings whole, known or not
+            summary.update(saved["day_stats"], day_settings=saved["day_args"], tamer_h_kwargs=day.h_net.kwargs)
         h_net = day.h_net
         save_network(f"{run_dir}/tamer_h.pt", h_net, env_id=args.env_id)
 
         # ---- sleep phase ("night"): offline IQ-Learn on the success set and the whole buffer
-        phase = "sleep"
+        phase, t0 = "sleep", time.time() - evaluator.seconds
         if args.sleep_seed is not None:  # a night of its own: the random streams start afresh
             seed_everything(args.sleep_seed)
-        t0 = time.time() - evaluator.seconds
         expert_idx = buffer.success[: buffer.size].nonzero().squeeze(1)
         summary.update({"sleep/expert_transitions": int(expert_idx.numel()), "sleep/replay_transitions": buffer.size,
                         "sleep_skipped": expert_idx.numel() == 0})  # fmt: skip
@@ -876,7 +875,7 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", saved: di
         if args.env_id not in MAZE_IDS:
             summary["maze_tests/skipped"] = f"the wall maze, start cells, reward table, drawings: none on {args.env_id}"
         for name, policy in policies.items():  # INFORM's at the sleep's last step, the others at the day's
-            evaluator(name, policy, args.sleep_gradient_steps if name == "inform" else summary["feedback/steps"])
+            evaluator(name, policy, args.sleep_gradient_steps if name == "inform" else summary["feedback/steps"], True)
         if args.capture_video:  # after the evaluation: drawing changes no number
             record_videos(run_dir, {name: policy for name, policy in policies.items() if name != "oracle"})
         if args.teacher in ("human", "browser"):
@@ -898,6 +897,8 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", saved: di
         status = "failed"
         summary["error"] = f"{type(e).__name__}: {(str(e).strip() or '-').splitlines()[0]}"
         failure = None if isinstance(e, OSError) else e
+    if status != "completed" and phase in ("oracle", "tamer", "sleep"):  # how long the cut phase ran
+        summary[f"time/{phase}_s"] = time.time() - evaluator.seconds - t0
     summary = end_run(summary, status, phase, run_dir, run_start, evaluator, (env, writer, page), stop, args.seed,
                       vars(args))  # fmt: skip
     if failure is not None:
@@ -914,7 +915,7 @@ def cli(args: Args) -> int:
         check_args(args)
         oracle_q = saved = None
         if args.sleep_from:  # a saved day: no oracle, no forward phase; its day flags replace these
-            saved = load_day(args.sleep_from)
+            saved = load_day(args.sleep_from, type(args))
             flags = {f.name for f in fields(args)}
             for name in flags & set(saved["day_args"]):
                 setattr(args, name, saved["day_args"][name])
@@ -926,7 +927,7 @@ def cli(args: Args) -> int:
                 "steps); its day flags replace these")  # fmt: skip
             unknown = {k: v for k, v in saved["day_args"].items() if k not in flags}
             if unknown:  # a copy's day: its settings are recorded, never dropped
-                say(f"[day] the day's settings that are not this script's flags, kept in summary.json: {unknown}")
+                say(f"[day] the day's settings unknown to this script, kept in summary.json: {cut(unknown, 200)}")
         elif args.oracle_path:
             oracle_q = load_oracle(args.oracle_path, args.env_id)
         check_writable("runs")
@@ -1126,9 +1127,10 @@ def set_rng_state(rng: dict) -> None:
     random.setstate((version, tuple(internal), gauss))
 
 
-def load_day(run_dir: str) -> dict:
-    """RUN_DIR/day.pt, checked (keys, shapes, index and value ranges; its flags are checked as this run's when they
-    replace them). Raises InputError before anything is written."""
+def load_day(run_dir: str, args_type: type = Args) -> dict:
+    """RUN_DIR/day.pt, checked (keys, shapes, index and value ranges; its settings and stats as JSON values, a flag of
+    `args_type` also of its type, and checked as this run's when they replace them). Raises InputError before anything
+    is written."""
     path = os.path.join(run_dir, "day.pt")
     if not os.path.isdir(run_dir):
         raise InputError(f"--sleep-from {run_dir}: no such directory")
@@ -1137,6 +1139,8 @@ def load_day(run_dir: str) -> dict:
     day = read_checkpoint(path, "--sleep-from")
     if day.get("format") != DAY_FORMAT:
         raise InputError(f"{path}: not a saved day of this script (format {day.get('format')!r}, not {DAY_FORMAT!r})")
+    for part, hints in (("day_args", typing.get_type_hints(args_type, include_extras=True)), ("day_stats", {})):
+        check_settings(day.get(part, {}), hints, f"{path}: {part}")  # they go into summary.json
     missing = [k for k in ("env_id", "day_args", *DAY_TENSORS, *EPISODE_TABLE, "h_net", "q_star", "rng", "day_stats")
                if k not in day] + [f"day_args.{k}" for k in DAY_ARGS if k not in day.get("day_args", {})]  # fmt: skip
     if missing:
@@ -1171,6 +1175,7 @@ def load_day(run_dir: str) -> dict:
         raise InputError(f"{path}: a damaged or tampered day: {', '.join(k for k, ok in ranges.items() if not ok)} "
                          f"out of range")  # fmt: skip
     try:  # the day's learner, rebuilt from what the day saved (another script's H is refused here, by name)
+        check_settings(day["h_net"]["kwargs"], typing.get_type_hints(QNetwork.__init__), f"{path}: h_net kwargs")
         day["learner"] = Day(day["day_args"], torch.device("cpu"), saved=day["h_net"])
         if day["h_net"]["kwargs"]["obs_dim"] != n_states:
             raise ValueError(f"H is a network for {day['h_net']['kwargs']['obs_dim']}-d observations, not {n_states}-d")
@@ -1414,7 +1419,9 @@ def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop
     if run_dir is not None:
         final = {"time/eval_s": evaluator.seconds if evaluator else 0.0, "wall_time_s": time.time() - run_start}
         final.update(seed=seed, script=os.path.basename(__file__), status=status, args=flags)
-        summary = {**(evaluator.final if evaluator else {}), **summary, **final}
+        checks = evaluator.checks if evaluator and status != "completed" else {}  # not under the final tests' names
+        checks = {f"eval/last_check/{k.removeprefix('eval/')}": v for k, v in checks.items()}
+        summary = {**(evaluator.final if evaluator else {}), **summary, **checks, **final}
         summary.update({"phase": phase} if status != "completed" else {})
         summary.update({"signal": stop.reason()} if status == "interrupted" else {})
         try:
@@ -1440,6 +1447,39 @@ def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop
 
 
 # --- end of shared plumbing ---
+
+
+def check_settings(values, hints: dict, where: str) -> None:
+    """What a saved day brings into summary.json, checked as it is read: a dict of JSON values (str, int, float, bool,
+    None, lists and dicts of them), a known flag's (in `hints`, Args' type hints) also of that flag's type. InputError
+    naming the first that is not, its value cut short."""
+    if not isinstance(values, dict):
+        raise InputError(f"{where} is {cut(values)}, not a dict")
+    for name, value in values.items():
+        try:  # TypeError: a tensor, bytes, a key that is no string; ValueError: a loop
+            json.dumps({name: value})
+        except (TypeError, ValueError, RecursionError):
+            raise InputError(f"{where}[{cut(name)}] is {cut(value)}, not a JSON value") from None
+        if name in hints and not of_type(value, hints[name]):
+            kind = getattr(hints[name], "__origin__", hints[name])  # Annotated's type
+            kind = kind.__name__ if isinstance(kind, type) else str(kind).replace("typing.", "")
+            raise InputError(f"{where}[{cut(name)}] is {cut(value)}, not of its flag's type ({kind})")
+
+
+def of_type(value, hint) -> bool:
+    """Is `value` of a flag's type `hint` (Annotated, Literal, a union, bool, int, str; a float may be an int)?"""
+    origin, members = typing.get_origin(hint), typing.get_args(hint)
+    if origin is Annotated or origin in (typing.Union, type(int | None)):
+        return any(of_type(value, m) for m in (members[:1] if origin is Annotated else members))
+    if origin is Literal:
+        return any(type(value) is type(m) and value == m for m in members)
+    kind = (int, float) if hint is float else origin or hint
+    return isinstance(value, kind) and (hint is bool or not isinstance(value, bool))
+
+
+def cut(value, n: int = 80) -> str:  # a value in a message: one line, a long one cut short
+    text = " ".join(repr(value).split())
+    return text if len(text) <= n else f"{text[:n]}... ({len(text):,} characters)"
 
 
 def strict_json(value):  # NaN and inf as null, at any depth (a metric this run does not have, e.g. no successes)

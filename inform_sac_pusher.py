@@ -239,8 +239,8 @@ class Args:
         return " ".join(f"{k}={v}" for k, v in settings.items())
 
     def night(self, tamer_actor: "Actor", device, tamer: dict) -> "Night":
-        """The night's learner (`tamer`: TAMER's H and entropy coefficient at the day's end, which only the study's
-        sham control uses)."""
+        """The night's learner (`tamer`: TAMER's H, its constructor arguments and its entropy coefficient at the day's
+        end, which only the study's sham control uses)."""
         return Night(tamer_actor, device, **self.night_settings())
 
 
@@ -685,6 +685,9 @@ def forward_phase(day: Day, env, oracle_actor, oracle_qf, teacher, outcome, buff
     stats.update({"feedback/steps": buffer.size, "feedback/positive_rate": positives / buffer.size})
     stats["feedback/driven_steps"] = int(buffer.driven[: buffer.size].sum())  # a person's own steps (the web page)
     stats.update({"sleep/success_episodes": int(successes), "sleep/episodes": len(buffer.episodes)})
+    if ((labels := buffer.feedback[: buffer.size])[labels > 0] != 1).any():  # graded answers: what counted, and how
+        stats.update({"feedback/counted_as_positive": "every answer above 0, as one signal (its rate, the budget)",
+                      "feedback/positive_label_mean": labels[labels > 0].mean().item()})  # fmt: skip
     return {**stats, "losses/tamer_entropy_coef": day.log_ent_coef.exp().item()}
 
 
@@ -920,20 +923,19 @@ class Evaluator:
         self.envs, self.contact = env_copies(env_id, seed, SIDE_BY_SIDE, contact=contact), contact
         self.writer, self.seed, self.random_starts, self.outcome = writer, seed, random_starts, outcome
         self.generator = torch.Generator().manual_seed(seed + 12345)  # sampled actions, off the training RNG
-        self.seconds = 0.0  # spent evaluating
-        self.final = {}  # the latest value of each tag
+        self.seconds, self.final, self.checks = 0.0, {}, {}  # spent evaluating; the final tests'; the last checks
 
     def reset_seed(self, episode: int) -> int:
         return 1_000_000 + 1000 * self.seed + episode if self.random_starts else self.seed
 
-    def __call__(self, name: str, actor: Actor, step: int, episodes: int) -> dict:
+    def __call__(self, name: str, actor: Actor, step: int, episodes: int, final: bool = False) -> dict:
         t, results = time.time(), {}
         for deterministic, suffix in ((True, ""), (False, "_sampled")):
             res = evaluate(actor, self.envs, episodes, self.reset_seed, deterministic, self.generator, self.outcome)
             results.update({f"eval/{name}_{k}{suffix}": res[k] for k in ("return", "final_distance", "success_rate")})
         for tag, value in results.items() if self.writer is not None else ():
             self.writer.add_scalar(tag, value, step)
-        self.final.update(results)
+        (self.final if final else self.checks).update(results if final else {**results, f"eval/{name}_step": step})
         self.seconds += time.time() - t
         return results
 
@@ -951,7 +953,7 @@ def final_evaluation(buffer, q_net, policies: dict, evaluator, writer, run_dir: 
     seed, outcome, contact, boxes = evaluator.seed, evaluator.outcome, evaluator.contact, None
     print("[eval] final evaluation", flush=True)
     for name, actor in policies.items():
-        evaluator(name, actor, end_step, eval_episodes)
+        evaluator(name, actor, end_step, eval_episodes, final=True)
     t = time.time()
     if obstacle_skipped(env_id, obstacle_episodes):
         results["obstacle/skipped"] = obstacle_skipped(env_id, obstacle_episodes)
@@ -1260,12 +1262,12 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
             stats = forward_phase(day, env, oracle_actor, oracle_qf, teacher, outcome, buffer, evaluator, writer)
         else:  # --sleep-from: the saved day's memories and TAMER, and the random streams where the day left them
             day, stats = restore_day(saved, buffer, evaluator, device)
-            summary["day_settings"] = saved["day_args"]  # whole, as the day recorded them (known here or not)
+            summary.update(day_settings=saved["day_args"], tamer_h_kwargs=day.h_kwargs)  # whole, as the day saved them
         summary["time/tamer_s"] = time.time() - evaluator.seconds - t0
         summary["sps/tamer"] = stats["feedback/steps"] / max(summary["time/tamer_s"], 1e-9)
         summary.update(stats)  # a saved day's stats bring the day's own time
         save_actor(f"{run_dir}/tamer_actor.pt", day.actor, env_id=args.env_id)
-        save_critic(f"{run_dir}/tamer_h.pt", day.h_net, obs_dim, act_dim, env_id=args.env_id)
+        save_critic(f"{run_dir}/tamer_h.pt", day.h_net, day.h_kwargs, env_id=args.env_id)
         if args.save_buffer:
             day_stats = {**stats, "time/tamer_s": summary["time/tamer_s"], "sps/tamer": summary["sps/tamer"]}
             save_day(f"{run_dir}/day.pt", day, buffer, oracle_ckpt, day_stats, evaluator.generator)
@@ -1274,7 +1276,7 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
         phase, t0 = "sleep", time.time() - evaluator.seconds
         if args.sleep_seed is not None:  # another night on the same day
             torch.manual_seed(args.sleep_seed)
-        night = args.night(day.actor, device, tamer={"h_net": day.h_net,
+        night = args.night(day.actor, device, tamer={"h_net": day.h_net, "h_kwargs": day.h_kwargs,
                                                      "ent_coef": stats["losses/tamer_entropy_coef"]})  # fmt: skip
         summary.update(sleep_phase(night, buffer, args.sleep_gradient_steps, args.sleep_batch_size, evaluator, writer,
                                    device))  # fmt: skip
@@ -1283,7 +1285,7 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
         summary["sps/sleep"] = args.sleep_gradient_steps / max(summary["time/sleep_s"], 1e-9)
         save_actor(f"{run_dir}/inform_actor.pt", inform_actor, env_id=args.env_id)
         extra = {"env_id": args.env_id, "gamma": SLEEP_GAMMA, "temperature": args.sleep_temperature}
-        save_critic(f"{run_dir}/inform_critic.pt", q_net, obs_dim, act_dim, **extra)
+        save_critic(f"{run_dir}/inform_critic.pt", q_net, {"obs_dim": obs_dim, "act_dim": act_dim}, **extra)
         policies = {"oracle": oracle_actor, "tamer": day.actor, "inform": inform_actor}
         if selected is not None:  # the checkpoint picked offline, beside the last one
             save_actor(f"{run_dir}/inform_selected_actor.pt", selected["actor"], env_id=args.env_id)
@@ -1306,6 +1308,8 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
     except Exception as e:  # the summary records it; a bug then gets its traceback, a full disk its one line
         status, summary["error"] = "failed", f"{type(e).__name__}: {(str(e).strip() or '-').splitlines()[0]}"
         failure = None if isinstance(e, OSError) else e
+    if status != "completed" and phase in ("oracle", "tamer", "sleep"):  # how long the cut phase ran
+        summary[f"time/{phase}_s"] = time.time() - evaluator.seconds - t0
     summary = end_run(summary, status, phase, run_dir, run_start, evaluator, (env, writer), stop, args.seed, vars(args))
     if failure is not None:
         raise failure
@@ -1491,9 +1495,9 @@ def save_actor(path: str, actor: Actor, **extra) -> None:
     save_atomic({**ckpt, **extra}, path)
 
 
-def save_critic(path: str, q_net: QEnsemble, obs_dim: int, act_dim: int, **extra) -> None:
-    kwargs = {"obs_dim": obs_dim, "act_dim": act_dim, "hidden": q_net.fc1.weight.shape[2], "n": q_net.n}
-    save_atomic({"state_dict": state_dict_cpu(q_net), "kwargs": kwargs, **extra}, path)
+def save_critic(path: str, q_net: QEnsemble, kwargs: dict, **extra) -> None:  # kwargs: what rebuilds it, whole
+    shape = {"hidden": q_net.fc1.weight.shape[2], "n": q_net.n, "layer_norm": q_net.norm is not None}
+    save_atomic({"state_dict": state_dict_cpu(q_net), "kwargs": {**shape, **kwargs}, **extra}, path)
 
 
 def oracle_checkpoint(actor: Actor, qf: QEnsemble, env_id: str, steps: int, seed: int, contact) -> dict:
@@ -1530,10 +1534,10 @@ def save_day(path, day: Day, buffer: ReplayBuffer, oracle_ckpt, stats, generator
     save_atomic({**record, "evaluator_rng": generator.get_state()}, path)
 
 
-def load_day(run_dir: str) -> dict:
+def load_day(run_dir: str, args_type: type = Args) -> dict:
     """--sleep-from: RUN_DIR/day.pt, read with weights_only=True and checked: its memories (check_day), and its
     learner rebuilt from what the day saved (Day, as "learner"), with finite networks; InputError otherwise. The
-    day's settings stay whole in "day_args", known to this script or not."""
+    day's settings stay whole in "day_args", known to `args_type` or not, each a JSON value (of its flag's type)."""
     path = os.path.join(run_dir, "day.pt")
     if not os.path.isfile(path):
         raise InputError(f"--sleep-from {run_dir}: no day.pt there (make one with --save-buffer)")
@@ -1549,6 +1553,8 @@ def load_day(run_dir: str) -> dict:
         day["format"] = DAY_FORMAT
     if not isinstance(day, dict) or day.get("format") != DAY_FORMAT:  # this script's or a copy's, under any name
         raise InputError(f"--sleep-from {path}: not a day saved by this script's --save-buffer ({DAY_FORMAT})")
+    for part, hints in (("day_args", typing.get_type_hints(args_type, include_extras=True)), ("day_stats", {})):
+        check_settings(day.get(part), hints, f"--sleep-from {path}: {part}")  # they go into summary.json
     ran = {k: day["day_args"].get(k, v) for k, v in DAY_CONSTANTS.items()}
     if ran != DAY_CONSTANTS:
         raise InputError(f"--sleep-from {path}: the day ran with {ran}, this script has {DAY_CONSTANTS}")
@@ -1561,6 +1567,7 @@ def load_day(run_dir: str) -> dict:
         bounds = {"action_low": day["oracle"]["action_low"], "action_high": day["oracle"]["action_high"]}
         day["tamer_actor"]["kwargs"] = {**shapes, **bounds}
     try:
+        check_settings(day["tamer_h"]["kwargs"], typing.get_type_hints(QEnsemble.__init__), f"{path}: tamer_h kwargs")
         learner = day["learner"] = Day(day["day_args"], torch.device("cpu"), saved=day)
     except (TypeError, RuntimeError, KeyError) as e:  # networks built, or settings kept, by another script
         why = " ".join(str(e).split())[:200]
@@ -1737,7 +1744,7 @@ def cli(args: Args, make_teacher=None) -> int:
     saved = oracle_ckpt = None  # a saved day brings its own teacher
     try:
         if args.sleep_from is not None:  # the day's flags replace this run's: its numbers are the day's
-            saved = load_day(args.sleep_from)
+            saved = load_day(args.sleep_from, type(args))
             flags = {f.name for f in fields(args)}  # but the contact: a day under another one is refused, below
             args = dataclasses.replace(args, **{k: v for k, v in saved["day_args"].items() if k in flags - {"contact"}})
             check_contact(saved["day_args"], args, f"--sleep-from {args.sleep_from}")
@@ -1745,7 +1752,7 @@ def cli(args: Args, make_teacher=None) -> int:
                   f"{saved['obs'].shape[0]} steps); its day flags replace this run's", flush=True)  # fmt: skip
             unknown = {k: v for k, v in saved["day_args"].items() if k not in flags and k not in DAY_CONSTANTS}
             if unknown:  # a copy's day: its settings are recorded, never dropped
-                print(f"[day] the day's settings that are not this script's flags, kept in summary.json: {unknown}")
+                say(f"[day] the day's settings unknown to this script, kept in summary.json: {cut(unknown, 200)}")
         check_args(args)
         if contact_of(args.env_id, args.contact):  # under mujoco<3 Gymnasium's contact is 2.3's: recorded as what runs
             args = dataclasses.replace(args, contact=contact_of(args.env_id, args.contact))
@@ -1883,7 +1890,9 @@ def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop
     if run_dir is not None:
         final = {"time/eval_s": evaluator.seconds if evaluator else 0.0, "wall_time_s": time.time() - run_start}
         final.update(seed=seed, script=os.path.basename(__file__), status=status, args=flags)
-        summary = {**(evaluator.final if evaluator else {}), **summary, **final}
+        checks = evaluator.checks if evaluator and status != "completed" else {}  # not under the final tests' names
+        checks = {f"eval/last_check/{k.removeprefix('eval/')}": v for k, v in checks.items()}
+        summary = {**(evaluator.final if evaluator else {}), **summary, **checks, **final}
         summary.update({"phase": phase} if status != "completed" else {})
         summary.update({"signal": stop.reason()} if status == "interrupted" else {})
         try:
@@ -1909,6 +1918,39 @@ def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop
 
 
 # --- end of shared plumbing ---
+
+
+def check_settings(values, hints: dict, where: str) -> None:
+    """What a saved day brings into summary.json, checked as it is read: a dict of JSON values (str, int, float, bool,
+    None, lists and dicts of them), a known flag's (in `hints`, Args' type hints) also of that flag's type. InputError
+    naming the first that is not, its value cut short."""
+    if not isinstance(values, dict):
+        raise InputError(f"{where} is {cut(values)}, not a dict")
+    for name, value in values.items():
+        try:  # TypeError: a tensor, bytes, a key that is no string; ValueError: a loop
+            json.dumps({name: value})
+        except (TypeError, ValueError, RecursionError):
+            raise InputError(f"{where}[{cut(name)}] is {cut(value)}, not a JSON value") from None
+        if name in hints and not of_type(value, hints[name]):
+            kind = getattr(hints[name], "__origin__", hints[name])  # Annotated's type
+            kind = kind.__name__ if isinstance(kind, type) else str(kind).replace("typing.", "")
+            raise InputError(f"{where}[{cut(name)}] is {cut(value)}, not of its flag's type ({kind})")
+
+
+def of_type(value, hint) -> bool:
+    """Is `value` of a flag's type `hint` (Annotated, Literal, a union, bool, int, str; a float may be an int)?"""
+    origin, members = typing.get_origin(hint), typing.get_args(hint)
+    if origin is Annotated or origin in (typing.Union, type(int | None)):
+        return any(of_type(value, m) for m in (members[:1] if origin is Annotated else members))
+    if origin is Literal:
+        return any(type(value) is type(m) and value == m for m in members)
+    kind = (int, float) if hint is float else origin or hint
+    return isinstance(value, kind) and (hint is bool or not isinstance(value, bool))
+
+
+def cut(value, n: int = 80) -> str:  # a value in a message: one line, a long one cut short
+    text = " ".join(repr(value).split())
+    return text if len(text) <= n else f"{text[:n]}... ({len(text):,} characters)"
 
 
 def strict_json(value):  # NaN and inf as null, at any depth (a metric this run does not have, e.g. no successes)
