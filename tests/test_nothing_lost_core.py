@@ -160,7 +160,8 @@ def test_the_pusher_sham_builds_h_as_the_day_built_it():
     args = svp.Args(sleep_control="sham", sleep_batch_size=4)
     night = args.night(actor, torch.device("cpu"), tamer={"h_net": h_net, "h_kwargs": kwargs, "ent_coef": 0.5})
     assert night.h_net.norm is not None and night.h_net.fc1.weight.shape[2] == 64
-    assert all(torch.equal(a, b) for a, b in zip(night.h_net.state_dict().values(), h_net.state_dict().values()))
+    theirs = h_net.state_dict()
+    assert all(torch.equal(value, theirs[name]) for name, value in night.h_net.state_dict().items())
     batch = (torch.randn(8, 23), torch.rand(8, 7) * 4 - 2, torch.randn(8, 23), torch.ones(8), torch.zeros(8))
     night.update(1, batch)  # H learns on
 
