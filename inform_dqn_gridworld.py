@@ -61,6 +61,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 import torch.nn as nn  # noqa: E402
 import torch.nn.functional as F  # noqa: E402
+import typeguard  # noqa: E402
 import tyro  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from torch.utils.tensorboard import SummaryWriter  # noqa: E402
@@ -304,15 +305,12 @@ class Teacher:
 
     def __init__(self, noise=0.0, sparsity=1.0, delay=0, credit_window=1, budget=None, seed=0):
         self.noise, self.sparsity, self.delay, self.credit_window = noise, sparsity, delay, credit_window
-        self.budget = budget
-        self.rng = np.random.default_rng(seed)
+        self.budget, self.rng = budget, np.random.default_rng(seed)
         self.in_flight = collections.deque()  # clicks on their way, oldest first
-        self.positives = 0  # +1 signals delivered
-        self.perfect_positives = 0  # +1 answers of the perfect teacher (Eq. 4), for the record
+        self.positives = self.perfect_positives = 0  # +1 signals delivered; +1 answers of the perfect teacher (Eq. 4)
 
     @property
-    def gone(self) -> bool:
-        """The budget is spent: no more feedback from now on."""
+    def gone(self) -> bool:  # the budget is spent: no more feedback from now on
         return self.budget is not None and self.positives >= self.budget
 
     def __call__(self, step: int, h_star: float) -> dict[int, float]:
@@ -381,8 +379,7 @@ class ReplayBuffer:
     """Every forward-phase transition (s, a, s', h, terminated), preallocated, and the success tag of its episode."""
 
     def __init__(self, capacity: int, obs_dim: int, device: torch.device):
-        self.obs = torch.zeros(capacity, obs_dim, device=device)
-        self.next_obs = torch.zeros(capacity, obs_dim, device=device)
+        self.obs, self.next_obs = (torch.zeros(capacity, obs_dim, device=device) for _ in range(2))
         self.actions = torch.zeros(capacity, dtype=torch.long, device=device)
         self.feedback = torch.zeros(capacity, device=device)  # h, written by the teacher when a signal arrives
         self.terminated = torch.zeros(capacity, device=device)
@@ -391,10 +388,8 @@ class ReplayBuffer:
         self.episodes = []  # (start, end) of each episode that ended: buffer[start:end]
 
     def add(self, obs, action, next_obs, terminated) -> None:
-        self.obs[self.size] = torch.as_tensor(obs)
-        self.actions[self.size] = action
-        self.next_obs[self.size] = torch.as_tensor(next_obs)
-        self.terminated[self.size] = float(terminated)
+        self.obs[self.size], self.actions[self.size] = torch.as_tensor(obs), action
+        self.next_obs[self.size], self.terminated[self.size] = torch.as_tensor(next_obs), float(terminated)
         self.size += 1
 
     def tag_episode(self, start: int, success: bool) -> bool:
@@ -460,8 +455,7 @@ def forward_phase(day: Day, env, q_star: np.ndarray, teacher, buffer: ReplayBuff
     progress = Progress("tamer", n, evaluator)
     h_loss = torch.zeros((), device=device)
     optimum_at = None  # (step, +1 signals) at the first evaluation where TAMER's greedy path is the shortest
-    evaluated_at = ep_start = ep_length = successes = 0
-    ep_return = 0.0
+    evaluated_at, ep_start, ep_length, successes, ep_return = 0, 0, 0, 0, 0.0
     goal_reward = top_reward(env)
     obs, _ = env.reset(seed=s["seed"])
     for step in range(n):
@@ -489,8 +483,7 @@ def forward_phase(day: Day, env, q_star: np.ndarray, teacher, buffer: ReplayBuff
 
         next_obs, reward, terminated, truncated, _ = env.step(action)
         buffer.add(obs, action, next_obs, terminated)
-        ep_length += 1
-        ep_return += float(reward)
+        ep_length, ep_return = ep_length + 1, ep_return + float(reward)
         obs = next_obs
         if terminated or truncated:  # an episode cut off by the end of the phase stays untagged: a failure
             successes += buffer.tag_episode(ep_start, is_success(terminated, reward, ep_length,
@@ -705,9 +698,8 @@ def sleep_phase(learner: Sleep, buffer: ReplayBuffer, expert_idx, steps: int, ba
                 raise Diverged(f"the sleep loss diverged (NaN or inf) by gradient step {step}; last finite losses: "
                                f"{last or 'none yet'}; try a lower --sleep-q-lr")  # fmt: skip
             losses = {f"losses/{tag}": value for tag, value in zip(tags, values, strict=True)}
-            for tag, value in losses.items():
+            for tag, value in {**losses, "sleep/SPS": progress.sps(step)}.items():
                 writer.add_scalar(tag, value, step)
-            writer.add_scalar("sleep/SPS", progress.sps(step), step)
         report = {"iq_loss": losses.get("losses/iq_loss")}
         if step % EVAL_FREQUENCY == 0 or last_step:
             metrics = evaluator("inform", greedy_actions(learner.q_net, device, buffer.obs.shape[1]), step)
@@ -751,7 +743,7 @@ class Evaluator:
 
     def __init__(self, env_id: str, success_max_steps: int, eval_episodes: int, seed: int, writer=None):
         self.writer, self.success_max_steps, self.maze = writer, success_max_steps, env_id in MAZE_IDS
-        self.seconds, self.final, self.checks = 0.0, {}, {}  # the final tests'; each policy's last periodic check
+        self.seconds, self.final = 0.0, {}
         if self.maze:
             self.envs = {name: gym.make(f"KnoxStoneMaze{suffix}-v0") for name, suffix in
                          (("plain", ""), ("wall", "Wall"), ("start_set", "StartSet"))}  # fmt: skip
@@ -770,9 +762,8 @@ class Evaluator:
             self.optimum = evaluate(optimal_q(self.envs["plain"]).argmax(1), self.envs["plain"], resets,
                                     success_max_steps)[0]  # fmt: skip
 
-    def __call__(self, name: str, policy: np.ndarray, step: int, final: bool = False) -> dict:
-        t0 = time.time()
-        results, metrics = {}, {}
+    def __call__(self, name: str, policy: np.ndarray, step: int) -> dict:
+        t0, results, metrics = time.time(), {}, {}
         for tag, (maze, starts, which) in self.tests.items():
             if (maze, id(starts)) not in results:  # one set of episodes gives the length and the success rate
                 resets = start_cells(*starts) if self.maze else starts
@@ -780,7 +771,7 @@ class Evaluator:
             metrics[tag.format(name)] = results[maze, id(starts)][which]
         for tag, value in metrics.items() if self.writer is not None else ():
             self.writer.add_scalar(tag, value, step)
-        (self.final if final else self.checks).update(metrics if final else {**metrics, f"eval/{name}_step": step})
+        self.final.update(metrics)
         self.seconds += time.time() - t0
         return metrics
 
@@ -794,15 +785,13 @@ class Evaluator:
 
 
 def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", saved: dict | None = None) -> dict:
-    run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
-    run_start = time.time()
-    run_dir = writer = env = evaluator = page = None
+    run_start, run_dir, writer, env, evaluator, page = time.time(), None, None, None, None, None
     summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
     summary["sleep_from"] = os.path.abspath(args.sleep_from) if args.sleep_from else None  # a saved day's run
     summary["sleep_variant"] = args.sleep_variant()
     status, failure, phase = "completed", None, "startup"
     try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
-        run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
+        run_dir = make_run_dir(f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}")  # input checked
         say(f"run directory: {run_dir}")
         StopSignals.check()  # a stop while starting ends here, with a summary in the run directory
         seed_everything(args.seed)
@@ -810,7 +799,14 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", saved: di
         torch.use_deterministic_algorithms(True)
         torch.set_num_threads(1)  # one thread is fastest for networks this small
         device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
-        writer = make_writer(run_dir, vars(args), args.track)
+        if args.track:  # Weights & Biases mirrors the TensorBoard events (CleanRL's --track); before the writer
+            import wandb
+
+            wandb.init(project=os.environ.get("WANDB_PROJECT", "inform"), sync_tensorboard=True, config=vars(args),
+                       name=os.path.basename(run_dir), dir=run_dir, save_code=True)  # fmt: skip
+        writer = SummaryWriter(run_dir)
+        table = "\n".join(f"|{key}|{value}|" for key, value in vars(args).items())
+        writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + table)
         env = make_env(args.env_id)
         env.action_space.seed(args.seed)
         evaluator = Evaluator(args.env_id, args.success_max_steps, args.eval_episodes, args.seed, writer)
@@ -875,7 +871,7 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", saved: di
         if args.env_id not in MAZE_IDS:
             summary["maze_tests/skipped"] = f"the wall maze, start cells, reward table, drawings: none on {args.env_id}"
         for name, policy in policies.items():  # INFORM's at the sleep's last step, the others at the day's
-            evaluator(name, policy, args.sleep_gradient_steps if name == "inform" else summary["feedback/steps"], True)
+            evaluator(name, policy, args.sleep_gradient_steps if name == "inform" else summary["feedback/steps"])
         if args.capture_video:  # after the evaluation: drawing changes no number
             record_videos(run_dir, {name: policy for name, policy in policies.items() if name != "oracle"})
         if args.teacher in ("human", "browser"):
@@ -888,14 +884,11 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", saved: di
                 page.show_outcome("\n\n".join(drawn))
         writer.flush()  # the events whole before the summary says completed (an error in TensorBoard's thread: here)
     except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
-        status = "interrupted"
-        stop.broken_pipe = isinstance(e, BrokenPipeError)
+        status, stop.broken_pipe = "interrupted", isinstance(e, BrokenPipeError)
     except Diverged as e:
-        status = "diverged"
-        summary["error"] = str(e)
+        status, summary["error"] = "diverged", str(e)
     except Exception as e:  # a full disk (OSError: one line), or a bug (in the summary, then its traceback)
-        status = "failed"
-        summary["error"] = f"{type(e).__name__}: {(str(e).strip() or '-').splitlines()[0]}"
+        status, summary["error"] = "failed", f"{type(e).__name__}: {(str(e).strip() or '-').splitlines()[0]}"
         failure = None if isinstance(e, OSError) else e
     if status != "completed" and phase in ("oracle", "tamer", "sleep"):  # how long the cut phase ran
         summary[f"time/{phase}_s"] = time.time() - evaluator.seconds - t0
@@ -925,8 +918,7 @@ def cli(args: Args) -> int:
                 raise InputError(f"{args.sleep_from}/day.pt: its day flags are not valid: {e}") from None
             say(f"[day] sleeping on {args.sleep_from}'s day ({args.env_id}, seed {args.seed}, {saved['obs'].shape[0]} "
                 "steps); its day flags replace these")  # fmt: skip
-            unknown = {k: v for k, v in saved["day_args"].items() if k not in flags}
-            if unknown:  # a copy's day: its settings are recorded, never dropped
+            if unknown := {k: v for k, v in saved["day_args"].items() if k not in flags}:  # a copy's: kept, said
                 say(f"[day] the day's settings unknown to this script, kept in summary.json: {cut(unknown, 200)}")
         elif args.oracle_path:
             oracle_q = load_oracle(args.oracle_path, args.env_id)
@@ -950,20 +942,6 @@ def seed_everything(seed: int) -> None:
     random.seed(seed)
     np.random.seed(seed)
     torch.manual_seed(seed)
-
-
-def make_writer(run_dir: str, flags: dict, track: bool) -> SummaryWriter:
-    """TensorBoard's writer with the run's flags; with --track, Weights & Biases mirrors its events (CleanRL's
-    --track), set up first."""
-    if track:
-        import wandb
-
-        wandb.init(project=os.environ.get("WANDB_PROJECT", "inform"), sync_tensorboard=True, config=flags,
-                   name=os.path.basename(run_dir), dir=run_dir, save_code=True)  # fmt: skip
-    writer = SummaryWriter(run_dir)
-    table = "\n".join(f"|{key}|{value}|" for key, value in flags.items())
-    writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + table)
-    return writer
 
 
 class Progress:
@@ -1128,9 +1106,8 @@ def set_rng_state(rng: dict) -> None:
 
 
 def load_day(run_dir: str, args_type: type = Args) -> dict:
-    """RUN_DIR/day.pt, checked (keys, shapes, index and value ranges; its settings and stats as JSON values, a flag of
-    `args_type` also of its type, and checked as this run's when they replace them). Raises InputError before anything
-    is written."""
+    """RUN_DIR/day.pt, checked (keys, shapes, index and value ranges, its settings and stats as JSON values, a flag of
+    `args_type` of its type; its flags as this run's when they replace them). InputError before anything is written."""
     path = os.path.join(run_dir, "day.pt")
     if not os.path.isdir(run_dir):
         raise InputError(f"--sleep-from {run_dir}: no such directory")
@@ -1341,10 +1318,7 @@ class StopSignals:
     @classmethod
     @contextlib.contextmanager
     def waiting(cls):  # a wait for a person: a stop signal before it or during it raises at once
-        stop = cls.current
-        if stop is None:  # none installed (the script imported, not run): a plain wait
-            yield
-            return
+        stop = cls.current or cls.__new__(cls)  # none installed (the script imported, not run): a plain wait
         stop.waiting_for_input = True
         try:
             cls.check()
@@ -1413,15 +1387,13 @@ def write_json_atomic(path: str, data: dict) -> None:
 
 
 def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop, seed: int, flags: dict) -> dict:
-    """The summary (with the run's `flags`) first, then the messages: no signal cuts this short (StopSignals only notes
-    the later ones)."""
+    """The summary (with the run's `flags`; the evaluator's results if it completed, never a mid-run check) first,
+    then the messages: no signal cuts this short (StopSignals only notes the later ones)."""
     stop.finished = True
     if run_dir is not None:
         final = {"time/eval_s": evaluator.seconds if evaluator else 0.0, "wall_time_s": time.time() - run_start}
         final.update(seed=seed, script=os.path.basename(__file__), status=status, args=flags)
-        checks = evaluator.checks if evaluator and status != "completed" else {}  # not under the final tests' names
-        checks = {f"eval/last_check/{k.removeprefix('eval/')}": v for k, v in checks.items()}
-        summary = {**(evaluator.final if evaluator else {}), **summary, **checks, **final}
+        summary = {**(evaluator.final if evaluator and status == "completed" else {}), **summary, **final}
         summary.update({"phase": phase} if status != "completed" else {})
         summary.update({"signal": stop.reason()} if status == "interrupted" else {})
         try:
@@ -1450,31 +1422,19 @@ def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop
 
 
 def check_settings(values, hints: dict, where: str) -> None:
-    """What a saved day brings into summary.json, checked as it is read: a dict of JSON values (str, int, float, bool,
-    None, lists and dicts of them), a known flag's (in `hints`, Args' type hints) also of that flag's type. InputError
-    naming the first that is not, its value cut short."""
+    """What a saved day brings into summary.json, checked as it is read: a dict of JSON values, a known flag's (in
+    `hints`, Args' type hints) of its type too (typeguard's check); InputError naming the first that is not."""
     if not isinstance(values, dict):
         raise InputError(f"{where} is {cut(values)}, not a dict")
     for name, value in values.items():
         try:  # TypeError: a tensor, bytes, a key that is no string; ValueError: a loop
             json.dumps({name: value})
+            typeguard.check_type(value, hints.get(name, typing.Any))
         except (TypeError, ValueError, RecursionError):
             raise InputError(f"{where}[{cut(name)}] is {cut(value)}, not a JSON value") from None
-        if name in hints and not of_type(value, hints[name]):
-            kind = getattr(hints[name], "__origin__", hints[name])  # Annotated's type
-            kind = kind.__name__ if isinstance(kind, type) else str(kind).replace("typing.", "")
-            raise InputError(f"{where}[{cut(name)}] is {cut(value)}, not of its flag's type ({kind})")
-
-
-def of_type(value, hint) -> bool:
-    """Is `value` of a flag's type `hint` (Annotated, Literal, a union, bool, int, str; a float may be an int)?"""
-    origin, members = typing.get_origin(hint), typing.get_args(hint)
-    if origin is Annotated or origin in (typing.Union, type(int | None)):
-        return any(of_type(value, m) for m in (members[:1] if origin is Annotated else members))
-    if origin is Literal:
-        return any(type(value) is type(m) and value == m for m in members)
-    kind = (int, float) if hint is float else origin or hint
-    return isinstance(value, kind) and (hint is bool or not isinstance(value, bool))
+        except typeguard.TypeCheckError as e:  # in its words, on one line
+            why = " ".join(str(e).split())[:160]
+            raise InputError(f"{where}[{cut(name)}] is {cut(value)}, not of its flag's type: {why}") from None
 
 
 def cut(value, n: int = 80) -> str:  # a value in a message: one line, a long one cut short
