@@ -7,14 +7,14 @@ study's switches) with the variant's flags, a 15% hold-out (so every night logs 
 held-out episodes), any flags given after `--`, and a sleep seed; then its INFORM actor (and the one the offline
 criterion picked) is tested on 50 random starts by `inform_utils.evaluate_policy pusher`. What a night leaves is
 copied at once to {results_dir}/{campaign}/{day}/{variant}__sleep{seed}/ (summary.json, obstacle_distances.npz,
-random_starts.json, and night.json: its day by content, day.pt's sha256, and every flag it ran with). A night of the
-campaign already there is not run again: the study resumes; a campaign that holds a night of another day.pt or other
-flags is refused before anything runs (a day re-made by its command is the same day: its day.pt differs only in the
-wall-clock stats it keeps, and with a kept night's put back it is byte for byte that night's). --table prints the
-table from the results alone, each night it cannot read named with its cause; --with-campaigns adds other campaigns
-(a campaign a budget) to the rule for the methods.
+random_starts.json, and night.json: its day by content (content_sha256: every value of day.pt but how long the day
+took, so a day re-made by its command is the same day) and by day.pt's sha256 (what records kept before name it by),
+the CPU kernels it ran on, and every flag it ran with). A night of the campaign already there is not run again: the
+study resumes; a campaign that holds a night of another day or other flags is refused before anything runs. --table
+prints the table from the results alone, each night it cannot read named with its cause; --with-campaigns adds other
+campaigns (a campaign a budget) to the rule for the methods.
 Exit 0; 1 if a night failed; 2 for bad input (or a night that refuses its input); 128 + the signal if stopped (the
-night in progress saves what finished and is not kept).
+night in progress saves what finished and is not kept; signals that come within SAME_STOP seconds are one stop).
 
     python inform_sac_pusher.py --env-id Pusher-v4 --seed 1 --save-buffer          # a day: runs/<day>/day.pt
     python -m inform_utils.sleep_study --days runs/<day> --campaign sleep_study    # the nights on it
