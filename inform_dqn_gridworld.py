@@ -435,8 +435,7 @@ class Day:
         """TAMER's update: H regresses on the feedback (Eq. 1) of the rows `idx` (None: a random batch); H's loss."""
         n = self.settings["tamer_batch_size"]
         idx = torch.randint(0, buffer.size, (n,), device=buffer.obs.device) if idx is None else idx
-        obs_b, actions_b, _, feedback_b, _ = buffer.batch(idx)
-        h_loss = tamer_loss(self.h_net, obs_b, actions_b, feedback_b)
+        h_loss = tamer_loss(self.h_net, buffer.obs[idx], buffer.actions[idx], buffer.feedback[idx])
         self.h_optimizer.zero_grad()
         h_loss.backward()
         self.h_optimizer.step()
@@ -844,9 +843,8 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", saved: di
                         "sleep_skipped": expert_idx.numel() == 0})  # fmt: skip
         q_net = None
         if summary["sleep_skipped"]:  # no success: nothing to consolidate, no INFORM policy
-            how = "raise --tamer-total-timesteps"
-            if args.teacher in ("human", "browser"):
-                how = "next time keep teaching until the agent has walked from S to G in time at least once"
+            how = ("next time keep teaching until the agent has walked from S to G in time at least once"
+                   if args.teacher in ("human", "browser") else "raise --tamer-total-timesteps")  # fmt: skip
             say(f"warning: the sleep is skipped and no INFORM policy is made: no episode reached G in fewer than "
                 f"{args.success_max_steps} steps, so there is nothing to consolidate; {how}", sys.stderr)  # fmt: skip
         else:
@@ -1387,13 +1385,15 @@ def write_json_atomic(path: str, data: dict) -> None:
 
 
 def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop, seed: int, flags: dict) -> dict:
-    """The summary (with the run's `flags`; the evaluator's results if it completed, never a mid-run check) first,
-    then the messages: no signal cuts this short (StopSignals only notes the later ones)."""
+    """The summary (with the run's `flags`; a run that did not complete keeps its mid-run checks under their own
+    name) first, then the messages: no signal cuts this short (StopSignals only notes the later ones)."""
     stop.finished = True
     if run_dir is not None:
         final = {"time/eval_s": evaluator.seconds if evaluator else 0.0, "wall_time_s": time.time() - run_start}
         final.update(seed=seed, script=os.path.basename(__file__), status=status, args=flags)
-        summary = {**(evaluator.final if evaluator and status == "completed" else {}), **summary, **final}
+        tests = evaluator.final if evaluator else {}
+        tests = tests if status == "completed" else {f"eval/last_check/{k[5:]}": v for k, v in tests.items()}
+        summary = {**tests, **summary, **final}
         summary.update({"phase": phase} if status != "completed" else {})
         summary.update({"signal": stop.reason()} if status == "interrupted" else {})
         try:

@@ -1192,8 +1192,7 @@ _OBSTACLE_DIR: list[str] = []
 def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=None) -> dict:
     """oracle -> day (the forward phase) -> night (`args.night`, the study's Args give theirs) -> Eq. 3 and the tests.
     `make_teacher(args, env, run_dir)`: the day's teacher in place of the simulated one (a person at a web page)."""
-    recipe = args.sleep_recipe()  # the preset's values that ran go into the summary's args
-    args = dataclasses.replace(args, **{k: v for k, v in recipe.items() if hasattr(args, k)})
+    args = dataclasses.replace(args, **{k: v for k, v in args.sleep_recipe().items() if hasattr(args, k)})  # as ran
     run_start, run_dir, writer, env, evaluator = time.time(), None, None, None, None
     oracle_ckpt = saved["oracle"] if saved is not None else oracle_ckpt  # --sleep-from: the saved day's teacher
     summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
@@ -1855,13 +1854,15 @@ def write_json_atomic(path: str, data: dict) -> None:
 
 
 def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop, seed: int, flags: dict) -> dict:
-    """The summary (with the run's `flags`; the evaluator's results if it completed, never a mid-run check) first,
-    then the messages: no signal cuts this short (StopSignals only notes the later ones)."""
+    """The summary (with the run's `flags`; a run that did not complete keeps its mid-run checks under their own
+    name) first, then the messages: no signal cuts this short (StopSignals only notes the later ones)."""
     stop.finished = True
     if run_dir is not None:
         final = {"time/eval_s": evaluator.seconds if evaluator else 0.0, "wall_time_s": time.time() - run_start}
         final.update(seed=seed, script=os.path.basename(__file__), status=status, args=flags)
-        summary = {**(evaluator.final if evaluator and status == "completed" else {}), **summary, **final}
+        tests = evaluator.final if evaluator else {}
+        tests = tests if status == "completed" else {f"eval/last_check/{k[5:]}": v for k, v in tests.items()}
+        summary = {**tests, **summary, **final}
         summary.update({"phase": phase} if status != "completed" else {})
         summary.update({"signal": stop.reason()} if status == "interrupted" else {})
         try:
