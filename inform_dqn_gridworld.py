@@ -61,6 +61,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 import torch.nn as nn  # noqa: E402
 import torch.nn.functional as F  # noqa: E402
+import typeguard  # noqa: E402
 import tyro  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from torch.utils.tensorboard import SummaryWriter  # noqa: E402
@@ -304,15 +305,12 @@ class Teacher:
 
     def __init__(self, noise=0.0, sparsity=1.0, delay=0, credit_window=1, budget=None, seed=0):
         self.noise, self.sparsity, self.delay, self.credit_window = noise, sparsity, delay, credit_window
-        self.budget = budget
-        self.rng = np.random.default_rng(seed)
+        self.budget, self.rng = budget, np.random.default_rng(seed)
         self.in_flight = collections.deque()  # clicks on their way, oldest first
-        self.positives = 0  # +1 signals delivered
-        self.perfect_positives = 0  # +1 answers of the perfect teacher (Eq. 4), for the record
+        self.positives = self.perfect_positives = 0  # +1 signals delivered; +1 answers of the perfect teacher (Eq. 4)
 
     @property
-    def gone(self) -> bool:
-        """The budget is spent: no more feedback from now on."""
+    def gone(self) -> bool:  # the budget is spent: no more feedback from now on
         return self.budget is not None and self.positives >= self.budget
 
     def __call__(self, step: int, h_star: float) -> dict[int, float]:
@@ -381,8 +379,7 @@ class ReplayBuffer:
     """Every forward-phase transition (s, a, s', h, terminated), preallocated, and the success tag of its episode."""
 
     def __init__(self, capacity: int, obs_dim: int, device: torch.device):
-        self.obs = torch.zeros(capacity, obs_dim, device=device)
-        self.next_obs = torch.zeros(capacity, obs_dim, device=device)
+        self.obs, self.next_obs = (torch.zeros(capacity, obs_dim, device=device) for _ in range(2))
         self.actions = torch.zeros(capacity, dtype=torch.long, device=device)
         self.feedback = torch.zeros(capacity, device=device)  # h, written by the teacher when a signal arrives
         self.terminated = torch.zeros(capacity, device=device)
@@ -391,10 +388,8 @@ class ReplayBuffer:
         self.episodes = []  # (start, end) of each episode that ended: buffer[start:end]
 
     def add(self, obs, action, next_obs, terminated) -> None:
-        self.obs[self.size] = torch.as_tensor(obs)
-        self.actions[self.size] = action
-        self.next_obs[self.size] = torch.as_tensor(next_obs)
-        self.terminated[self.size] = float(terminated)
+        self.obs[self.size], self.actions[self.size] = torch.as_tensor(obs), action
+        self.next_obs[self.size], self.terminated[self.size] = torch.as_tensor(next_obs), float(terminated)
         self.size += 1
 
     def tag_episode(self, start: int, success: bool) -> bool:
@@ -440,8 +435,7 @@ class Day:
         """TAMER's update: H regresses on the feedback (Eq. 1) of the rows `idx` (None: a random batch); H's loss."""
         n = self.settings["tamer_batch_size"]
         idx = torch.randint(0, buffer.size, (n,), device=buffer.obs.device) if idx is None else idx
-        obs_b, actions_b, _, feedback_b, _ = buffer.batch(idx)
-        h_loss = tamer_loss(self.h_net, obs_b, actions_b, feedback_b)
+        h_loss = tamer_loss(self.h_net, buffer.obs[idx], buffer.actions[idx], buffer.feedback[idx])
         self.h_optimizer.zero_grad()
         h_loss.backward()
         self.h_optimizer.step()
@@ -460,8 +454,7 @@ def forward_phase(day: Day, env, q_star: np.ndarray, teacher, buffer: ReplayBuff
     progress = Progress("tamer", n, evaluator)
     h_loss = torch.zeros((), device=device)
     optimum_at = None  # (step, +1 signals) at the first evaluation where TAMER's greedy path is the shortest
-    evaluated_at = ep_start = ep_length = successes = 0
-    ep_return = 0.0
+    evaluated_at, ep_start, ep_length, successes, ep_return = 0, 0, 0, 0, 0.0
     goal_reward = top_reward(env)
     obs, _ = env.reset(seed=s["seed"])
     for step in range(n):
@@ -489,8 +482,7 @@ def forward_phase(day: Day, env, q_star: np.ndarray, teacher, buffer: ReplayBuff
 
         next_obs, reward, terminated, truncated, _ = env.step(action)
         buffer.add(obs, action, next_obs, terminated)
-        ep_length += 1
-        ep_return += float(reward)
+        ep_length, ep_return = ep_length + 1, ep_return + float(reward)
         obs = next_obs
         if terminated or truncated:  # an episode cut off by the end of the phase stays untagged: a failure
             successes += buffer.tag_episode(ep_start, is_success(terminated, reward, ep_length,
@@ -705,9 +697,8 @@ def sleep_phase(learner: Sleep, buffer: ReplayBuffer, expert_idx, steps: int, ba
                 raise Diverged(f"the sleep loss diverged (NaN or inf) by gradient step {step}; last finite losses: "
                                f"{last or 'none yet'}; try a lower --sleep-q-lr")  # fmt: skip
             losses = {f"losses/{tag}": value for tag, value in zip(tags, values, strict=True)}
-            for tag, value in losses.items():
+            for tag, value in {**losses, "sleep/SPS": progress.sps(step)}.items():
                 writer.add_scalar(tag, value, step)
-            writer.add_scalar("sleep/SPS", progress.sps(step), step)
         report = {"iq_loss": losses.get("losses/iq_loss")}
         if step % EVAL_FREQUENCY == 0 or last_step:
             metrics = evaluator("inform", greedy_actions(learner.q_net, device, buffer.obs.shape[1]), step)
@@ -771,8 +762,7 @@ class Evaluator:
                                     success_max_steps)[0]  # fmt: skip
 
     def __call__(self, name: str, policy: np.ndarray, step: int) -> dict:
-        t0 = time.time()
-        results, metrics = {}, {}
+        t0, results, metrics = time.time(), {}, {}
         for tag, (maze, starts, which) in self.tests.items():
             if (maze, id(starts)) not in results:  # one set of episodes gives the length and the success rate
                 resets = start_cells(*starts) if self.maze else starts
@@ -794,15 +784,13 @@ class Evaluator:
 
 
 def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", saved: dict | None = None) -> dict:
-    run_name = f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}"
-    run_start = time.time()
-    run_dir = writer = env = evaluator = page = None
+    run_start, run_dir, writer, env, evaluator, page = time.time(), None, None, None, None, None
     summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
     summary["sleep_from"] = os.path.abspath(args.sleep_from) if args.sleep_from else None  # a saved day's run
     summary["sleep_variant"] = args.sleep_variant()
     status, failure, phase = "completed", None, "startup"
     try:  # a stop (signal, dead reader) anywhere below finds the except that saves what finished
-        run_dir = make_run_dir(run_name)  # only now: bad input has been rejected, nothing half-written is left
+        run_dir = make_run_dir(f"{args.env_id}__{args.exp_name}__{args.seed}__{int(time.time())}")  # input checked
         say(f"run directory: {run_dir}")
         StopSignals.check()  # a stop while starting ends here, with a summary in the run directory
         seed_everything(args.seed)
@@ -810,7 +798,14 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", saved: di
         torch.use_deterministic_algorithms(True)
         torch.set_num_threads(1)  # one thread is fastest for networks this small
         device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
-        writer = make_writer(run_dir, vars(args), args.track)
+        if args.track:  # Weights & Biases mirrors the TensorBoard events (CleanRL's --track); before the writer
+            import wandb
+
+            wandb.init(project=os.environ.get("WANDB_PROJECT", "inform"), sync_tensorboard=True, config=vars(args),
+                       name=os.path.basename(run_dir), dir=run_dir, save_code=True)  # fmt: skip
+        writer = SummaryWriter(run_dir)
+        table = "\n".join(f"|{key}|{value}|" for key, value in vars(args).items())
+        writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + table)
         env = make_env(args.env_id)
         env.action_space.seed(args.seed)
         evaluator = Evaluator(args.env_id, args.success_max_steps, args.eval_episodes, args.seed, writer)
@@ -835,23 +830,21 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", saved: di
                 save_day(f"{run_dir}/day.pt", day, buffer, q_star, {**stats, "time/tamer_s": summary["time/tamer_s"]})
         else:  # --sleep-from: a saved day's oracle, memories and H, its random streams where that day left them
             q_star, buffer, day = restore_day(saved, device)
-            summary.update(saved["day_stats"], day_settings=saved["day_args"])  # its settings whole, known or not
+            summary.update(saved["day_stats"], day_settings=saved["day_args"], tamer_h_kwargs=day.h_net.kwargs)
         h_net = day.h_net
         save_network(f"{run_dir}/tamer_h.pt", h_net, env_id=args.env_id)
 
         # ---- sleep phase ("night"): offline IQ-Learn on the success set and the whole buffer
-        phase = "sleep"
+        phase, t0 = "sleep", time.time() - evaluator.seconds
         if args.sleep_seed is not None:  # a night of its own: the random streams start afresh
             seed_everything(args.sleep_seed)
-        t0 = time.time() - evaluator.seconds
         expert_idx = buffer.success[: buffer.size].nonzero().squeeze(1)
         summary.update({"sleep/expert_transitions": int(expert_idx.numel()), "sleep/replay_transitions": buffer.size,
                         "sleep_skipped": expert_idx.numel() == 0})  # fmt: skip
         q_net = None
         if summary["sleep_skipped"]:  # no success: nothing to consolidate, no INFORM policy
-            how = "raise --tamer-total-timesteps"
-            if args.teacher in ("human", "browser"):
-                how = "next time keep teaching until the agent has walked from S to G in time at least once"
+            how = ("next time keep teaching until the agent has walked from S to G in time at least once"
+                   if args.teacher in ("human", "browser") else "raise --tamer-total-timesteps")  # fmt: skip
             say(f"warning: the sleep is skipped and no INFORM policy is made: no episode reached G in fewer than "
                 f"{args.success_max_steps} steps, so there is nothing to consolidate; {how}", sys.stderr)  # fmt: skip
         else:
@@ -889,15 +882,14 @@ def main(args: Args, oracle_q: np.ndarray | None, stop: "StopSignals", saved: di
                 page.show_outcome("\n\n".join(drawn))
         writer.flush()  # the events whole before the summary says completed (an error in TensorBoard's thread: here)
     except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
-        status = "interrupted"
-        stop.broken_pipe = isinstance(e, BrokenPipeError)
+        status, stop.broken_pipe = "interrupted", isinstance(e, BrokenPipeError)
     except Diverged as e:
-        status = "diverged"
-        summary["error"] = str(e)
+        status, summary["error"] = "diverged", str(e)
     except Exception as e:  # a full disk (OSError: one line), or a bug (in the summary, then its traceback)
-        status = "failed"
-        summary["error"] = f"{type(e).__name__}: {(str(e).strip() or '-').splitlines()[0]}"
+        status, summary["error"] = "failed", f"{type(e).__name__}: {(str(e).strip() or '-').splitlines()[0]}"
         failure = None if isinstance(e, OSError) else e
+    if status != "completed" and phase in ("oracle", "tamer", "sleep"):  # how long the cut phase ran
+        summary[f"time/{phase}_s"] = time.time() - evaluator.seconds - t0
     summary = end_run(summary, status, phase, run_dir, run_start, evaluator, (env, writer, page), stop, args.seed,
                       vars(args))  # fmt: skip
     if failure is not None:
@@ -914,7 +906,7 @@ def cli(args: Args) -> int:
         check_args(args)
         oracle_q = saved = None
         if args.sleep_from:  # a saved day: no oracle, no forward phase; its day flags replace these
-            saved = load_day(args.sleep_from)
+            saved = load_day(args.sleep_from, type(args))
             flags = {f.name for f in fields(args)}
             for name in flags & set(saved["day_args"]):
                 setattr(args, name, saved["day_args"][name])
@@ -924,9 +916,8 @@ def cli(args: Args) -> int:
                 raise InputError(f"{args.sleep_from}/day.pt: its day flags are not valid: {e}") from None
             say(f"[day] sleeping on {args.sleep_from}'s day ({args.env_id}, seed {args.seed}, {saved['obs'].shape[0]} "
                 "steps); its day flags replace these")  # fmt: skip
-            unknown = {k: v for k, v in saved["day_args"].items() if k not in flags}
-            if unknown:  # a copy's day: its settings are recorded, never dropped
-                say(f"[day] the day's settings that are not this script's flags, kept in summary.json: {unknown}")
+            if unknown := {k: v for k, v in saved["day_args"].items() if k not in flags}:  # a copy's: kept, said
+                say(f"[day] the day's settings unknown to this script, kept in summary.json: {cut(unknown, 200)}")
         elif args.oracle_path:
             oracle_q = load_oracle(args.oracle_path, args.env_id)
         check_writable("runs")
@@ -949,20 +940,6 @@ def seed_everything(seed: int) -> None:
     random.seed(seed)
     np.random.seed(seed)
     torch.manual_seed(seed)
-
-
-def make_writer(run_dir: str, flags: dict, track: bool) -> SummaryWriter:
-    """TensorBoard's writer with the run's flags; with --track, Weights & Biases mirrors its events (CleanRL's
-    --track), set up first."""
-    if track:
-        import wandb
-
-        wandb.init(project=os.environ.get("WANDB_PROJECT", "inform"), sync_tensorboard=True, config=flags,
-                   name=os.path.basename(run_dir), dir=run_dir, save_code=True)  # fmt: skip
-    writer = SummaryWriter(run_dir)
-    table = "\n".join(f"|{key}|{value}|" for key, value in flags.items())
-    writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + table)
-    return writer
 
 
 class Progress:
@@ -1126,9 +1103,9 @@ def set_rng_state(rng: dict) -> None:
     random.setstate((version, tuple(internal), gauss))
 
 
-def load_day(run_dir: str) -> dict:
-    """RUN_DIR/day.pt, checked (keys, shapes, index and value ranges; its flags are checked as this run's when they
-    replace them). Raises InputError before anything is written."""
+def load_day(run_dir: str, args_type: type = Args) -> dict:
+    """RUN_DIR/day.pt, checked (keys, shapes, index and value ranges, its settings and stats as JSON values, a flag of
+    `args_type` of its type; its flags as this run's when they replace them). InputError before anything is written."""
     path = os.path.join(run_dir, "day.pt")
     if not os.path.isdir(run_dir):
         raise InputError(f"--sleep-from {run_dir}: no such directory")
@@ -1137,6 +1114,8 @@ def load_day(run_dir: str) -> dict:
     day = read_checkpoint(path, "--sleep-from")
     if day.get("format") != DAY_FORMAT:
         raise InputError(f"{path}: not a saved day of this script (format {day.get('format')!r}, not {DAY_FORMAT!r})")
+    for part, hints in (("day_args", typing.get_type_hints(args_type, include_extras=True)), ("day_stats", {})):
+        check_settings(day.get(part, {}), hints, f"{path}: {part}")  # they go into summary.json
     missing = [k for k in ("env_id", "day_args", *DAY_TENSORS, *EPISODE_TABLE, "h_net", "q_star", "rng", "day_stats")
                if k not in day] + [f"day_args.{k}" for k in DAY_ARGS if k not in day.get("day_args", {})]  # fmt: skip
     if missing:
@@ -1171,6 +1150,7 @@ def load_day(run_dir: str) -> dict:
         raise InputError(f"{path}: a damaged or tampered day: {', '.join(k for k, ok in ranges.items() if not ok)} "
                          f"out of range")  # fmt: skip
     try:  # the day's learner, rebuilt from what the day saved (another script's H is refused here, by name)
+        check_settings(day["h_net"]["kwargs"], typing.get_type_hints(QNetwork.__init__), f"{path}: h_net kwargs")
         day["learner"] = Day(day["day_args"], torch.device("cpu"), saved=day["h_net"])
         if day["h_net"]["kwargs"]["obs_dim"] != n_states:
             raise ValueError(f"H is a network for {day['h_net']['kwargs']['obs_dim']}-d observations, not {n_states}-d")
@@ -1336,10 +1316,7 @@ class StopSignals:
     @classmethod
     @contextlib.contextmanager
     def waiting(cls):  # a wait for a person: a stop signal before it or during it raises at once
-        stop = cls.current
-        if stop is None:  # none installed (the script imported, not run): a plain wait
-            yield
-            return
+        stop = cls.current or cls.__new__(cls)  # none installed (the script imported, not run): a plain wait
         stop.waiting_for_input = True
         try:
             cls.check()
@@ -1408,13 +1385,15 @@ def write_json_atomic(path: str, data: dict) -> None:
 
 
 def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop, seed: int, flags: dict) -> dict:
-    """The summary (with the run's `flags`) first, then the messages: no signal cuts this short (StopSignals only notes
-    the later ones)."""
+    """The summary (with the run's `flags`; a run that did not complete keeps its mid-run checks under their own
+    name) first, then the messages: no signal cuts this short (StopSignals only notes the later ones)."""
     stop.finished = True
     if run_dir is not None:
         final = {"time/eval_s": evaluator.seconds if evaluator else 0.0, "wall_time_s": time.time() - run_start}
         final.update(seed=seed, script=os.path.basename(__file__), status=status, args=flags)
-        summary = {**(evaluator.final if evaluator else {}), **summary, **final}
+        tests = evaluator.final if evaluator else {}
+        tests = tests if status == "completed" else {f"eval/last_check/{k[5:]}": v for k, v in tests.items()}
+        summary = {**tests, **summary, **final}
         summary.update({"phase": phase} if status != "completed" else {})
         summary.update({"signal": stop.reason()} if status == "interrupted" else {})
         try:
@@ -1440,6 +1419,27 @@ def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop
 
 
 # --- end of shared plumbing ---
+
+
+def check_settings(values, hints: dict, where: str) -> None:
+    """What a saved day brings into summary.json, checked as it is read: a dict of JSON values, a known flag's (in
+    `hints`, Args' type hints) of its type too (typeguard's check); InputError naming the first that is not."""
+    if not isinstance(values, dict):
+        raise InputError(f"{where} is {cut(values)}, not a dict")
+    for name, value in values.items():
+        try:  # TypeError: a tensor, bytes, a key that is no string; ValueError: a loop
+            json.dumps({name: value})
+            typeguard.check_type(value, hints.get(name, typing.Any))
+        except (TypeError, ValueError, RecursionError):
+            raise InputError(f"{where}[{cut(name)}] is {cut(value)}, not a JSON value") from None
+        except typeguard.TypeCheckError as e:  # in its words, on one line
+            why = " ".join(str(e).split())[:160]
+            raise InputError(f"{where}[{cut(name)}] is {cut(value)}, not of its flag's type: {why}") from None
+
+
+def cut(value, n: int = 80) -> str:  # a value in a message: one line, a long one cut short
+    text = " ".join(repr(value).split())
+    return text if len(text) <= n else f"{text[:n]}... ({len(text):,} characters)"
 
 
 def strict_json(value):  # NaN and inf as null, at any depth (a metric this run does not have, e.g. no successes)

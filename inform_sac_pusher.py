@@ -26,6 +26,7 @@ import importlib.util
 import json
 import math
 import os
+import pathlib
 import random
 import re
 import shutil
@@ -63,6 +64,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 import torch.nn as nn  # noqa: E402
 import torch.nn.functional as F  # noqa: E402
+import typeguard  # noqa: E402
 import tyro  # noqa: E402
 from torch.utils.tensorboard import SummaryWriter  # noqa: E402
 
@@ -79,6 +81,7 @@ ORACLE_SAC = {"learning_starts": 5000, "batch_size": 256, "q_lr": 1e-3, "policy_
 EVAL_FREQUENCY = 2000  # forward-phase env steps between evaluations of TAMER (curves like Fig. 3)
 SLEEP_EVAL_FREQUENCY = 1000  # sleep gradient steps between evaluations of INFORM
 PERIODIC_EVAL_EPISODES = 5  # episodes of each evaluation during the phases
+METRICS = ("return", "final_distance", "success_rate")  # what a test reports of each policy
 SIDE_BY_SIDE = 20  # episodes a test runs at once, on copies of its env (evaluate)
 LOG_FREQUENCY = 1000  # steps between scalar logs
 # the night's recipe, ours and the authors' (their test loads the 100k-step checkpoint); a preset fills in only what
@@ -239,8 +242,7 @@ class Args:
         return " ".join(f"{k}={v}" for k, v in settings.items())
 
     def night(self, tamer_actor: "Actor", device, tamer: dict) -> "Night":
-        """The night's learner (`tamer`: TAMER's H and entropy coefficient at the day's end, which only the study's
-        sham control uses)."""
+        """The night's learner (`tamer`: the day's H, its kwargs and entropy coefficient, which only the sham uses)."""
         return Night(tamer_actor, device, **self.night_settings())
 
 
@@ -293,8 +295,7 @@ class Outcome:
 
 # ---------------------------------------------------------------------------------------------------------------------
 # ALGO LOGIC: the networks (each is rebuilt from the `kwargs` saved beside its state_dict)
-LOG_STD_MIN = -5.0
-LOG_STD_MAX = 2.0
+LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
 
 
 class BatchedLinear(nn.Module):
@@ -424,8 +425,7 @@ class Teacher:
         self.noise, self.sparsity, self.delay, self.credit_window = noise, sparsity, delay, credit_window
         self.budget, self.rng = budget, np.random.default_rng(seed)
         self.in_flight = collections.deque()  # clicks on their way, oldest first
-        self.positives = 0  # +1 signals delivered
-        self.perfect_positives = 0  # +1 answers of the perfect teacher (Eq. 4), for the record
+        self.positives = self.perfect_positives = 0  # +1 signals delivered; +1 answers of the perfect teacher (Eq. 4)
 
     @property
     def gone(self) -> bool:  # the budget is spent: no more feedback from now on
@@ -512,11 +512,9 @@ class ReplayBuffer:
     """Every forward-phase transition (s, a, s', h, terminated), preallocated, and the success tag of its episode."""
 
     def __init__(self, capacity: int, obs_dim: int, act_dim: int, device: torch.device):
-        self.obs = torch.zeros(capacity, obs_dim, device=device)
-        self.next_obs = torch.zeros(capacity, obs_dim, device=device)
+        self.obs, self.next_obs = (torch.zeros(capacity, obs_dim, device=device) for _ in range(2))
         self.actions = torch.zeros(capacity, act_dim, device=device)
-        self.feedback = torch.zeros(capacity, device=device)  # h, written by the teacher when a signal arrives
-        self.terminated = torch.zeros(capacity, device=device)
+        self.feedback, self.terminated = (torch.zeros(capacity, device=device) for _ in range(2))  # h: when it comes
         self.success = torch.zeros(capacity, dtype=torch.bool, device=device)
         self.driven = torch.zeros(capacity, dtype=torch.bool, device=device)  # a person at the page drove the arm
         self.episodes: list[tuple[int, int, float]] = []  # (first step, end step, shortfall: see Outcome)
@@ -557,12 +555,11 @@ class ReplayBuffer:
 
 
 class Day:
-    """The day's learner and what made it, as `Night` is the night's: TAMER's twin feedback models H (Eq. 1, gamma =
-    0), its actor trained SAC-style on H, their optimisers, and `settings` (every flag marked DAY in Args: a saved day
-    keeps them whole). A change goes here: a new day flag (marked DAY, read from `settings`); `answer`, the perfect
-    teacher's h* (Eq. 4's 0 or 1: any sign and size reaches H as given); `h_kwargs`, `actor_kwargs`, what H and the
-    actor are built from (a saved day rebuilds them from these); `update`, TAMER's step; `teacher`, the simulated
-    person."""
+    """The day's learner and what made it, as `Night` is the night's: TAMER's twin feedback models H (Eq. 1, gamma = 0),
+    its actor trained SAC-style on H, their optimisers, and `settings` (every flag marked DAY in Args: a saved day keeps
+    them whole). A change goes here: a new day flag (marked DAY, read from `settings`); `answer`, the perfect teacher's
+    h* (Eq. 4's 0 or 1: any sign and size reaches H as given); `h_kwargs`, `actor_kwargs`, what H and the actor are
+    built from (a saved day rebuilds them from these); `update`, TAMER's step; `teacher`, the simulated person."""
 
     def __init__(self, settings: dict, device, space: gym.spaces.Box | None = None, obs_dim=0, saved=None):
         """A new day for actions in `space` and `obs_dim`-d observations, or a saved day's learner (`saved`: the
@@ -643,8 +640,7 @@ def forward_phase(day: Day, env, oracle_actor, oracle_qf, teacher, outcome, buff
         next_obs, reward, terminated, truncated, info = env.step(action_t.cpu().numpy())
         next_t = torch.as_tensor(next_obs, dtype=torch.float32, device=device)
         buffer.add(obs_t, action_t, next_t, terminated, driven is not None)
-        ep_return += float(reward)
-        ep_length += 1
+        ep_return, ep_length = ep_return + float(reward), ep_length + 1
         last_step = step == n - 1 or (teacher.gone and s["budget_ends_forward_phase"])
         if terminated or truncated or last_step:  # tag the trajectory; a cut-off last one by where it stands
             distance, success, shortfall = outcome(info, ep_return)
@@ -672,8 +668,7 @@ def forward_phase(day: Day, env, oracle_actor, oracle_qf, teacher, outcome, buff
                 writer.add_scalar(tag, value, step + 1)
         report = {"return": last_return}
         if (step + 1) % EVAL_FREQUENCY == 0 or last_step:
-            metrics = evaluator("tamer", day.actor, step + 1, PERIODIC_EVAL_EPISODES)
-            report["eval return"] = metrics["eval/tamer_return"]
+            report["eval return"] = evaluator("tamer", day.actor, step + 1, PERIODIC_EVAL_EPISODES)["eval/tamer_return"]
         progress(step + 1, **report)
         if last_step:
             break
@@ -685,6 +680,9 @@ def forward_phase(day: Day, env, oracle_actor, oracle_qf, teacher, outcome, buff
     stats.update({"feedback/steps": buffer.size, "feedback/positive_rate": positives / buffer.size})
     stats["feedback/driven_steps"] = int(buffer.driven[: buffer.size].sum())  # a person's own steps (the web page)
     stats.update({"sleep/success_episodes": int(successes), "sleep/episodes": len(buffer.episodes)})
+    if ((labels := buffer.feedback[: buffer.size])[labels > 0] != 1).any():  # graded answers: what counted, and how
+        stats.update({"feedback/counted_as_positive": "every answer above 0, as one signal (its rate, the budget)",
+                      "feedback/positive_label_mean": labels[labels > 0].mean().item()})  # fmt: skip
     return {**stats, "losses/tamer_entropy_coef": day.log_ent_coef.exp().item()}
 
 
@@ -700,9 +698,8 @@ def sleep_batch(buffer: ReplayBuffer, batch_size: int, expert_idx: torch.Tensor,
 class Night:
     """The night's learner: soft Q by IQ-Learn (Eq. 2) on replay rows then expert rows, the INFORM actor on Q (SAC's
     objective at a fixed temperature), the target Q following softly. The sleep study
-    (inform_utils/sleep_variants_pusher.py) subclasses it: `loss`, `actor_loss` and `update_actor` are where a
-    variant changes the night (calling these, so that a term added here reaches every variant), `memories` what it
-    sleeps on."""
+    (inform_utils/sleep_variants_pusher.py) subclasses it: `loss`, `actor_loss` and `update_actor` are where a variant
+    changes the night (calling these, so that a term added here reaches every variant), `memories` what it sleeps on."""
 
     n_critics = 1  # soft Q networks (twins: their minimum in V(s) and in the actor's objective)
 
@@ -794,8 +791,7 @@ def sleep_phase(night: Night, buffer: ReplayBuffer, steps: int, batch_size: int,
                 writer.add_scalar(tag, value, step)
         report = {"iq_loss": losses.get("losses/iq_loss")}
         if step % SLEEP_EVAL_FREQUENCY == 0 or last_step:
-            metrics = evaluator("inform", night.actor, step, PERIODIC_EVAL_EPISODES)
-            report["eval return"] = metrics["eval/inform_return"]
+            report["eval return"] = evaluator("inform", night.actor, step, PERIODIC_EVAL_EPISODES)["eval/inform_return"]
             report.update(night.evaluated(step, writer))
         progress(step, **report)
     return {**stats, **night.stats(), **losses}
@@ -920,8 +916,7 @@ class Evaluator:
         self.envs, self.contact = env_copies(env_id, seed, SIDE_BY_SIDE, contact=contact), contact
         self.writer, self.seed, self.random_starts, self.outcome = writer, seed, random_starts, outcome
         self.generator = torch.Generator().manual_seed(seed + 12345)  # sampled actions, off the training RNG
-        self.seconds = 0.0  # spent evaluating
-        self.final = {}  # the latest value of each tag
+        self.seconds, self.final = 0.0, {}  # spent evaluating; the latest value of each tag
 
     def reset_seed(self, episode: int) -> int:
         return 1_000_000 + 1000 * self.seed + episode if self.random_starts else self.seed
@@ -930,7 +925,7 @@ class Evaluator:
         t, results = time.time(), {}
         for deterministic, suffix in ((True, ""), (False, "_sampled")):
             res = evaluate(actor, self.envs, episodes, self.reset_seed, deterministic, self.generator, self.outcome)
-            results.update({f"eval/{name}_{k}{suffix}": res[k] for k in ("return", "final_distance", "success_rate")})
+            results.update({f"eval/{name}_{k}{suffix}": res[k] for k in METRICS})
         for tag, value in results.items() if self.writer is not None else ():
             self.writer.add_scalar(tag, value, step)
         self.final.update(results)
@@ -967,9 +962,7 @@ def final_evaluation(buffer, q_net, policies: dict, evaluator, writer, run_dir: 
         envs = env_copies(env_id, seed, authors_test_episodes, contact=contact)
         for name, actor in policies.items():
             res = evaluate(actor, envs, authors_test_episodes, lambda ep: seed, False, evaluator.generator, outcome)
-            results.update(
-                {f"eval/authors_test/{name}_{k}": res[k] for k in ("return", "final_distance", "success_rate")}
-            )
+            results.update({f"eval/authors_test/{name}_{k}": res[k] for k in METRICS})
         for env in envs:
             env.close()
     for tag, value in results.items():
@@ -1154,8 +1147,12 @@ def obstacle_xml(env_id: str, positions, camera: bool = False) -> str:
     for i, (x, y) in enumerate(() if positions is None else positions):
         box = {"name": f"obstacle_{i}", "type": "box", "size": f"{h} {h} {h}", "pos": f"{x:.6f} {y:.6f} {OBSTACLE_Z}"}
         ET.SubElement(world, "geom", {**box, "contype": "1", "conaffinity": "1", "rgba": "0.2 0.2 0.8 1"})
-    if camera:  # the videos' camera, and no shadows: they triple the time of a frame in software OpenGL
-        ET.SubElement(world, "camera", video_camera())
+    if camera:  # the videos' camera: VIDEO_CAMERA's distance from its lookat, seen from +x (image up is -x); no
+        # shadows: they triple the time of a frame in software OpenGL
+        (x, y, z), d, el = VIDEO_CAMERA["lookat"], VIDEO_CAMERA["distance"], math.radians(VIDEO_CAMERA["elevation"])
+        pos = f"{x + d * math.cos(el):.4f} {y} {z - d * math.sin(el):.4f}"
+        xyaxes = f"0 1 0 {math.sin(el):.4f} 0 {math.cos(el):.4f}"
+        ET.SubElement(world, "camera", {"name": "inform_video", "mode": "fixed", "pos": pos, "xyaxes": xyaxes})
         ET.SubElement(ET.SubElement(tree.getroot(), "visual"), "quality", {"shadowsize": "0"})
     if not _OBSTACLE_DIR:  # one temporary directory per process, removed at exit
         _OBSTACLE_DIR.append(tempfile.mkdtemp(prefix="inform_pusher_obstacle_"))
@@ -1195,8 +1192,7 @@ _OBSTACLE_DIR: list[str] = []
 def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=None) -> dict:
     """oracle -> day (the forward phase) -> night (`args.night`, the study's Args give theirs) -> Eq. 3 and the tests.
     `make_teacher(args, env, run_dir)`: the day's teacher in place of the simulated one (a person at a web page)."""
-    recipe = args.sleep_recipe()  # the preset's values that ran go into the summary's args
-    args = dataclasses.replace(args, **{k: v for k, v in recipe.items() if hasattr(args, k)})
+    args = dataclasses.replace(args, **{k: v for k, v in args.sleep_recipe().items() if hasattr(args, k)})  # as ran
     run_start, run_dir, writer, env, evaluator = time.time(), None, None, None, None
     oracle_ckpt = saved["oracle"] if saved is not None else oracle_ckpt  # --sleep-from: the saved day's teacher
     summary = {"time/oracle_s": 0.0, "time/tamer_s": 0.0, "time/sleep_s": 0.0}
@@ -1246,8 +1242,7 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
             oracle_ckpt = oracle_checkpoint(oracle_actor, oracle_qf, args.env_id, args.oracle_total_timesteps,
                                             args.seed, contact_of(args.env_id, args.contact))  # fmt: skip
             save_atomic(oracle_ckpt, f"{run_dir}/oracle.pt")  # and the saved day's teacher
-        oracle_actor.requires_grad_(False)
-        oracle_qf.requires_grad_(False)
+        oracle_actor.requires_grad_(False), oracle_qf.requires_grad_(False)
         summary["time/oracle_s"] = time.time() - t0
         evaluator("oracle", oracle_actor, 0, PERIODIC_EVAL_EPISODES)
 
@@ -1260,12 +1255,12 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
             stats = forward_phase(day, env, oracle_actor, oracle_qf, teacher, outcome, buffer, evaluator, writer)
         else:  # --sleep-from: the saved day's memories and TAMER, and the random streams where the day left them
             day, stats = restore_day(saved, buffer, evaluator, device)
-            summary["day_settings"] = saved["day_args"]  # whole, as the day recorded them (known here or not)
+            summary.update(day_settings=saved["day_args"], tamer_h_kwargs=day.h_kwargs)  # whole, as the day saved them
         summary["time/tamer_s"] = time.time() - evaluator.seconds - t0
         summary["sps/tamer"] = stats["feedback/steps"] / max(summary["time/tamer_s"], 1e-9)
         summary.update(stats)  # a saved day's stats bring the day's own time
         save_actor(f"{run_dir}/tamer_actor.pt", day.actor, env_id=args.env_id)
-        save_critic(f"{run_dir}/tamer_h.pt", day.h_net, obs_dim, act_dim, env_id=args.env_id)
+        save_critic(f"{run_dir}/tamer_h.pt", day.h_net, day.h_kwargs, env_id=args.env_id)
         if args.save_buffer:
             day_stats = {**stats, "time/tamer_s": summary["time/tamer_s"], "sps/tamer": summary["sps/tamer"]}
             save_day(f"{run_dir}/day.pt", day, buffer, oracle_ckpt, day_stats, evaluator.generator)
@@ -1274,7 +1269,7 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
         phase, t0 = "sleep", time.time() - evaluator.seconds
         if args.sleep_seed is not None:  # another night on the same day
             torch.manual_seed(args.sleep_seed)
-        night = args.night(day.actor, device, tamer={"h_net": day.h_net,
+        night = args.night(day.actor, device, tamer={"h_net": day.h_net, "h_kwargs": day.h_kwargs,
                                                      "ent_coef": stats["losses/tamer_entropy_coef"]})  # fmt: skip
         summary.update(sleep_phase(night, buffer, args.sleep_gradient_steps, args.sleep_batch_size, evaluator, writer,
                                    device))  # fmt: skip
@@ -1283,7 +1278,7 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
         summary["sps/sleep"] = args.sleep_gradient_steps / max(summary["time/sleep_s"], 1e-9)
         save_actor(f"{run_dir}/inform_actor.pt", inform_actor, env_id=args.env_id)
         extra = {"env_id": args.env_id, "gamma": SLEEP_GAMMA, "temperature": args.sleep_temperature}
-        save_critic(f"{run_dir}/inform_critic.pt", q_net, obs_dim, act_dim, **extra)
+        save_critic(f"{run_dir}/inform_critic.pt", q_net, {"obs_dim": obs_dim, "act_dim": act_dim}, **extra)
         policies = {"oracle": oracle_actor, "tamer": day.actor, "inform": inform_actor}
         if selected is not None:  # the checkpoint picked offline, beside the last one
             save_actor(f"{run_dir}/inform_selected_actor.pt", selected["actor"], env_id=args.env_id)
@@ -1292,12 +1287,10 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
         # ---- the recovered reward (Eq. 3), then the final evaluation and the obstacle robustness test
         phase = "eval"
         summary.update(final_evaluation(
-            buffer, q_net, policies, evaluator, writer, run_dir, env_id=args.env_id,
+            buffer, q_net, policies, evaluator, writer, run_dir, env_id=args.env_id, eval_episodes=args.eval_episodes,
             end_step=args.tamer_total_timesteps + args.sleep_gradient_steps, temperature=args.sleep_temperature,
-            eval_episodes=args.eval_episodes, obstacle_layout=args.obstacle_layout,
-            obstacle_episodes=args.obstacle_episodes, authors_test_episodes=args.authors_test_episodes,
-            capture_video=args.capture_video,
-        ))  # fmt: skip
+            obstacle_layout=args.obstacle_layout, obstacle_episodes=args.obstacle_episodes,
+            authors_test_episodes=args.authors_test_episodes, capture_video=args.capture_video))  # fmt: skip
         writer.flush()  # the events whole before the summary says completed (an error in TensorBoard's thread: here)
     except (KeyboardInterrupt, BrokenPipeError) as e:  # a signal, or the reader of our output died
         status, stop.broken_pipe = "interrupted", isinstance(e, BrokenPipeError)
@@ -1306,6 +1299,8 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
     except Exception as e:  # the summary records it; a bug then gets its traceback, a full disk its one line
         status, summary["error"] = "failed", f"{type(e).__name__}: {(str(e).strip() or '-').splitlines()[0]}"
         failure = None if isinstance(e, OSError) else e
+    if status != "completed" and phase in ("oracle", "tamer", "sleep"):  # how long the cut phase ran
+        summary[f"time/{phase}_s"] = time.time() - evaluator.seconds - t0
     summary = end_run(summary, status, phase, run_dir, run_start, evaluator, (env, writer), stop, args.seed, vars(args))
     if failure is not None:
         raise failure
@@ -1320,14 +1315,6 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
 # lookat) looks down on the table from behind the goal: arm, object (white), goal (red), boxes (blue)
 VIDEO_CAMERA = {"lookat": (0.42, -0.2, -0.3), "distance": 1.0, "elevation": -75.0}  # metres, degrees
 VIDEO_SIZE = 480  # pixels, square; a multiple of 16, as H.264 wants
-
-
-def video_camera() -> dict:
-    """The camera's MJCF attributes: VIDEO_CAMERA's distance from its lookat, seen from +x (image up is -x)."""
-    (x, y, z), d, el = VIDEO_CAMERA["lookat"], VIDEO_CAMERA["distance"], math.radians(VIDEO_CAMERA["elevation"])
-    pos = f"{x + d * math.cos(el):.4f} {y} {z - d * math.sin(el):.4f}"
-    xyaxes = f"0 1 0 {math.sin(el):.4f} 0 {math.cos(el):.4f}"
-    return {"name": "inform_video", "mode": "fixed", "pos": pos, "xyaxes": xyaxes}
 
 
 GL_HINT = "install EGL (Debian: apt-get install libegl1 libegl-mesa0) or OSMesa (libosmesa6, MUJOCO_GL=osmesa)"
@@ -1461,7 +1448,7 @@ def load_oracle(args: Args) -> dict | None:
     env_id, path, gymnasium = args.env_id, args.oracle_path, contact_of(args.env_id, args.contact) == CONTACTS[1]
     name = os.path.join("oracles", f"{env_id}__sac_oracle{'_gymnasium_contact' if gymnasium else ''}.pt")
     if path is None and not args.train_oracle:  # oracles/ beside the script, in the cwd, then above either
-        script_up, cwd_up = directories_up(REPO_DIR), directories_up(os.getcwd())
+        script_up, cwd_up = ([d, *map(str, pathlib.PurePath(d).parents)] for d in (REPO_DIR, os.getcwd()))  # and up
         places = list(dict.fromkeys(os.path.join(d, name) for d in [script_up[0], cwd_up[0], *script_up, *cwd_up]))
         path = next((p for p in places if os.path.isfile(p)), None)
         if path is None:  # a copied script far from the repository: say so before an hour of training starts
@@ -1475,11 +1462,6 @@ def load_oracle(args: Args) -> dict | None:
         return {**ckpt, "path": path}
 
 
-def directories_up(path: str) -> list[str]:  # the directory and each one above it, to the root
-    path = os.path.abspath(path)
-    return [path] if os.path.dirname(path) == path else [path, *directories_up(os.path.dirname(path))]
-
-
 def state_dict_cpu(net: nn.Module) -> dict:
     return {k: v.detach().cpu().clone() for k, v in net.state_dict().items()}
 
@@ -1491,9 +1473,9 @@ def save_actor(path: str, actor: Actor, **extra) -> None:
     save_atomic({**ckpt, **extra}, path)
 
 
-def save_critic(path: str, q_net: QEnsemble, obs_dim: int, act_dim: int, **extra) -> None:
-    kwargs = {"obs_dim": obs_dim, "act_dim": act_dim, "hidden": q_net.fc1.weight.shape[2], "n": q_net.n}
-    save_atomic({"state_dict": state_dict_cpu(q_net), "kwargs": kwargs, **extra}, path)
+def save_critic(path: str, q_net: QEnsemble, kwargs: dict, **extra) -> None:  # kwargs: what rebuilds it, whole
+    shape = {"hidden": q_net.fc1.weight.shape[2], "n": q_net.n, "layer_norm": q_net.norm is not None}
+    save_atomic({"state_dict": state_dict_cpu(q_net), "kwargs": {**shape, **kwargs}, **extra}, path)
 
 
 def oracle_checkpoint(actor: Actor, qf: QEnsemble, env_id: str, steps: int, seed: int, contact) -> dict:
@@ -1530,10 +1512,10 @@ def save_day(path, day: Day, buffer: ReplayBuffer, oracle_ckpt, stats, generator
     save_atomic({**record, "evaluator_rng": generator.get_state()}, path)
 
 
-def load_day(run_dir: str) -> dict:
+def load_day(run_dir: str, args_type: type = Args) -> dict:
     """--sleep-from: RUN_DIR/day.pt, read with weights_only=True and checked: its memories (check_day), and its
     learner rebuilt from what the day saved (Day, as "learner"), with finite networks; InputError otherwise. The
-    day's settings stay whole in "day_args", known to this script or not."""
+    day's settings stay whole in "day_args", known to `args_type` or not, each a JSON value (of its flag's type)."""
     path = os.path.join(run_dir, "day.pt")
     if not os.path.isfile(path):
         raise InputError(f"--sleep-from {run_dir}: no day.pt there (make one with --save-buffer)")
@@ -1544,11 +1526,12 @@ def load_day(run_dir: str) -> dict:
         raise InputError(f"--sleep-from {path}: not a readable weights-only day ({type(e).__name__})") from None
     if isinstance(day, dict) and day.get("format") == "inform-day-1" and "episode_final_distance" in day:
         # saved before other tasks: Pusher's final distances, and episodes judged by Outcome's defaults
-        day["episode_shortfall"] = day.pop("episode_final_distance")
+        day["episode_shortfall"], day["format"] = day.pop("episode_final_distance"), DAY_FORMAT
         day["day_args"] = {"success_info_key": "reward_dist", "success_return": None, **day["day_args"]}
-        day["format"] = DAY_FORMAT
     if not isinstance(day, dict) or day.get("format") != DAY_FORMAT:  # this script's or a copy's, under any name
         raise InputError(f"--sleep-from {path}: not a day saved by this script's --save-buffer ({DAY_FORMAT})")
+    for part, hints in (("day_args", typing.get_type_hints(args_type, include_extras=True)), ("day_stats", {})):
+        check_settings(day.get(part), hints, f"--sleep-from {path}: {part}")  # they go into summary.json
     ran = {k: day["day_args"].get(k, v) for k, v in DAY_CONSTANTS.items()}
     if ran != DAY_CONSTANTS:
         raise InputError(f"--sleep-from {path}: the day ran with {ran}, this script has {DAY_CONSTANTS}")
@@ -1558,9 +1541,9 @@ def load_day(run_dir: str) -> dict:
     if "kwargs" not in day["tamer_h"]:  # saved before days kept their networks' arguments: today's (checked above)
         shapes = {"obs_dim": day["obs"].shape[1], "act_dim": day["actions"].shape[1], "hidden": HIDDEN_SIZE}
         day["tamer_h"]["kwargs"] = {**shapes, "n": day["tamer_h"].pop("n")}
-        bounds = {"action_low": day["oracle"]["action_low"], "action_high": day["oracle"]["action_high"]}
-        day["tamer_actor"]["kwargs"] = {**shapes, **bounds}
+        day["tamer_actor"]["kwargs"] = {**shapes, **{k: day["oracle"][k] for k in ("action_low", "action_high")}}
     try:
+        check_settings(day["tamer_h"]["kwargs"], typing.get_type_hints(QEnsemble.__init__), f"{path}: tamer_h kwargs")
         learner = day["learner"] = Day(day["day_args"], torch.device("cpu"), saved=day)
     except (TypeError, RuntimeError, KeyError) as e:  # networks built, or settings kept, by another script
         why = " ".join(str(e).split())[:200]
@@ -1586,8 +1569,7 @@ def check_day(day: dict, path: str) -> None:
         checks["episode table"] = bool(day["episode_success"].shape == table and tiled)
     except (KeyError, AttributeError, TypeError, IndexError, RuntimeError, ValueError) as e:
         raise InputError(f"--sleep-from {path}: not a day as --save-buffer writes it ({type(e).__name__})") from None
-    bad = [what for what, ok in checks.items() if not ok]
-    if bad:
+    if bad := [what for what, ok in checks.items() if not ok]:
         raise InputError(f"--sleep-from {path}: the day's {bad[0]} are not what --save-buffer writes")
 
 
@@ -1737,22 +1719,20 @@ def cli(args: Args, make_teacher=None) -> int:
     saved = oracle_ckpt = None  # a saved day brings its own teacher
     try:
         if args.sleep_from is not None:  # the day's flags replace this run's: its numbers are the day's
-            saved = load_day(args.sleep_from)
+            saved = load_day(args.sleep_from, type(args))
             flags = {f.name for f in fields(args)}  # but the contact: a day under another one is refused, below
             args = dataclasses.replace(args, **{k: v for k, v in saved["day_args"].items() if k in flags - {"contact"}})
             check_contact(saved["day_args"], args, f"--sleep-from {args.sleep_from}")
             print(f"[day] sleeping on the day saved in {args.sleep_from} ({args.env_id}, seed {args.seed}, "
                   f"{saved['obs'].shape[0]} steps); its day flags replace this run's", flush=True)  # fmt: skip
-            unknown = {k: v for k, v in saved["day_args"].items() if k not in flags and k not in DAY_CONSTANTS}
-            if unknown:  # a copy's day: its settings are recorded, never dropped
-                print(f"[day] the day's settings that are not this script's flags, kept in summary.json: {unknown}")
+            if unknown := {k: v for k, v in saved["day_args"].items() if k not in {*flags, *DAY_CONSTANTS}}:
+                say(f"[day] the day's settings unknown to this script, kept in summary.json: {cut(unknown, 200)}")
         check_args(args)
         if contact_of(args.env_id, args.contact):  # under mujoco<3 Gymnasium's contact is 2.3's: recorded as what runs
             args = dataclasses.replace(args, contact=contact_of(args.env_id, args.contact))
         if args.capture_video:
             check_video(args.env_id)
-        if saved is None:
-            oracle_ckpt = load_oracle(args)
+        oracle_ckpt = load_oracle(args) if saved is None else None  # a saved day brings its own teacher
         check_writable("runs")
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
@@ -1805,10 +1785,7 @@ class StopSignals:
     @classmethod
     @contextlib.contextmanager
     def waiting(cls):  # a wait for a person: a stop signal before it or during it raises at once
-        stop = cls.current
-        if stop is None:  # none installed (the script imported, not run): a plain wait
-            yield
-            return
+        stop = cls.current or cls.__new__(cls)  # none installed (the script imported, not run): a plain wait
         stop.waiting_for_input = True
         try:
             cls.check()
@@ -1877,13 +1854,15 @@ def write_json_atomic(path: str, data: dict) -> None:
 
 
 def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop, seed: int, flags: dict) -> dict:
-    """The summary (with the run's `flags`) first, then the messages: no signal cuts this short (StopSignals only notes
-    the later ones)."""
+    """The summary (with the run's `flags`; a run that did not complete keeps its mid-run checks under their own
+    name) first, then the messages: no signal cuts this short (StopSignals only notes the later ones)."""
     stop.finished = True
     if run_dir is not None:
         final = {"time/eval_s": evaluator.seconds if evaluator else 0.0, "wall_time_s": time.time() - run_start}
         final.update(seed=seed, script=os.path.basename(__file__), status=status, args=flags)
-        summary = {**(evaluator.final if evaluator else {}), **summary, **final}
+        tests = evaluator.final if evaluator else {}
+        tests = tests if status == "completed" else {f"eval/last_check/{k[5:]}": v for k, v in tests.items()}
+        summary = {**tests, **summary, **final}
         summary.update({"phase": phase} if status != "completed" else {})
         summary.update({"signal": stop.reason()} if status == "interrupted" else {})
         try:
@@ -1909,6 +1888,27 @@ def end_run(summary, status, phase, run_dir, run_start, evaluator, closing, stop
 
 
 # --- end of shared plumbing ---
+
+
+def check_settings(values, hints: dict, where: str) -> None:
+    """What a saved day brings into summary.json, checked as it is read: a dict of JSON values, a known flag's (in
+    `hints`, Args' type hints) of its type too (typeguard's check); InputError naming the first that is not."""
+    if not isinstance(values, dict):
+        raise InputError(f"{where} is {cut(values)}, not a dict")
+    for name, value in values.items():
+        try:  # TypeError: a tensor, bytes, a key that is no string; ValueError: a loop
+            json.dumps({name: value})
+            typeguard.check_type(value, hints.get(name, typing.Any))
+        except (TypeError, ValueError, RecursionError):
+            raise InputError(f"{where}[{cut(name)}] is {cut(value)}, not a JSON value") from None
+        except typeguard.TypeCheckError as e:  # in its words, on one line
+            why = " ".join(str(e).split())[:160]
+            raise InputError(f"{where}[{cut(name)}] is {cut(value)}, not of its flag's type: {why}") from None
+
+
+def cut(value, n: int = 80) -> str:  # a value in a message: one line, a long one cut short
+    text = " ".join(repr(value).split())
+    return text if len(text) <= n else f"{text[:n]}... ({len(text):,} characters)"
 
 
 def strict_json(value):  # NaN and inf as null, at any depth (a metric this run does not have, e.g. no successes)

@@ -7,14 +7,14 @@ study's switches) with the variant's flags, a 15% hold-out (so every night logs 
 held-out episodes), any flags given after `--`, and a sleep seed; then its INFORM actor (and the one the offline
 criterion picked) is tested on 50 random starts by `inform_utils.evaluate_policy pusher`. What a night leaves is
 copied at once to {results_dir}/{campaign}/{day}/{variant}__sleep{seed}/ (summary.json, obstacle_distances.npz,
-random_starts.json, and night.json: its day by content, day.pt's sha256, and every flag it ran with). A night of the
-campaign already there is not run again: the study resumes; a campaign that holds a night of another day.pt or other
-flags is refused before anything runs (a day re-made by its command is the same day: its day.pt differs only in the
-wall-clock stats it keeps, and with a kept night's put back it is byte for byte that night's). --table prints the
-table from the results alone, each night it cannot read named with its cause; --with-campaigns adds other campaigns
-(a campaign a budget) to the rule for the methods.
+random_starts.json, and night.json: its day by content (content_sha256: every value of day.pt but how long the day
+took, so a day re-made by its command is the same day) and by day.pt's sha256 (what records kept before name it by),
+the CPU kernels it ran on, and every flag it ran with). A night of the campaign already there is not run again: the
+study resumes; a campaign that holds a night of another day or other flags is refused before anything runs. --table
+prints the table from the results alone, each night it cannot read named with its cause; --with-campaigns adds other
+campaigns (a campaign a budget) to the rule for the methods.
 Exit 0; 1 if a night failed; 2 for bad input (or a night that refuses its input); 128 + the signal if stopped (the
-night in progress saves what finished and is not kept).
+night in progress saves what finished and is not kept; signals that come within SAME_STOP seconds are one stop).
 
     python inform_sac_pusher.py --env-id Pusher-v4 --seed 1 --save-buffer          # a day: runs/<day>/day.pt
     python -m inform_utils.sleep_study --days runs/<day> --campaign sleep_study    # the nights on it
@@ -220,20 +220,26 @@ class NightFailed(Exception):
     """A night, or a test of its policies, ended without a result: the study goes on and exits 1 at the end."""
 
 
+SAME_STOP = 2.0  # seconds after a stop signal in which another is the same stop
+
+
 class Stop:
     """The first SIGINT/SIGTERM/SIGHUP is remembered and passed on once to the live child (each child runs in its own
-    process group, so a terminal's Ctrl-C reaches it only through the study); a second one kills the child. The
-    handler only records and passes on; the study looks at `signum` before each child."""
+    process group, so a terminal's Ctrl-C reaches it only through the study), which then saves what finished. More
+    within SAME_STOP seconds are the same stop (`timeout` signals the study, then its process group); one after that
+    kills the child. The handler only records and passes on; the study looks at `signum` before each child."""
 
     def __init__(self):
-        self.signum, self.count, self.procs = 0, 0, set()
+        self.signum, self.first, self.procs = 0, None, set()
 
     def handler(self, signum, frame):
-        self.count += 1
-        self.signum = self.signum or signum
+        if self.first is not None and time.monotonic() - self.first < SAME_STOP:
+            return  # the same stop, signalled again
+        kill = self.first is not None
+        self.signum, self.first = self.signum or signum, self.first or time.monotonic()
         for proc in list(self.procs):
             with contextlib.suppress(ProcessLookupError):
-                proc.send_signal(signal.SIGKILL if self.count > 1 else signum)
+                proc.send_signal(signal.SIGKILL if kill else signum)
 
     @contextlib.contextmanager
     def installed(self):
@@ -279,27 +285,82 @@ def last_json(proc: subprocess.CompletedProcess, what: str) -> dict:
         raise NightFailed(f"{what} printed no result: {proc.stdout.strip()[-300:]}") from None
 
 
-def identity(args: Args, extra: list[str], day_sha: str, night_flags: list[str]) -> dict:
+def identity(args: Args, extra: list[str], day: dict, night_flags: list[str]) -> dict:
     """What makes a night the campaign's: its script, the flags after `--` every night of the campaign gets, the
-    random-start test's episodes (Pusher), its day by content (day.pt's sha256, whatever its folder is called) and
-    every flag it ran with. Kept beside the night as night.json."""
+    random-start test's episodes (Pusher), its day by content (`day`: day.pt's content_sha256, and the file's sha256,
+    which records kept before the content's name them by) and every flag it ran with. Kept beside the night as
+    night.json, with the CPU kernels it ran on."""
     pusher = STUDIES[args.script].pusher
     record = {"script": args.script, "flags": list(extra), "random_start_episodes": args.random_start_episodes
-              if pusher else None, "day_sha256": day_sha, "night_flags": night_flags}  # fmt: skip
+              if pusher else None, **day, "night_flags": night_flags, "cpu": cpu_kernels()}  # fmt: skip
     return record | ({"gradient_steps": args.gradient_steps} if args.gradient_steps is not None else {})
 
 
 CAMPAIGN_KEYS = ("script", "flags", "random_start_episodes", "gradient_steps")  # what every night of a campaign shares
+DAY_KEYS = ("day_sha256", "day_content_sha256", "cpu")  # what names a night's day and where it ran, not its flags
+# what night.json holds (identity()), by type: a record with another is damaged
+RECORD = {"script": str, "flags": list, "random_start_episodes": int | None, "day_sha256": str, "night_flags": list,
+          "gradient_steps": int, "day_content_sha256": str | None, "cpu": str | None}  # fmt: skip
+
+
+def damaged(record: dict) -> str | None:
+    """What in a night's record is not of the type identity() writes (flags: lists of strings), or None."""
+    for key, kind in RECORD.items():
+        value = record.get(key)
+        words = isinstance(value, list) and all(isinstance(word, str) for word in value)
+        if key in record and (not isinstance(value, kind) or isinstance(value, bool) or kind is list and not words):
+            return f"its {key} is {json.dumps(value)[:60]}"
+    return None
+
+
+def cpu_kernels() -> str:
+    """The CPU kernels torch runs here (AVX2, AVX512, ...; OPENBLAS_CORETYPE if set): another can move a last bit."""
+    import torch
+
+    forced = os.environ.get("OPENBLAS_CORETYPE")
+    return torch.backends.cpu.get_cpu_capability() + (f", OPENBLAS_CORETYPE={forced}" if forced else "")
 
 
 WALL_CLOCK = ("time/", "sps/")  # the saved day's stats that say how long it took: a re-made day does not repeat them
+NOT_CONTENT = ("oracle_path",)  # where a Pusher day's teacher was read from (the teacher itself is in the day)
+
+
+def content_sha256(day_pt: str) -> str | None:
+    """A day by its content: the sha256 of every value day.pt holds (tensors by their dtype, shape and bytes), but how
+    long the day took (its stats' WALL_CLOCK) and where its teacher was read from, which a day re-made by its command
+    does not repeat. None if day.pt is not a day torch reads (its file's sha256 names it then)."""
+    import torch  # here only: the study reads a day only to name it by its content
+
+    try:
+        day = torch.load(day_pt, weights_only=True, map_location="cpu")
+    except Exception:  # not a torch file, or one of another kind: the night that sleeps on it says why
+        return None
+    day = {k: v for k, v in day.items() if k not in NOT_CONTENT} if isinstance(day, dict) else day
+    if isinstance(day, dict) and isinstance(day.get("day_stats"), dict):
+        day["day_stats"] = {k: v for k, v in day["day_stats"].items() if not k.startswith(WALL_CLOCK)}
+    digest = hashlib.sha256()
+
+    def add(value) -> None:
+        if isinstance(value, torch.Tensor):
+            digest.update(f"tensor {value.dtype} {tuple(value.shape)}:".encode())
+            digest.update(value.contiguous().reshape(-1).view(torch.uint8).numpy().tobytes())
+        elif isinstance(value, dict | list | tuple):
+            digest.update(f"{type(value).__name__} {len(value)}:".encode())
+            for item in value.items() if isinstance(value, dict) else value:
+                add(item)
+        else:
+            digest.update(f"{type(value).__name__} {value!r};".encode())
+
+    add(day)
+    return digest.hexdigest()
 
 
 @functools.lru_cache(maxsize=4)
 def sha256_with_clock(day_pt: str, clock: tuple[tuple[str, float], ...]) -> str | None:
     """The sha256 day.pt would have had its day taken as long as `clock` says: its wall-clock stats put back and saved
-    as the scripts save it (torch.save gives the same bytes for the same values); None if `clock` lacks one."""
-    import torch  # here only: the study never reads a day but to tell a re-made one
+    as the scripts save it (torch.save gives the same bytes for the same values); None if `clock` lacks one. How a
+    record kept before content_sha256 names its day."""
+    import torch
 
     day = torch.load(day_pt, weights_only=True, map_location="cpu")
     clock = dict(clock)
@@ -313,9 +374,9 @@ def sha256_with_clock(day_pt: str, clock: tuple[tuple[str, float], ...]) -> str 
 
 
 def remade(day_pt: str, night: str, record: dict) -> bool:
-    """Is `day_pt` the day a kept night ran on, re-made by its command? A day is deterministic but for how long it
-    took, which day.pt keeps (day_stats' time/ and sps/) and every night copies into its summary: with the night's
-    put back, the re-made day.pt is byte for byte the night's (its day_sha256)."""
+    """Is `day_pt` the day a kept night ran on, re-made by its command, by a record kept before content_sha256? A day
+    is deterministic but for how long it took, which day.pt keeps (day_stats' time/ and sps/) and every night copies
+    into its summary: with the night's put back, the re-made day.pt is byte for byte the night's (its day_sha256)."""
     try:
         summary = read_json(os.path.join(night, "summary.json"))
         clock = tuple(sorted((k, v) for k, v in summary.items() if k.startswith(WALL_CLOCK)))
@@ -324,14 +385,27 @@ def remade(day_pt: str, night: str, record: dict) -> bool:
         return False
 
 
+def ran_on(day_pt: str, night: str) -> bool:
+    """Did the kept night run on this very day.pt? Its summary holds its day's stats, the clock too, to the bit."""
+    import torch
+
+    try:
+        stats = torch.load(day_pt, weights_only=True, map_location="cpu")["day_stats"]
+        summary = read_json(os.path.join(night, "summary.json"))
+        return bool(stats) and all(k in summary and summary[k] == v for k, v in stats.items())
+    except (BadFile, OSError, RuntimeError, KeyError, TypeError, AttributeError, pickle.UnpicklingError):
+        return False
+
+
 def conflicts(args: Args, planned: dict[str, dict]) -> list[str]:
     """The nights already kept in the campaign that are not its own: kept by an older study (no night.json) or one
     whose record is damaged, run with other flags after `--` (or another script or random-start test), on another
-    day.pt in a folder of the same name (a day re-made by its command is the same day, `remade`), or with other flags
-    of their own. `planned`: {night folder: its identity}."""
+    day in a folder of the same name (by content: a day re-made by its command is the same day; by `remade` for a
+    record kept before content_sha256), or with other flags of their own. `planned`: {night folder: its identity}."""
     mine = next(iter(planned.values()), None)
-    days = {os.path.dirname(path): record["day_sha256"] for path, record in planned.items()}
+    days = {os.path.dirname(path): record for path, record in planned.items()}
     day_files = {os.path.join(args.results_dir, args.campaign, day_name(day)): day for day in args.days}
+    flags_of = lambda record: {k: v for k, v in record.items() if k not in DAY_KEYS}  # noqa: E731
     found, told = [], set()
     for path in night_dirs(args):
         try:
@@ -339,25 +413,39 @@ def conflicts(args: Args, planned: dict[str, dict]) -> list[str]:
         except BadFile as e:
             found.append(f"{path} has no readable record of its day and flags ({str(e).rsplit('(', 1)[-1]}")
             continue
+        if problem := damaged(record):
+            found.append(f"{path} has a damaged record of its day and flags ({problem} in its night.json)")
+            continue
         if mine is not None and any(record.get(k) != mine.get(k) for k in CAMPAIGN_KEYS):
             ran = " ".join(record.get("flags") or []) or "none"
             found.append(f"{path} ran with other flags after -- ({ran}) or another script or --random-start-episodes")
             continue
         folder = os.path.dirname(path)
-        same_day = folder not in days or record.get("day_sha256") == days[folder]
-        if not same_day and remade(os.path.join(day_files[folder], "day.pt"), path, record):
-            same_day = True
-            if folder not in told:
-                told.add(folder)
-                print(f"[study] {day_files[folder]}: re-made; its day.pt is the kept nights' but for how long the day "
-                      "took", flush=True)  # fmt: skip
+        day, day_pt = days.get(folder, record), os.path.join(day_files.get(folder, folder), "day.pt")
+        same_file = record.get("day_sha256") == day["day_sha256"]
+        if same_file or record.get("day_content_sha256") is not None:
+            same_day = same_file or record["day_content_sha256"] == day.get("day_content_sha256")
+        else:  # a record kept before content_sha256: the re-made file with the night's clock put back
+            same_day = remade(day_pt, path, record)
+        if same_day and not same_file and folder not in told:
+            told.add(folder)
+            print(f"[study] {day_files[folder]}: re-made; its day.pt is the kept nights' but for how long the day took",
+                  flush=True)  # fmt: skip
         if not same_day:
-            found.append(f"{path} is a night on another day.pt kept in a folder of the same name (re-made on another "
-                         "CPU? OpenBLAS's kernels can change the last bit of its final distances: re-make it with "
-                         "OPENBLAS_CORETYPE as where it was made: Haswell for the committed v4 days)")  # fmt: skip
-        elif path in planned and {**record, "day_sha256": None} != {**planned[path], "day_sha256": None}:
+            why = other_day(day_pt, path, record)
+            found.append(f"{path} is a night on another day.pt kept in a folder of the same name ({why})")
+        elif path in planned and flags_of(record) != flags_of(planned[path]):
             found.append(f"{path} ran with other flags ({' '.join(record.get('night_flags') or [])})")
     return found
+
+
+def other_day(day_pt: str, night: str, record: dict) -> str:
+    """Why a kept night's record names another day than day.pt, as far as the files tell."""
+    if ran_on(day_pt, night):  # its summary holds this day.pt's stats to the bit: the record, not the day, changed
+        return "yet its summary.json holds this day.pt's stats to the bit: its night.json was changed since it was kept"
+    where = f"; that night ran on {record['cpu']}, this machine is {cpu_kernels()}" if record.get("cpu") else ""
+    return (f"re-made on another CPU{where}? OpenBLAS's kernels can change the last bit of its final distances: "
+            "re-make it with OPENBLAS_CORETYPE as where it was made: Haswell for the committed v4 days")  # fmt: skip
 
 
 def read_night(path: str, pusher: bool) -> tuple[dict | None, str]:
@@ -373,9 +461,27 @@ def read_night(path: str, pusher: bool) -> tuple[dict | None, str]:
             read_npz(os.path.join(path, "obstacle_distances.npz"), ("tamer", "inform"))
     except BadFile as e:
         return None, str(e)
+    if problem := unreadable(summary):
+        return None, problem
     if not re.fullmatch(r".+__sleep\d+", os.path.basename(path)):
         return None, "not named {variant}__sleep{seed}"
     return summary, ""
+
+
+def unreadable(summary: dict) -> str | None:
+    """What keeps a completed night from the table, or None: a measure (eval/, random_starts/) that is not a number
+    or null, no seed (an integer: its day's), or settings that are not what a run writes."""
+    for key, value in summary.items():
+        if key.startswith(("eval/", "random_starts/")) and not (value is None or number(value)):
+            file = "random_starts.json" if key.startswith("random_starts/") else "summary.json"
+            return f"its {file} holds {json.dumps(value)[:60]} as {key[:100]}, not a number"
+    kinds = {"seed": int, "args": dict, "sleep_variant": str}
+    wrong = [k for k, kind in kinds.items() if (k == "seed" or k in summary) and not isinstance(summary.get(k), kind)]
+    return f"its summary.json's {wrong[0]} is {json.dumps(summary.get(wrong[0]))[:60]}, not a run's" if wrong else None
+
+
+def number(value) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
 
 
 def completed(path: str, pusher: bool = False) -> bool:
@@ -431,24 +537,28 @@ def run_night(args: Args, day: str, variant: str, seed: int, record: dict, stop:
         if study.pusher:
             tested = random_starts(run_dir, summary["seed"], summary["args"]["env_id"], args.random_start_episodes,
                                    stop, summary.get("contact"))  # fmt: skip
+        keep(dest, run_dir, tested, record, study.pusher)
     except (NightFailed, BadFile) as e:
         print(f"[study] failed ({e})", flush=True)
         return False
-    keep(dest, run_dir, tested, record, study.pusher)
     print(f"[study] done in {time.time() - t0:.0f}s: {dest}", flush=True)
     return True
 
 
 def keep(dest: str, run_dir: str, tested: dict, record: dict, pusher: bool) -> None:
     """The night's files into `dest` at once: copied into a hidden folder beside it, which then takes its place (a
-    night of the campaign that did not complete, run again, is replaced)."""
+    night of the campaign that did not complete, run again, is replaced). NightFailed, naming the file, if the night
+    left one of them out; nothing is made then."""
+    files = ("summary.json", "obstacle_distances.npz") if pusher else ("summary.json",)
+    if missing := [file for file in files if not os.path.isfile(os.path.join(run_dir, file))]:
+        raise NightFailed(f"the night in {run_dir} left no {' or '.join(missing)}")
     parent, name = os.path.split(dest)
     tmp, old = os.path.join(parent, f".{name}.tmp"), os.path.join(parent, f".{name}.old")
     for path in (tmp, old):
         shutil.rmtree(path, ignore_errors=True)
     try:
         os.makedirs(tmp)
-        for file in ("summary.json", "obstacle_distances.npz") if pusher else ("summary.json",):
+        for file in files:
             copy(os.path.join(run_dir, file), os.path.join(tmp, file))
         write_json(os.path.join(tmp, "random_starts.json"), tested)
         write_json(os.path.join(tmp, "night.json"), record)
@@ -722,9 +832,9 @@ def per_day(rows: list[dict], variants: list[str]) -> str:
     first, keys = first_nights(rows), ("eval/{p}_return", "eval/{p}_success_rate", "eval/obstacle/{p}_final_distance")
 
     def cell(nights: list[dict], p: str) -> str:
-        if not nights:
+        ret, ok, boxes = ([r[k] for r in nights if r.get(k) is not None] for k in (key.format(p=p) for key in keys))
+        if not (ret and ok and boxes):  # none of the nights has them (a test that did not run)
             return "-"
-        ret, ok, boxes = ([r[key.format(p=p)] for r in nights] for key in keys)
         return f"{statistics.mean(ret):.2f} ({sum(v >= 1 for v in ok)}/{len(nights)}), {statistics.mean(boxes):.3f} m"
 
     lines = ["per day: fixed-start return (nights that succeed at the fixed start), distance with the boxes"]
@@ -1047,15 +1157,16 @@ def rule_means(rows: list[dict], variants: list[str]) -> list[str]:
         if any(set(m) != days for m in means):  # day_means() holds only the days the variant ran
             continue
         ret, boxes, sampled = (statistics.mean(m.values()) for m in means)
-        ok = sum(r[f"eval/{p}_success_rate"] >= 1 for r in nights)
+        ok = sum((r.get(f"eval/{p}_success_rate") or 0) >= 1 for r in nights)
         what = "days" if variant == "tamer" else "nights"
         cells = [f"{ret:.2f}", f"{ok} of {len(nights)} {what}", f"{boxes:.3f} m", f"{sampled:.2f}"]
         lines.append(table_row([variant, *cells]))
     return lines
 
 
-def validate(args: Args) -> dict[str, str]:
-    """Bad input, before anything runs: ValueError, one line. Returns {day: day.pt's sha256}."""
+def validate(args: Args, extra: list[str] = ()) -> dict[str, dict]:
+    """Bad input, before anything runs (`extra`: the flags after --): ValueError, one line. Returns {day: its name in
+    a night's record, by content and by day.pt's sha256}."""
     if not re.fullmatch(FOLDER, args.campaign):
         raise ValueError(f"--campaign {args.campaign[:100]!r}: one folder name under {args.results_dir}/ (letters, "
                          "digits and ._+=-, no / or ..)")  # fmt: skip
@@ -1068,31 +1179,53 @@ def validate(args: Args) -> dict[str, str]:
         if not args.table or not re.fullmatch(FOLDER, other) or named.count(other) > 1:
             raise ValueError(f"--with-campaigns {other[:100]!r}: campaigns (folder names under {args.results_dir}/) "
                              "beside --table's, for the table only, each named once")  # fmt: skip
-    if args.table:
+    if args.table:  # a campaign that is a file (or a dangling link) holds no nights: not an empty table
+        for flag, where in [("--results-dir", args.results_dir)] + [("--campaign", c) for c in named]:
+            path = where if flag == "--results-dir" else os.path.join(args.results_dir, where)
+            if os.path.lexists(path) and not os.path.isdir(path):
+                raise ValueError(f"{flag} {where[:100]}: {path[:200]} is not a folder of nights")
         return {}
-    if not args.sleep_seeds or args.random_start_episodes < 1 or (args.gradient_steps or 1) < 1:
+    steps = args.gradient_steps if args.gradient_steps is not None else 1
+    if not args.sleep_seeds or args.random_start_episodes < 1 or steps < 1:
         raise ValueError("--sleep-seeds must name at least one seed, --random-start-episodes and --gradient-steps "
                          "be >= 1")  # fmt: skip
-    days = {}
+    if study.pusher and any(zero(value) for value in given(extra, "--obstacle-episodes")):
+        raise ValueError("--obstacle-episodes 0 after --: the Pusher study's table needs every night's obstacle test "
+                         "(obstacle_distances.npz); leave it out, or give at least 1")  # fmt: skip
     for day in args.days:
         if not os.path.isfile(os.path.join(day, "day.pt")):
             raise ValueError(f"{day} holds no day.pt; make one with {args.script} --save-buffer")
-        days[day] = sha256(os.path.join(day, "day.pt"))
-    by_name = {}
-    for day, sha in days.items():
-        other = by_name.setdefault(day_name(day), (day, sha))
-        if other[1] != sha:  # the campaign keeps a day's nights under its folder's name
-            raise ValueError(f"--days {other[0]} and {day}: two different days in folders of one name; give one of "
-                             "them another folder name (or run it in another --campaign)")  # fmt: skip
     check_writable(os.path.join(args.results_dir, args.campaign), "--results-dir")
+    days = {day: {"day_sha256": sha256(os.path.join(day, "day.pt")),
+                  "day_content_sha256": content_sha256(os.path.join(day, "day.pt"))} for day in args.days}  # fmt: skip
+    by_name = {}
+    for day, names in days.items():  # the campaign keeps a day's nights under its folder's name
+        other, known = by_name.setdefault(day_name(day), (day, names))
+        content = names["day_content_sha256"]
+        if known["day_sha256"] != names["day_sha256"] and (content is None or content != known["day_content_sha256"]):
+            raise ValueError(f"--days {other} and {day}: two different days in folders of one name; give one of "
+                             "them another folder name (or run it in another --campaign)")  # fmt: skip
     return days
+
+
+def given(flags: list[str], name: str) -> list[str]:
+    """The values `flags` give the flag `name` (as `name value` or `name=value`)."""
+    pairs = zip(flags, [*flags[1:], ""], strict=False)  # each flag and the word after it
+    return [value if flag == name else flag.split("=", 1)[1] for flag, value in pairs if flag.split("=")[0] == name]
+
+
+def zero(text: str) -> bool:
+    try:
+        return int(text) == 0
+    except ValueError:
+        return False
 
 
 def study_main(args: Args, extra: list[str]) -> int:
     """Run the campaign's nights that are not kept yet, then print the table. Exit 0, 1 if a night failed, 2 for bad
     input (ValueError, raised before anything runs, or by a night that refuses its input), 128 + the signal if
     stopped."""
-    days = validate(args)
+    days = validate(args, extra)
     if args.table:
         print(table(args))
         return 0

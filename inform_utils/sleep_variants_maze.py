@@ -12,6 +12,7 @@ consolidation. Same steps and batches as the night. With neither switch, the cor
 flag that the chosen control does not use (`hears`) is refused in one line, never recorded as if it ran.
 """
 
+import copy
 import sys
 from dataclasses import dataclass, fields
 from typing import Literal
@@ -56,7 +57,7 @@ class ShamControl(StudySleep):
 
     def __init__(self, obs_dim, n_actions, device, *, h_net, h_lr, **settings):
         super().__init__(obs_dim, n_actions, device, **settings)
-        self.q_net.load_state_dict(h_net.state_dict())
+        self.q_net, self.q_target = copy.deepcopy(h_net), copy.deepcopy(h_net)  # the day's H as the day built it
         self.optimizer = torch.optim.Adam(self.q_net.parameters(), lr=h_lr, fused=True)
 
     def loss(self, obs, actions, next_obs, feedback, terminated, is_expert, **kw):

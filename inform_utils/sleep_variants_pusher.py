@@ -286,10 +286,9 @@ class ShamControl(StudyNight):
              "holdout_fraction"}  # fmt: skip
     fixed = {"policy_lr": core.TAMER_POLICY_LR, "init_actor_from_tamer": True}
 
-    def __init__(self, tamer_actor, device, *, h_net, ent_coef: float, h_lr: float, **settings):
+    def __init__(self, tamer_actor, device, *, h_net, h_kwargs: dict, ent_coef: float, h_lr: float, **settings):
         super().__init__(tamer_actor, device, **settings)
-        obs_dim, act_dim = tamer_actor.fc1.in_features, tamer_actor.fc_mean.out_features
-        self.h_net = core.QEnsemble(obs_dim, act_dim, core.HIDDEN_SIZE, n=2).to(device)
+        self.h_net = core.QEnsemble(**h_kwargs).to(device)  # as the day built its H (a saved day: from its kwargs)
         self.h_net.load_state_dict(h_net.state_dict())
         self.h_optimizer = torch.optim.Adam(self.h_net.parameters(), lr=h_lr, foreach=True)
         self.log_ent_coef = torch.full((1,), math.log(ent_coef), device=device, requires_grad=True)

@@ -222,3 +222,37 @@ def test_the_maze_evaluation_looks_for_a_stop_every_episode(monkeypatch):
     with pytest.raises(KeyboardInterrupt):  # before a single episode of the 100,000
         maze.evaluate(maze.np.zeros(16, dtype=int), env, [{"seed": s} for s in range(100_000)], 100)
     assert stop.raised
+
+
+# the sham control on a day whose H is another network (issue 71) ----------------------------------------------------
+def maze_wider_h(code: str) -> str:
+    """H 64 wide by QNetwork's constructor default alone: the day's saved kwargs say so, no flag does."""
+    return patch(code, "n_actions: int, hidden: int = 32):", "n_actions: int, hidden: int = 64):")
+
+
+SHAM_CASES = {  # script, hack, study module, day flags, night flags, the hack's flag, what the day's H is
+    "pusher LayerNorm": ("inform_sac_pusher.py", pusher_layer_norm, "sleep_variants_pusher", PUSHER_DAY, PUSHER_NIGHT,
+                         ["--tamer-layer-norm"], {"layer_norm": True}),
+    "maze 64 wide": ("inform_dqn_gridworld.py", maze_wider_h, "sleep_variants_maze", MAZE_DAY, MAZE_NIGHT, [],
+                     {"hidden": 64}),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", SHAM_CASES)
+def test_a_sham_night_on_a_day_whose_h_is_another_network(case, tmp_path):
+    """ShamControl rebuilt H from today's constants: a traceback. It is built from the day's saved kwargs, which the
+    night's summary records (an H changed by a constructor default alone says so nowhere else); the day's tamer_h.pt
+    rebuilds from its own kwargs (Pusher's omitted layer_norm)."""
+    script, hack, study, day_flags, night_flags, flag, h = SHAM_CASES[case]
+    code = copy_of(tmp_path / "copy", script, hack)
+    result, day_dir, day = run(tmp_path, code, [script, *day_flags, *night_flags, "--save-buffer", *flag])
+    assert result.returncode == 0 and day["status"] == "completed", result.stderr[-2000:]
+    saved_h = torch.load(os.path.join(day_dir, "tamer_h.pt"), weights_only=True)
+    assert h.items() <= saved_h["kwargs"].items(), saved_h["kwargs"]
+    (isp.QEnsemble if script == "inform_sac_pusher.py" else maze.QNetwork)(**saved_h["kwargs"]).load_state_dict(
+        saved_h["state_dict"])  # fmt: skip
+
+    cmd = ["-m", f"inform_utils.{study}", "--sleep-from", day_dir, "--sleep-control", "sham", *night_flags]
+    result, _, night = run(tmp_path, REPO, cmd)  # the original study's sham
+    assert result.returncode == 0 and night["status"] == "completed", result.stderr[-2000:]
+    assert h.items() <= night["tamer_h_kwargs"].items(), night["tamer_h_kwargs"]

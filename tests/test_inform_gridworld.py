@@ -398,7 +398,8 @@ def assert_interrupted_run(cwd, phase, signal_name):
     assert summary["status"] == "interrupted" and summary["phase"] == phase and summary["signal"] == signal_name
     assert os.path.exists(os.path.join(run_dir, "tamer_h.pt")) == (phase == "sleep")  # what finished is saved
     assert not os.path.exists(os.path.join(run_dir, "inform_q.pt"))
-    assert f"eval/{'inform' if phase == 'sleep' else 'tamer'}_episode_length" in summary  # the curves so far
+    policy = "inform" if phase == "sleep" else "tamer"  # the curves so far, under a name that says they are (issue 71)
+    assert f"eval/last_check/{policy}_episode_length" in summary and f"eval/{policy}_episode_length" not in summary
 
 
 @pytest.mark.parametrize(

@@ -585,7 +585,7 @@ def test_both_scripts_carry_the_same_networks_and_judge_episodes_alike():
             f"{name} differs between inform_sac_pusher.py and oracle_train.py; a teacher's checkpoint loads into "
             "either script's networks, so change both alike (a new layer: an argument off by default in both)"
         )
-    for name in ("check_crc", "strict_json"):  # beside the shared plumbing: the maze's copy is the same code
+    for name in ("check_crc", "strict_json", "check_settings", "cut"):  # beside the shared plumbing: the same code
         assert inspect.getsource(getattr(isp, name)) == inspect.getsource(getattr(inform_dqn_gridworld, name)), name
 
 
