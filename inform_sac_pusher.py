@@ -1442,12 +1442,12 @@ def actor_from_checkpoint(ckpt: dict) -> Actor:  # a saved actor, or an oracle's
     return actor
 
 
-def load_oracle(args: Args) -> dict | None:
-    """The oracle checkpoint to use (--oracle-path, else the shipped one of the run's contact), or None to train one
-    here (--train-oracle, or no shipped one found: then for --oracle-total-timesteps)."""
-    env_id, path, gymnasium = args.env_id, args.oracle_path, contact_of(args.env_id, args.contact) == CONTACTS[1]
+def load_oracle(env_id: str, contact: str, path: str | None, train: bool, train_steps: int) -> dict | None:
+    """The oracle checkpoint to use (`path`, else the shipped one of the run's `contact`), or None to train one here
+    (`train`, or no shipped one found: then for `train_steps`)."""
+    gymnasium = contact_of(env_id, contact) == CONTACTS[1]
     name = os.path.join("oracles", f"{env_id}__sac_oracle{'_gymnasium_contact' if gymnasium else ''}.pt")
-    if path is None and not args.train_oracle:  # oracles/ beside the script, in the cwd, then above either
+    if path is None and not train:  # oracles/ beside the script, in the cwd, then above either
         script_up, cwd_up = ([d, *map(str, pathlib.PurePath(d).parents)] for d in (REPO_DIR, os.getcwd()))  # and up
         places = list(dict.fromkeys(os.path.join(d, name) for d in [script_up[0], cwd_up[0], *script_up, *cwd_up]))
         path = next((p for p in places if os.path.isfile(p)), None)
@@ -1455,10 +1455,10 @@ def load_oracle(args: Args) -> dict | None:
             hint = "pass --oracle-path PATH (a checkpoint of oracle_train.py, as in oracles/), or --train-oracle"
             say(f"[oracle] no shipped teacher found (looked for {name} beside the script, in the working directory and "
                 f"in every directory above them: {', '.join(places)}); training one here for "
-                f"{args.oracle_total_timesteps} env steps (~100 steps/s on one core). To skip this, {hint}",
+                f"{train_steps} env steps (~100 steps/s on one core). To skip this, {hint}",
                 sys.stderr)  # fmt: skip
     if path is not None:
-        check_contact(ckpt := read_checkpoint(path, "--oracle-path", env_id), args, f"--oracle-path {path}")
+        check_contact(ckpt := read_checkpoint(path, "--oracle-path", env_id), env_id, contact, f"--oracle-path {path}")
         return {**ckpt, "path": path}
 
 
@@ -1692,9 +1692,9 @@ def made_under(record: dict, env_id: str) -> str | None:  # before the setting: 
     return record.get("contact", {"Pusher-v4": CONTACTS[0], "Pusher-v5": CONTACTS[1]}.get(env_id))
 
 
-def check_contact(record: dict, args: Args, where: str) -> None:
+def check_contact(record: dict, env_id: str, contact: str, where: str) -> None:
     """A teacher or a saved day runs only under the contact it was made under: InputError, one line, if not."""
-    ours, theirs = contact_of(args.env_id, args.contact), made_under(record, args.env_id)
+    ours, theirs = contact_of(env_id, contact), made_under(record, env_id)
     if None not in (theirs, ours) and theirs != ours:
         raise InputError(f"{where}: made under the {theirs} contact, and this run's is {ours}; pass --contact "
                          f"{theirs}, or a teacher or day made under {ours}")  # fmt: skip
@@ -1722,7 +1722,7 @@ def cli(args: Args, make_teacher=None) -> int:
             saved = load_day(args.sleep_from, type(args))
             flags = {f.name for f in fields(args)}  # but the contact: a day under another one is refused, below
             args = dataclasses.replace(args, **{k: v for k, v in saved["day_args"].items() if k in flags - {"contact"}})
-            check_contact(saved["day_args"], args, f"--sleep-from {args.sleep_from}")
+            check_contact(saved["day_args"], args.env_id, args.contact, f"--sleep-from {args.sleep_from}")
             print(f"[day] sleeping on the day saved in {args.sleep_from} ({args.env_id}, seed {args.seed}, "
                   f"{saved['obs'].shape[0]} steps); its day flags replace this run's", flush=True)  # fmt: skip
             if unknown := {k: v for k, v in saved["day_args"].items() if k not in {*flags, *DAY_CONSTANTS}}:
@@ -1732,7 +1732,9 @@ def cli(args: Args, make_teacher=None) -> int:
             args = dataclasses.replace(args, contact=contact_of(args.env_id, args.contact))
         if args.capture_video:
             check_video(args.env_id)
-        oracle_ckpt = load_oracle(args) if saved is None else None  # a saved day brings its own teacher
+        if saved is None:
+            teacher = args.oracle_path, args.train_oracle, args.oracle_total_timesteps
+            oracle_ckpt = load_oracle(args.env_id, args.contact, *teacher)
         check_writable("runs")
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)

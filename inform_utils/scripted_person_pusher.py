@@ -361,8 +361,8 @@ def load_oracle(run_flags: list[str]):
 
     import inform_sac_pusher as isp
 
-    run = isp.Args(env_id=run_env_id(run_flags), contact=run_flag(run_flags, "--contact", "mujoco-2.3"))
-    return isp.oracle_from_checkpoint(isp.load_oracle(run), torch.device("cpu"))
+    env_id, contact = run_env_id(run_flags), run_flag(run_flags, "--contact", "mujoco-2.3")
+    return isp.oracle_from_checkpoint(isp.load_oracle(env_id, contact, None, False, 0), torch.device("cpu"))
 
 
 def run_seed(seed: int, args: Args, browser, oracle, work: str, out: str, say) -> dict:

@@ -134,7 +134,9 @@ def pusher(tmp_path_factory):
         mp.setattr(isp, "PERIODIC_EVAL_EPISODES", 1)  # evaluation draws from its own generator: no number moves
         rec.summary = isp.main(
             args,
-            isp.load_oracle(args),
+            isp.load_oracle(
+                args.env_id, args.contact, args.oracle_path, args.train_oracle, args.oracle_total_timesteps
+            ),
             isp.StopSignals(),
         )
     assert rec.summary["status"] == "completed", rec.summary.get("error")

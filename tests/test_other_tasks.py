@@ -161,4 +161,9 @@ def test_oracle_train_on_reacher_gives_a_teacher_the_script_takes(tmp_path):
     with open(os.path.join(run_dir, "eval_curve.csv")) as f:
         assert f.read().splitlines()[0] == "step,success_rate,final_distance,return"
     args = tyro.cli(isp.Args, args=["--env-id", "Reacher-v5", "--oracle-path", oracle])
-    assert isp.load_oracle(args)["env_id"] == "Reacher-v5"
+    assert (
+        isp.load_oracle(args.env_id, args.contact, args.oracle_path, args.train_oracle, args.oracle_total_timesteps)[
+            "env_id"
+        ]
+        == "Reacher-v5"
+    )

@@ -143,7 +143,9 @@ def in_process_run(tmp_path, monkeypatch, *flags) -> dict:
     try:
         return isp.main(
             args,
-            isp.load_oracle(args),
+            isp.load_oracle(
+                args.env_id, args.contact, args.oracle_path, args.train_oracle, args.oracle_total_timesteps
+            ),
             isp.StopSignals(),
         )
     finally:

@@ -316,9 +316,11 @@ def test_the_working_directorys_teacher_comes_before_one_above_the_script(tmp_pa
     shutil.copy(SHIPPED, tmp_path / "cwd" / "oracles")
     monkeypatch.setattr(isp, "REPO_DIR", str(tmp_path / "home" / "project"))
     monkeypatch.chdir(tmp_path / "cwd")
-    assert isp.load_oracle(isp.Args())["path"] == str(tmp_path / "cwd" / "oracles" / "Pusher-v5__sac_oracle.pt")
+    assert isp.load_oracle("Pusher-v5", "mujoco-2.3", None, False, 200000)["path"] == str(
+        tmp_path / "cwd" / "oracles" / "Pusher-v5__sac_oracle.pt"
+    )
     shutil.copy(SHIPPED, tmp_path / "home" / "project" / "oracles")  # beside the script comes first
-    assert isp.load_oracle(isp.Args())["path"] == str(
+    assert isp.load_oracle("Pusher-v5", "mujoco-2.3", None, False, 200000)["path"] == str(
         tmp_path / "home" / "project" / "oracles" / "Pusher-v5__sac_oracle.pt"
     )
 
@@ -526,7 +528,7 @@ def test_bad_input_messages(tmp_path):
         args = tyro.cli(isp.Args, args=flags)
         with pytest.raises(isp.InputError) as err:
             isp.check_args(args)
-            isp.load_oracle(args)
+            isp.load_oracle(args.env_id, args.contact, args.oracle_path, args.train_oracle, args.oracle_total_timesteps)
         message = str(err.value)
         assert "\n" not in message and needle in message, (flags, message)
 

@@ -313,7 +313,9 @@ def test_an_error_after_the_run_directory_exists_still_leaves_a_summary(tmp_path
             with pytest.raises(RuntimeError, match="a bug in the final evaluation"):
                 pusher.main(
                     args,
-                    pusher.load_oracle(args),
+                    pusher.load_oracle(
+                        args.env_id, args.contact, args.oracle_path, args.train_oracle, args.oracle_total_timesteps
+                    ),
                     pusher.StopSignals(),
                 )
         else:
