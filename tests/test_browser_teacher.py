@@ -863,7 +863,7 @@ def test_a_person_takes_the_arm_drives_its_fingertip_by_keys_and_gives_it_back(n
     page.keyboard.press("t")
     wait_until(lambda: page.get_attribute("#day", "data-driving") == "1", "the arm taken")
     start = page.evaluate("state.target")
-    for key, presses in (("ArrowLeft", 14), ("ArrowUp", 8)):  # 28 cm towards the arm, 16 cm towards the goal
+    for key, presses in (("ArrowUp", 14), ("ArrowRight", 8)):  # as the map is turned: 28 cm in x, 16 cm in y
         for _ in range(presses):
             page.keyboard.press(key)
             time.sleep(0.02)
