@@ -1164,9 +1164,9 @@ function render() {
   $("keys").hidden = !pusher || s.role !== "teacher";
   $("take").disabled = !canDrive() || s.driving;
   $("release").disabled = !canDrive() || !s.driving;
-  const mine = s.driving && s.role === "teacher";
-  $("drive-status").className = mine ? "you" : "";
-  $("drive-status").textContent = mine
+  const drivingHere = s.driving && s.role === "teacher";
+  $("drive-status").className = drivingHere ? "you" : "";
+  $("drive-status").textContent = drivingHere
     ? "You drive the arm: click the map or use the arrow keys (2 cm a press); g gives it back."
     : s.driving ? "The page that teaches drives the arm."
     : "The agent drives. t, or a click on the map, takes the arm: its fingertip follows your target.";
