@@ -906,7 +906,7 @@ kbd{border:1px solid #aaa;border-radius:3px;padding:0 .25rem;font-size:.85em;bac
 #map{border:1px solid #bbb;border-radius:6px;background:#f4efe6;cursor:crosshair}
 #drive-status{color:#333;margin:.3rem 0} #drive-status.you{color:#1b5e20;font-weight:bold}
 #task{font-size:1.1rem;font-weight:bold;margin:.2rem 0 .5rem} #keys{color:#333;font-size:.95rem;margin:.3rem 0}
-#legend{font-size:.8rem;color:#444;max-width:240px} #clamp{color:#b71c1c;font-weight:bold;min-height:1.2em}
+#mapbox{width:240px} #legend{font-size:.8rem;color:#444} #clamp{color:#b71c1c;font-weight:bold;min-height:1.2em}
 </style></head>
 <body>
 <h1>INFORM: teach the agent</h1>
