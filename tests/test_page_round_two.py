@@ -13,10 +13,9 @@ import os
 import threading
 
 import numpy as np
-import pytest
 import torch
-from conftest import REPO
-from test_browser_teacher import Session, browser, lines, new_page, wait_until  # noqa: F401 (fixtures)
+from conftest import REPO, WAIT_S
+from test_browser_teacher import Session, lines, wait_until
 
 import inform_sac_pusher as isp
 from browser_teacher import BrowserTeacher, clamp_to_reach
@@ -28,9 +27,10 @@ FAR = [0.9, 0.2]  # the map's bottom right corner: 1.2 m from the arm's base, be
 
 
 class PageDay(threading.Thread):
-    """The core's day as the page sees it, without TAMER: each step the person's action if they hold the arm (else
-    a random one, as the agent's before learning starts), the page shows it and its labels go into a buffer, as forward_phase does. `before(step)` runs
-    first at each step (a test's person acting between two steps); in a thread when a browser acts instead."""
+    """The core's day as the page sees it, without TAMER: each step the person's action if they hold the arm (else a
+    random one, as the agent's before learning starts); the page shows it, and its labels go into a buffer, as
+    forward_phase does. `before(step)` runs first at each step (a test's person acting between two steps); in a
+    thread when a browser acts instead."""
 
     def __init__(self, tmp_path, steps: int, before=None, **flags):
         super().__init__(daemon=True)
@@ -192,7 +192,7 @@ def test_a_second_tab_of_the_same_browser_only_watches(new_page, tmp_path):
     try:
         first = new_page(day.teacher.page.url)
         second = first.context.new_page()
-        second.set_default_timeout(20_000)
+        second.set_default_timeout(WAIT_S * 1000)
         second.goto(day.teacher.page.url)
         streaming(first)
         streaming(second)
@@ -212,7 +212,8 @@ def test_a_second_tab_of_the_same_browser_only_watches(new_page, tmp_path):
         streaming(first)
         first.wait_for_selector('#day[data-driving="1"]')
         first.keyboard.press("ArrowUp")  # up the map: -x
-        wait_until(lambda: np.allclose(day.teacher.page.target, [target[0] - 0.02, target[1]]), "the reloaded tab's move")
+        moved = [target[0] - 0.02, target[1]]
+        wait_until(lambda: np.allclose(day.teacher.page.target, moved), "the reloaded tab's move")
         assert first.evaluate("state.role") == "teacher" and first.is_hidden("#banner")
         day.teacher.page.end_day("the test is over")
         second.wait_for_selector('#day[data-mode="ended"]')
