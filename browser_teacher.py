@@ -7,10 +7,12 @@ The standard library, not a server package (Flask, aiohttp): seven routes and lo
 new pin is needed to run it.
 Safe by default: it listens on 127.0.0.1 unless told otherwise; the printed address carries a random token and a
 request without it gets 403; only the routes below exist (any other path: 404) and no part of a request reaches the
-file system. One person per run, by a session cookie: loading the page takes no role (a `curl` of the address, a link
-preview or a prefetch teaches nothing); the first session to act (answer, or end the day) teaches, any other watches
-read-only. If every page of the teaching session goes silent for `takeover_after` seconds (no long poll open: a
-crashed browser, a closed lid), another page holding the token may take over by acting; nothing answered is lost.
+file system. One person per run, by a session cookie and a tab: loading the page takes no role (a `curl` of the
+address, a link preview or a prefetch teaches nothing); the first tab to act (answer, take the arm, or end the day)
+teaches, and every other watches read-only, a second tab of the same browser as a second browser does (two tabs would
+drive the arm each from its own target). A reload stays the same tab (its id is in the tab's sessionStorage). If the
+teaching tab goes silent for `takeover_after` seconds (no long poll open: a crashed browser, a closed lid), another
+page holding the token may take over by acting; nothing answered is lost.
 
     GET  /            the page
     GET  /state       the page's state as JSON; ?since=VERSION waits (up to 10 s) until it changes (long polling)
@@ -18,11 +20,13 @@ crashed browser, a closed lid), another page holding the token may take over by 
     GET  /outcome     the picture of what came of the night (PNG, or an animated GIF)
     POST /answer      {"nonce", "answer": "yes" | "no" | "none", "question": id | null, "seq": frame, "waited_ms"}
     POST /drive       the Pusher: {"drive": "take" | "target" | "release", "target": [x, y]}: the person takes the
-                      arm (its fingertip follows the target, metres in the table's plane) or gives it back
+                      arm (its fingertip follows the target, metres in the table's plane) or gives it back; a target
+                      beyond the arm's `reach` is moved onto it, and the page says so
     POST /end         the person ends the day
     POST /bye         the page is being closed or reloaded: the day ends if, `close_grace` s later, no page is open
 
-The page names itself in every request (?page=, one id a load), so a reload (a new page) is told from a closed one.
+The page names itself in every request (?page=, one id a load; ?tab=, one id a tab), so a reload (a new page) is told
+from a closed one, and a second tab from a reload.
 
 Two ways to teach. `ask` waits for the person's answer about one move (the maze; the Pusher at the person's pace).
 `show` streams steps at `pace` steps a second without waiting, and `answers` hands over what the person answered
@@ -41,11 +45,13 @@ the answer and the frame shown (sequence number and SHA-256; a maze's drawing it
 arm, target and giving back (`"event": "drive"`, with the step it came at). While the person holds the arm,
 `driving` is True and `target` their point; the script turns it into the arm's action. The page keeps an answer in
 the browser's storage until the server has it, so a reload or a dropped connection loses none and the page resumes.
+A script adds lines of its own to answers.jsonl with `note` (the Pusher's: the steps a take labelled).
 """
 
 import hashlib
 import http.cookies
 import io
+import itertools
 import json
 import os
 import re
@@ -118,6 +124,19 @@ def is_number(value, bound: float) -> bool:
 
 def is_count(value) -> bool:  # a question's id or a frame's sequence number: 0 or more (0: none shown yet)
     return is_number(value, 2**53) and isinstance(value, int) and value >= 0
+
+
+def clamp_to_reach(target, reach) -> tuple[tuple[float, float], bool]:
+    """(the target moved onto the arm's reach if beyond it, whether it was): `reach` is ((x, y) of the arm's base,
+    radius), metres in the table's plane; None: no limit."""
+    x, y = float(target[0]), float(target[1])
+    if reach is None:
+        return (x, y), False
+    (bx, by), radius = reach
+    distance = ((x - bx) ** 2 + (y - by) ** 2) ** 0.5
+    if distance <= radius:
+        return (x, y), False
+    return (bx + (x - bx) * radius / distance, by + (y - by) * radius / distance), True
 
 
 def host_and_port(address: str) -> tuple[str, int]:
@@ -203,6 +222,8 @@ class BrowserTeacher:
         quiet: bool = False,
         takeover_after: float = 5.0,
         no_value: float = 0.0,
+        reach: tuple[tuple[float, float], float] | None = None,
+        day_steps: int | None = None,
     ):
         if task not in TASKS:
             raise ValueError(f"task must be one of {TASKS}, got {task!r}")
@@ -215,6 +236,9 @@ class BrowserTeacher:
         self.values = {**LABELS, "no": float(no_value)}  # the label each answer gives: a No 0, or TAMER's -1
         self.driving = False  # the person holds the arm (the Pusher), and moves its fingertip's target (x, y)
         self.target: tuple[float, float] | None = None
+        self.reach = None if reach is None else ((float(reach[0][0]), float(reach[0][1])), float(reach[1]))
+        self.clamped = False  # the newest target was beyond the reach, and moved onto it
+        self.day_steps = day_steps  # the day's steps at most (the page shows the steps and the time left)
         self.task = task
         self.participant = participant
         self.budget = budget
@@ -233,7 +257,9 @@ class BrowserTeacher:
         self._closed = self._closing = False
         self._sessions: set[str] = set()
         self._owner: str | None = None  # the session that teaches: the first to act, or one that took over
+        self._owner_tab: str | None = None  # and its tab that teaches (None: a client that names no tab)
         self._pages: dict[str, float] = {}  # the owner's pages (one a load of the page): when each was last heard
+        self._tabs: dict[str, str | None] = {}  # the tab of each of them
         self._pages_gone: set[str] = set()  # the pages that said goodbye (closed, or reloaded)
         self._bye_at: float | None = None
         self._step: int | None = None
@@ -265,7 +291,8 @@ class BrowserTeacher:
         self.answers_path = os.path.join(run_dir, "answers.jsonl")
         self._log = open(self.answers_path, "a", encoding="utf-8")
         start = {"event": "start", "task": task, "participant": participant, "budget": budget, "pace": pace}
-        self._record(start | {"delay": self.delay, "host": host, "port": self.port, "no_value": self.values["no"]})
+        start |= {"delay": self.delay, "host": host, "port": self.port, "no_value": self.values["no"]}
+        self._record(start | {"reach": self.reach, "day_steps": day_steps})
         shown_host = socket.gethostname() if host in ("", "0.0.0.0", "::") else host
         shown_host = f"[{shown_host}]" if ":" in shown_host else shown_host
         self.url = f"http://{shown_host}:{self.port}/?token={self.token}"
@@ -358,6 +385,11 @@ class BrowserTeacher:
             if answer.value is not None:
                 labels.update(dict.fromkeys(self.credit(answer, delay), answer.value))
         return labels
+
+    def note(self, event: str, **fields) -> None:
+        """A line of the script's own in answers.jsonl, with the step on the screen (e.g. the steps a take labelled)."""
+        with self._cond:
+            self._record({"event": event, "step": self._step, **as_json(fields)})
 
     def end_day(self, why: str = "day done") -> None:
         """The script ends the day itself (its steps or the budget are spent): the page says so."""
@@ -482,12 +514,20 @@ class BrowserTeacher:
 
     # ---- the routes' logic (called by the handler threads)
 
-    def _state(self, role: str) -> dict:
+    def _rate(self) -> float | None:
+        """Steps a second the page was shown over the last 5 s (the pace, unless the loop falls behind it)."""
+        if not self._shown:
+            return None
+        now = time.monotonic()
+        recent = sum(1 for _ in itertools.takewhile(lambda shown: shown[1] > now - 5.0, reversed(self._shown)))
+        return round(recent / max(min(5.0, now - self._shown[0][1]), 1e-3), 2)
+
+    def _state(self, role: str, takeover: bool = False) -> dict:
         return {
             "version": self._version,
             "mode": "closed" if self._closed else self._mode,
             "role": role,
-            "takeover": role == "teacher" and self._owner is not None and self._owner_silent(),
+            "takeover": takeover,
             "task": self.task,
             "participant": self.participant,
             "step": self._step,
@@ -509,9 +549,13 @@ class BrowserTeacher:
             "pace": self.pace,
             "driving": self.driving,
             "target": self.target,
+            "reach": None if self.reach is None else {"base": self.reach[0], "radius": self.reach[1]},
+            "clamped": self.clamped,
+            "day_steps": self.day_steps,
+            "rate": self._rate() if self._mode == "stream" else None,
         }
 
-    def _wait_state(self, since: int | None, role: str, session, page, connected) -> dict:
+    def _wait_state(self, since: int | None, role: str, session, page, connected, tab=None) -> dict:
         """The state once it differs from version `since` (at most LONG_POLL_S later). While it waits, an open poll
         of the owner's page keeps it heard; a poll whose browser went away ends at once (`connected()` says so)."""
         with self._cond:
@@ -519,16 +563,17 @@ class BrowserTeacher:
             while since is not None and self._version == since and not self._closed:
                 if (left := deadline - time.monotonic()) <= 0 or not connected():
                     break
-                if (role == "teacher") != self._may_teach(session):  # the owner went silent: say so at once
+                if (role == "teacher") != self._may_teach(session, tab):  # the owner went silent: say so at once
                     break
                 self._cond.wait(min(left, 0.5))
-                if session is not None and session == self._owner and page is not None:
-                    self._pages[page] = time.monotonic()
-            role = "teacher" if role == "teacher" and self._may_teach(session) else "watcher"  # it may have changed
-            if role == "teacher":
+                self._heard(session, page, tab)
+            teaches = role == "teacher" and self._may_teach(session, tab)  # it may have changed
+            if teaches:
                 self._owner_version = self._version
                 self._cond.notify_all()  # close() may wait for this
-            return self._state(role)
+            # another tab than the teaching one may teach only because that one went silent: it takes over by acting
+            takeover = teaches and self.ended is None and (session, tab) != (self._owner, self._owner_tab)
+            return self._state("teacher" if teaches else "watcher", takeover and self._owner is not None)
 
     def _outcome_picture(self, role: str) -> tuple[bytes, str] | None:
         with self._cond:
@@ -616,11 +661,13 @@ class BrowserTeacher:
             if kind != "take" and not self.driving:  # a target or a release of an arm not taken: nothing to log
                 return 409, {"driving": False, "why": "take the arm first"}
             self.driving = kind != "release"
-            self.target = (float(target[0]), float(target[1])) if kind != "release" else self.target
-            self._record({"event": "drive", "participant": self.participant, "drive": kind, "step": self._step,
-                          "target": None if self.target is None else list(self.target)})  # fmt: skip
+            record = {"event": "drive", "participant": self.participant, "drive": kind, "step": self._step}
+            if kind != "release":  # beyond the reach the fingertip stops short of the target: it goes to the reach
+                self.target, self.clamped = clamp_to_reach(target, self.reach)
+                record |= {"asked": [float(v) for v in target]} if self.clamped else {}
+            self._record(record | {"target": None if self.target is None else list(self.target)})
             self._changed()
-            return 200, {"driving": self.driving}
+            return 200, {"driving": self.driving, "target": self.target, "clamped": self.clamped}
 
     def _session(self, cookie_header: str | None, make: bool) -> tuple[str | None, str | None]:
         """(the request's session, a new session id to set as a cookie) for one request."""
@@ -640,30 +687,36 @@ class BrowserTeacher:
             self._sessions.add(session)
             return session, session
 
-    def _owner_silent(self) -> bool:
+    def _owner_silent(self) -> bool:  # no page of the teaching tab heard within takeover_after (or all said bye)
         now = time.monotonic()
-        return not any(now - t < self.takeover_after for p, t in self._pages.items() if p not in self._pages_gone)
+        return not any(now - t < self.takeover_after for p, t in self._pages.items()
+                       if p not in self._pages_gone and self._tabs.get(p) == self._owner_tab)  # fmt: skip
 
-    def _may_teach(self, session: str | None) -> bool:
-        """A session of this run teaches if it owns the role, if nobody has acted yet, or if the owner went silent."""
-        return session in self._sessions and (self._owner in (None, session) or self._owner_silent())
+    def _may_teach(self, session: str | None, tab: str | None = None) -> bool:
+        """A tab of this run teaches if it owns the role, if nobody has acted yet, or if the owner went silent."""
+        owns = self._owner is None or (session, tab) == (self._owner, self._owner_tab)
+        return session in self._sessions and (owns or self._owner_silent())
 
-    def _role(self, session: str | None, page: str | None, act: bool = False) -> str:
-        """ "teacher" or "watcher" for one request; `act` (an answer, the end of the day): a session that may teach
-        takes the role, and a takeover is said on every page and in answers.jsonl."""
+    def _heard(self, session: str | None, page: str | None, tab: str | None) -> None:
+        """A page of the teaching session was heard from: its pages still open end no day (`_live_pages`), and its
+        teaching tab's keep others from taking over."""
+        if session is not None and session == self._owner and page is not None:
+            self._pages[page], self._tabs[page] = time.monotonic(), tab
+
+    def _role(self, session: str | None, page: str | None, act: bool = False, tab: str | None = None) -> str:
+        """ "teacher" or "watcher" for one request; `act` (an answer, a drive, the end of the day): a tab that may
+        teach takes the role, and a takeover is said on every page and in answers.jsonl."""
         with self._cond:
-            if not self._may_teach(session):
-                return "watcher"
-            if act and session != self._owner:
+            teaches = self._may_teach(session, tab)
+            if teaches and act and (session, tab) != (self._owner, self._owner_tab):
                 if self._owner is not None:
                     self._message = "Another page took over teaching: the page that taught had gone silent."
                     self._record({"event": "takeover", "step": self._step, "answers": sum(self._counts.values())})
                     self._pages.clear()
                     self._changed()
-                self._owner = session
-            if session == self._owner and page is not None:
-                self._pages[page] = time.monotonic()
-            return "teacher"
+                self._owner, self._owner_tab = session, tab
+            self._heard(session, page, tab)
+            return "teacher" if teaches else "watcher"
 
 
 class _Server(ThreadingHTTPServer):
@@ -715,10 +768,10 @@ class _Handler(BaseHTTPRequestHandler):
         if method != allowed:
             return self.reply(405, b"405\n", "text/plain", {"Allow": allowed})
         session, new = self.teacher._session(self.headers.get("Cookie"), make=path == "/")
-        page = query.get("page", [""])[0]
-        page = page if NONCE.fullmatch(page) else None
-        role = self.teacher._role(session, page, act=path in ("/answer", "/drive", "/end"))
-        self.session, self.page_id = session, page
+        page, tab = (query.get(name, [""])[0] for name in ("page", "tab"))
+        page, tab = (value if NONCE.fullmatch(value) else None for value in (page, tab))
+        role = self.teacher._role(session, page, act=path in ("/answer", "/drive", "/end"), tab=tab)
+        self.session, self.page_id, self.tab = session, page, tab
         handle(query, role, new)
 
     def connected(self) -> bool:
@@ -773,7 +826,8 @@ class _Handler(BaseHTTPRequestHandler):
     def state(self, query, role, new_session):
         since = query.get("since", [""])[0]
         since = int(since) if since.lstrip("-").isdigit() and len(since) < 12 else None
-        self.reply_json(200, self.teacher._wait_state(since, role, self.session, self.page_id, self.connected))
+        state = self.teacher._wait_state(since, role, self.session, self.page_id, self.connected, self.tab)
+        self.reply_json(200, state)
 
     def frame(self, query, role, new_session):
         seq, png = self.teacher._png()
@@ -831,6 +885,7 @@ PAGE = r"""<!doctype html>
 body{font-family:system-ui,sans-serif;margin:1.2rem auto;max-width:54rem;padding:0 1rem;color:#1d1d1d}
 h1{font-size:1.35rem;margin:0 0 .4rem} h2{font-size:1.1rem;margin:.4rem 0}
 #progress{font-variant-numeric:tabular-nums;color:#333;background:#f1f3f5;padding:.35rem .6rem;border-radius:5px}
+#pace{color:#333;font-size:.95rem;margin:.25rem 0;font-variant-numeric:tabular-nums}
 #message{color:#555;margin:.3rem 0;min-height:1.2em}
 .banner{padding:.45rem .7rem;border-radius:5px;margin:.4rem 0}
 .watch{background:#fff3cd} .offline{background:#f8d7da} .over{background:#e7f1ff}
@@ -850,17 +905,26 @@ kbd{border:1px solid #aaa;border-radius:3px;padding:0 .25rem;font-size:.85em;bac
 #hint{color:#555;font-size:.95rem}
 #map{border:1px solid #bbb;border-radius:6px;background:#f4efe6;cursor:crosshair}
 #drive-status{color:#333;margin:.3rem 0} #drive-status.you{color:#1b5e20;font-weight:bold}
+#task{font-size:1.1rem;font-weight:bold;margin:.2rem 0 .5rem} #keys{color:#333;font-size:.95rem;margin:.3rem 0}
+#mapbox{width:240px} #legend{font-size:.8rem;color:#444} #clamp{color:#b71c1c;font-weight:bold;min-height:1.2em}
 </style></head>
 <body>
 <h1>INFORM: teach the agent</h1>
+<div id="task" hidden></div>
 <div id="progress">connecting…</div>
+<div id="pace"></div>
 <div id="message"></div>
 <div id="banner" hidden></div>
 <div id="day">
 <div id="question"></div>
 <div id="view"><pre id="maze" hidden></pre><img id="frame" alt="the agent" hidden>
-<canvas id="map" width="240" height="240" hidden
- title="the table from above: red the goal, white the object, blue the fingertip, green your target"></canvas></div>
+<div id="mapbox" hidden><canvas id="map" width="240" height="240"></canvas>
+<div id="legend">The table from above, turned as the view beside it: <b style="color:#e53935">&#9679;</b> goal,
+&#9675; object, <b style="color:#1e88e5">&#9679;</b> fingertip, <b>&#9632;</b> the arm's base, the circle its reach,
+<b style="color:#2e7d32">+</b> your target.</div><div id="clamp"></div></div></div>
+<div id="keys" hidden>Keys: <kbd>y</kbd> yes and <kbd>n</kbd> no (hold one down to keep answering);
+<kbd>t</kbd> or a click on the map takes the arm, and its fingertip follows your target: click again, or move it
+with the arrow keys (2 cm a press, as the map is turned); <kbd>g</kbd> gives it back to the agent.</div>
 <div id="drive" hidden><button id="take">Take the arm <kbd>t</kbd></button>
 <button id="release">Give it back <kbd>g</kbd></button><div id="drive-status"></div></div>
 <div id="info"></div>
@@ -883,8 +947,13 @@ let state = null, receivedAt = 0, shownSeq = 0, offline = false, endArmed = 0, g
 const answered = new Set();  // the questions this page answered (the state may not say so yet)
 let outcomeShown = null;  // the outcome whose picture was fetched
 const PAGE = nonce();  // this load of the page: the server tells a reload from a closed page by it
+const TAB = sessionStorage.getItem("inform_tab") || nonce();  // this tab, the same after a reload: one tab teaches
+sessionStorage.setItem("inform_tab", TAB);
+const TASK_LINES = {pusher: "Your task: teach the arm to push the white object onto the red goal."};
 
-function url(path, extra) { return path + "?" + new URLSearchParams({token: TOKEN, page: PAGE, ...(extra || {})}); }
+function url(path, extra) {
+  return path + "?" + new URLSearchParams({token: TOKEN, page: PAGE, tab: TAB, ...(extra || {})});
+}
 function sleep(ms) { return new Promise((r) => setTimeout(r, ms)); }
 function pending() { try { return JSON.parse(localStorage.getItem(QUEUE) || "[]"); } catch (e) { return []; } }
 function setPending(list) { localStorage.setItem(QUEUE, JSON.stringify(list)); }
@@ -950,29 +1019,47 @@ async function flush() {  // send the kept answers, oldest first, until the serv
   } finally { flushing = false; render(); }
 }
 
-const MAP = {x0: -0.1, x1: 0.9, y0: -0.8, y1: 0.2};  // the table's plane the map shows, metres (x right, y up)
+// the table's plane the map shows, metres, turned as the 3D view (its camera looks down from behind the goal): x runs
+// down the map, y to the right
+const MAP = {x0: -0.1, x1: 0.9, y0: -0.8, y1: 0.2};
 let myTarget = null;  // the target this page last sent, while it holds the arm (a poll's reply may lag behind it)
+let clampedHere = false;  // this page moved its newest target onto the arm's reach
 function toMap(p) {
   const c = $("map");
-  return [(p[0] - MAP.x0) / (MAP.x1 - MAP.x0) * c.width, (MAP.y1 - p[1]) / (MAP.y1 - MAP.y0) * c.height];
+  return [(p[1] - MAP.y0) / (MAP.y1 - MAP.y0) * c.width, (p[0] - MAP.x0) / (MAP.x1 - MAP.x0) * c.height];
 }
 function fromMap(px, py) {
   const c = $("map");
-  return [MAP.x0 + px / c.width * (MAP.x1 - MAP.x0), MAP.y1 - py / c.height * (MAP.y1 - MAP.y0)];
+  return [MAP.x0 + py / c.height * (MAP.x1 - MAP.x0), MAP.y0 + px / c.width * (MAP.y1 - MAP.y0)];
+}
+function toReach(t) {  // [the target moved onto the arm's reach if beyond it, whether it was] (the server does too)
+  const r = state && state.reach;
+  if (!r) return [t, false];
+  const dx = t[0] - r.base[0], dy = t[1] - r.base[1], d = Math.hypot(dx, dy);
+  return d <= r.radius ? [t, false] : [[r.base[0] + dx * r.radius / d, r.base[1] + dy * r.radius / d], true];
 }
 function tableMap() { return state && state.task === "pusher" && state.info && state.info._map; }
 function canDrive() { const s = state; return s && s.role === "teacher" && s.mode === "stream" && !s.ended && !gone; }
 function drawMap() {
   const c = $("map"), m = tableMap();
-  c.hidden = !m;
+  $("mapbox").hidden = !m;
   if (!m) return;
-  const g = c.getContext("2d");
+  const g = c.getContext("2d"), r = state.reach;
   g.clearRect(0, 0, c.width, c.height);
-  const dot = (p, r, fill, line) => {
+  const dot = (p, size, fill, line) => {
     const [x, y] = toMap(p);
-    g.beginPath(); g.arc(x, y, r, 0, 2 * Math.PI); g.fillStyle = fill; g.fill();
+    g.beginPath(); g.arc(x, y, size, 0, 2 * Math.PI); g.fillStyle = fill; g.fill();
     if (line) { g.strokeStyle = line; g.stroke(); }
   };
+  if (r) {  // the arm's reach, its base, and the arm from the base to the fingertip
+    const [bx, by] = toMap(r.base);
+    g.beginPath(); g.arc(bx, by, r.radius / (MAP.y1 - MAP.y0) * c.width, 0, 2 * Math.PI);
+    g.setLineDash([5, 4]); g.strokeStyle = "#777"; g.stroke(); g.setLineDash([]);
+    g.fillStyle = "#333"; g.fillRect(bx - 6, by - 6, 12, 12);
+    const [tx, ty] = toMap(m.tip);
+    g.beginPath(); g.moveTo(bx, by); g.lineTo(tx, ty); g.strokeStyle = "#9e9e9e"; g.lineWidth = 4; g.stroke();
+    g.lineWidth = 1;
+  }
   dot(m.goal, 9, "#e53935");
   dot(m.object, 7, "#ffffff", "#555");
   dot(m.tip, 5, "#1e88e5");
@@ -987,6 +1074,7 @@ function drawMap() {
 let driving = Promise.resolve();
 function drive(kind, target) {  // take the arm at `target`, move its target, or give it back
   if (!canDrive() || (kind === "target" && !state.driving)) return;
+  if (target) [target, clampedHere] = toReach(target);
   myTarget = kind === "release" ? null : target;
   state.driving = kind !== "release";  // shown at once; the server's state follows
   if (target) state.target = target;
@@ -995,9 +1083,20 @@ function drive(kind, target) {  // take the arm at `target`, move its target, or
   driving = driving.then(post).catch(() => setOffline(true));  // in the order given
   render();
 }
-function nudge(dx, dy) {  // the arrow keys: the target 2 cm along x or y
+// the arrow keys: the target 2 cm as the map shows it (right: +y; up: -x)
+const ARROWS = {ArrowRight: [0, 0.02], ArrowLeft: [0, -0.02], ArrowUp: [-0.02, 0], ArrowDown: [0.02, 0]};
+function nudge(dx, dy) {
   const t = myTarget || state.target || (tableMap() || {}).tip;
   if (t) drive("target", [t[0] + dx, t[1] + dy]);
+}
+
+function paceLine(s) {  // the steps and time left in the day, and whether the page keeps its pace
+  if (s.mode !== "stream" || !s.pace || s.ended) return "";
+  const rate = s.rate || s.pace, keeps = rate >= 0.9 * s.pace;
+  const left = s.day_steps ? Math.max(0, s.day_steps - 1 - (s.step ?? 0)) : null;
+  const time = left === null ? "" : `${left} steps left in the day, about ${clock(left / rate)} · `;
+  return time + (keeps ? `the page keeps its pace, ${s.pace} steps a second`
+    : `the page falls behind its pace: ${rate.toFixed(1)} of ${s.pace} steps a second`);
 }
 
 function setOffline(on) { if (offline !== on) { offline = on; render(); } }
@@ -1015,13 +1114,21 @@ function render() {
   const budget = s.budget == null ? "no budget" : `budget ${s.yes} of ${s.budget} yes`;
   const who = s.participant ? ` · participant ${s.participant}` : "";
   const counts = `answers ${s.answers} (yes ${s.yes}, no ${s.no}, no answer ${s.none})`;
-  $("progress").textContent = `${counts} · step ${s.step ?? "–"} · ${budget} · time ${clock(elapsed)}${who}`;
+  const steps = s.day_steps ? `step ${s.step ?? "–"} of ${s.day_steps}` : `step ${s.step ?? "–"}`;
+  $("progress").textContent = `${counts} · ${steps} · ${budget} · time ${clock(elapsed)}${who}`;
+  $("pace").textContent = paceLine(s);
   $("message").textContent = s.message || "";
+  $("task").hidden = !TASK_LINES[s.task];
+  $("task").textContent = TASK_LINES[s.task] || "";
   let note = null, cls = "";
+  const on = !s.ended;  // who teaches matters while the day is on; after it, the line below says it is over
   if (gone) { note = "The run has finished: this page is no longer served."; cls = "over"; }
   else if (offline) { note = "Reconnecting… your answers are kept, and sent once it is back."; cls = "offline"; }
-  else if (s.role !== "teacher") { note = "You are watching read-only: another page teaches this run."; cls = "watch"; }
-  else if (s.takeover) { note = "The page that taught has gone silent: answering here takes over."; cls = "watch"; }
+  else if (on && s.role !== "teacher") {
+    note = "You are watching read-only: another page (or tab) teaches this run."; cls = "watch";
+  } else if (on && s.takeover) {
+    note = "The page that taught has gone silent: answering here takes over."; cls = "watch";
+  }
   const banner = $("banner");
   banner.hidden = !note;
   banner.className = "banner " + cls;
@@ -1054,13 +1161,18 @@ function render() {
   $("hint").textContent = s.mode === "stream" ? window : "";
   const pusher = s.task === "pusher" && !s.ended && !gone;
   $("drive").hidden = !pusher;
+  $("keys").hidden = !pusher || s.role !== "teacher";
   $("take").disabled = !canDrive() || s.driving;
   $("release").disabled = !canDrive() || !s.driving;
-  $("drive-status").className = s.driving ? "you" : "";
-  $("drive-status").textContent = s.driving
+  const drivingHere = s.driving && s.role === "teacher";
+  $("drive-status").className = drivingHere ? "you" : "";
+  $("drive-status").textContent = drivingHere
     ? "You drive the arm: click the map or use the arrow keys (2 cm a press); g gives it back."
+    : s.driving ? "The page that teaches drives the arm."
     : "The agent drives. t, or a click on the map, takes the arm: its fingertip follows your target.";
   if (!s.driving) myTarget = null;
+  const clamped = s.driving && (myTarget ? clampedHere : s.clamped);
+  $("clamp").textContent = clamped ? "Out of reach: your target is held on the circle, as far as the arm reaches." : "";
   drawMap();
   const day = $("day").dataset;  // for a test (or a study's screen recorder) to read
   day.question = s.question && s.mode === "ask" ? s.question.id : "";
@@ -1068,6 +1180,7 @@ function render() {
   day.mode = gone ? "closed" : s.mode;
   day.answers = s.answers;
   day.driving = s.driving ? "1" : "0";
+  day.clamped = clamped ? "1" : "0";
   if (s.outcome) {
     $("outcome").hidden = false;
     if ($("outcome-text").dataset.text !== s.outcome.text) {
@@ -1149,7 +1262,7 @@ $("map").addEventListener("click", (e) => {
 });
 document.addEventListener("keydown", (e) => {
   if (e.ctrlKey || e.metaKey || e.altKey) return;
-  const step = {ArrowRight: [0.02, 0], ArrowLeft: [-0.02, 0], ArrowUp: [0, 0.02], ArrowDown: [0, -0.02]}[e.key];
+  const step = ARROWS[e.key];
   if (step && state && state.driving) { e.preventDefault(); nudge(...step); return; }
   if (e.repeat) return;
   if ((e.key === "t" || e.key === "T") && tableMap() && !state.driving) { drive("take", tableMap().tip); return; }

@@ -245,6 +245,10 @@ class Args:
         """The night's learner (`tamer`: the day's H, its kwargs and entropy coefficient, which only the sham uses)."""
         return Night(tamer_actor, device, **self.night_settings())
 
+    def day(self, device, space: gym.spaces.Box, obs_dim: int) -> "Day":
+        """The day's learner (a page's Args give theirs: inform_utils/browser_pusher.py), as `night` is the night's."""
+        return Day(self.day_settings(), device, space, obs_dim)
+
 
 def make_env(env_id: str, seed: int, obstacles=None, contact: str = "mujoco-2.3", **kwargs) -> gym.Env:
     """The env, or Pusher with the obstacle test's boxes at the xy `obstacles`; `kwargs` go to the env (render_mode,
@@ -1250,7 +1254,7 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
         phase, t0 = "tamer", time.time() - evaluator.seconds  # the phase's clock stops during its evaluations
         buffer = ReplayBuffer(args.tamer_total_timesteps, obs_dim, act_dim, device)
         if saved is None:  # the day's learner (Day), taught by a person (make_teacher) or by Eq. 4 through Teacher
-            day = Day(args.day_settings(), device, env.action_space, obs_dim)
+            day = args.day(device, env.action_space, obs_dim)
             teacher = make_teacher(args, env, run_dir) if make_teacher is not None else day.teacher()
             stats = forward_phase(day, env, oracle_actor, oracle_qf, teacher, outcome, buffer, evaluator, writer)
         else:  # --sleep-from: the saved day's memories and TAMER, and the random streams where the day left them

@@ -14,9 +14,20 @@ day.
     python -m inform_utils.browser_pusher --participant P01            # prints the page's address
     python -m inform_utils.browser_pusher --participant P01 --host 0.0.0.0:8000 --pace 5 --save-buffer
 
-Every answer is a line of runs/{run}/answers.jsonl (its time, step, action and the frame shown). The core script
-stays within its flag budget; this module holds the page's five flags (as inform_utils/sleep_variants_pusher.py
-holds the study's).
+The page says the task, shows the table from above turned as the 3D view (the arm's base, its reach, the fingertip,
+the object and the goal), the steps and time left in the day and whether it keeps its pace, and the keys. A person who
+takes the arm (t, or a click on the map) moves the fingertip's target; one beyond the arm's reach is held on it, and
+the page says so. One tab drives: a second tab watches, as a second browser does.
+
+The take-over as a signal (RLIF, Luo et al. ICLR 2024: the agent's action before a person takes over earns -1):
+`--takeover-steps k` gives the agent's last k actions of the episode before each take the label `--takeover-label`
+(-1 by default; 0 steps, the default: off), which stands over any answer about them. `--no-driven-in-h` keeps the
+steps the person drove out of H's regression (DayWithoutDriven); they stay in the buffer, marked, for the night.
+
+Every answer is a line of runs/{run}/answers.jsonl (its time, step, action and the frame shown), and so is every
+drive of the arm and, with --takeover-steps, every take's labelled steps ("event": "take labels"). The core script
+stays within its flag budget; this module holds the page's flags (as inform_utils/sleep_variants_pusher.py holds the
+study's), each marked DAY, so a saved day and summary.json record them.
 """
 
 import os
@@ -33,6 +44,7 @@ if __name__ == "__main__":  # before the slow imports, so that no stop ends in a
         if signal.getsignal(sig) is not signal.SIG_IGN:
             signal.signal(sig, stopped_while_starting)
 
+import copy  # noqa: E402
 import importlib.util  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
@@ -47,10 +59,6 @@ import tyro  # noqa: E402
 
 import inform_sac_pusher as isp  # noqa: E402
 
-# the page's camera: the arm, the object (white) and the goal (red) from above the table's corner (Pusher-v5; v4's
-# model takes no camera settings and shows its default view)
-PAGE_CAMERA = {"distance": 2.0, "elevation": -45.0, "azimuth": 135.0, "lookat": np.array([0.3, -0.3, -0.3]),
-               "trackbodyid": -1}  # fmt: skip
 FRAME_SIZE = 320  # pixels, square: the live view
 OUTCOME_SIZE = 240  # pixels: each of the two episodes side by side in the outcome's animation
 FRAMES_PER_SECOND = 5.0  # at most this many live frames a second reach the page ("a few")
@@ -76,6 +84,33 @@ class Args(isp.Args):
     """random-action steps before H and the actor are trained"""
     budget_ends_forward_phase: bool = True
     """the day ends when the person ends it (or the budget of yes answers is spent)"""
+    takeover_steps: Annotated[int, isp.In(0), isp.DAY] = 0
+    """the take-over as a signal (RLIF): the agent's last this many actions of the episode before each take of the arm
+    get --takeover-label (0: off)"""
+    takeover_label: Annotated[float, isp.In(-1, 0, "[]"), isp.DAY] = -1.0
+    """the label a take gives the steps before it: -1 (RLIF's reward, TAMER's negative answer) or up to 0"""
+    driven_in_h: Annotated[bool, isp.DAY] = True
+    """H hears the steps the person drove as yes answers; --no-driven-in-h keeps them out of H's regression (they stay
+    in the buffer, marked, for the night)"""
+
+    def day(self, device, space, obs_dim: int) -> isp.Day:
+        learner = isp.Day if self.driven_in_h else DayWithoutDriven
+        return learner(self.day_settings(), device, space, obs_dim)
+
+
+class DayWithoutDriven(isp.Day):
+    """The day's learner with --no-driven-in-h: H's regression (and the actor's states with it) never samples a step
+    the person drove; those stay in the buffer, marked (buffer.driven), for the night."""
+
+    def update(self, buffer: isp.ReplayBuffer, step: int) -> torch.Tensor:
+        kept = (~buffer.driven[: step + 1]).nonzero().squeeze(-1)  # the agent's own steps so far
+        if kept.numel() == 0:  # the person drove every step so far: nothing for H to hear yet
+            return torch.zeros((), device=buffer.obs.device)
+        rows = copy.copy(buffer)  # the same buffer with the agent's rows only: the core's update samples among them
+        for name in isp.DAY_TENSORS:
+            setattr(rows, name, getattr(buffer, name)[kept])
+        rows.size = kept.numel()
+        return super().update(rows, kept.numel() - 1)
 
 
 class PageTeacher:
@@ -83,25 +118,35 @@ class PageTeacher:
     answer h* (kept for the record only) and the action; shows the step and returns {step: label} of the answers
     that arrived since. `gone`: the person ended the day, closed the page, or spent the budget. `drive`: while the
     person holds the arm, the step's action is theirs (the fingertip controller towards their target), and H hears
-    it as a yes: a person's own action is what they would have answered yes to (docs/protocol.md)."""
+    it as a yes: a person's own action is what they would have answered yes to (docs/protocol.md). With
+    --takeover-steps, a take also labels the agent's last steps before it (RLIF's signal; `labelled`)."""
 
     def __init__(self, args: Args, env, run_dir: str):
         import browser_teacher
+        from inform_utils.pusher_control import FingertipController, arm_reach
 
+        base, radius = arm_reach(env.unwrapped.model)  # a target beyond it: the fingertip would stop short, above
         host, port = browser_teacher.host_and_port(args.host)
         self.page = browser_teacher.BrowserTeacher(run_dir, "pusher", host, port, participant=args.participant,
                                                    budget=args.feedback_budget, pace=args.pace,
-                                                   delay=args.credit_delay, no_value=args.no_label)  # fmt: skip
+                                                   delay=args.credit_delay, no_value=args.no_label,
+                                                   reach=(tuple(base), radius),
+                                                   day_steps=args.tamer_total_timesteps)  # fmt: skip
+        signal = {k: getattr(args, k) for k in ("takeover_steps", "takeover_label", "driven_in_h")}
+        self.page.note("take-over signal", **signal)
         self.env, self.last_step, self.budget = env, args.tamer_total_timesteps - 1, args.feedback_budget
-        self.camera = camera_env(args.env_id, FRAME_SIZE)
+        self.camera = camera_env(args.env_id, FRAME_SIZE, args.contact)
         self.camera.reset(seed=args.seed)
         self.every = max(1, round(args.pace / FRAMES_PER_SECOND))  # steps between two live frames
         self.frame = None
         self.credited: dict[int, tuple[float, float]] = {}  # step: (sum of weight * answer, sum of weights)
         self.positives = self.perfect_positives = 0
-        from inform_utils.pusher_control import FingertipController
-
         self.controller, self.drove = FingertipController(env.unwrapped.model), False
+        self.takeover_steps, self.takeover_label = args.takeover_steps, args.takeover_label
+        # Pusher never terminates: an episode starts every this many steps (forward_phase resets at its TimeLimit)
+        self.episode_steps = env.get_wrapper_attr("_max_episode_steps")
+        self.last_driven = -1  # the last step the person drove
+        self.labelled: dict[int, float] = {}  # step: the label a take gave it (an answer about it later moves it not)
 
     def wait_for_person(self) -> None:  # the day starts when the person opens the page (a stop ends the wait)
         while not self.page.person_here(0.2):
@@ -141,7 +186,20 @@ class PageTeacher:
         labels = weighted_labels(self.credited, [(a.value, self.page.credit(a)) for a in answers])
         if self.drove:  # the person's own step: a yes, weighed with any answer about it
             labels.update(weighted_labels(self.credited, [(1.0, {step: 1.0})]))
+            if self.takeover_steps and self.last_driven < step - 1:  # the first step of a take
+                labels.update(self.label_take(step))
+            self.last_driven = step
+        labels.update({t: self.labelled[t] for t in labels.keys() & self.labelled.keys()})
         return {t: h for t, h in labels.items() if t <= step}
+
+    def label_take(self, step: int) -> dict[int, float]:
+        """RLIF's signal: the person took the arm at `step`, so the agent's last `takeover_steps` actions of the
+        episode before it get `takeover_label` (a line of answers.jsonl says which); {step: label} of those."""
+        first = max(step - self.takeover_steps, step - step % self.episode_steps, self.last_driven + 1)
+        taken = dict.fromkeys(range(first, step), self.takeover_label)
+        self.labelled.update(taken)
+        self.page.note("take labels", step=step, label=self.takeover_label, steps=list(taken))
+        return taken
 
 
 def weighted_labels(credited: dict, answers: list[tuple[float, dict]]) -> dict[int, float]:
@@ -156,19 +214,24 @@ def weighted_labels(credited: dict, answers: list[tuple[float, dict]]) -> dict[i
     return labels
 
 
-def camera_env(env_id: str, size: int) -> gym.Env:
-    """The env, rendering from the page's camera: the day's state is copied in (set_state) to film it."""
-    camera = {"default_camera_config": PAGE_CAMERA} if env_id == "Pusher-v5" else {}
-    return gym.make(env_id, render_mode="rgb_array", width=size, height=size, **camera)
+def camera_env(env_id: str, size: int, contact: str) -> gym.Env:
+    """The env, rendering from the videos' camera (the core's, v4 and v5 alike: it looks down on the table from
+    behind the goal, image up is -x): the day's state is copied in (set_state) to film it."""
+    return isp.make_env(env_id, 0, contact=contact, render_mode="rgb_array", width=size, height=size)
 
 
-def outcome(run_dir: str, args: Args, summary: dict) -> tuple[str, list]:
-    """The night's outcome for the page: the final numbers, and TAMER's and INFORM's deterministic episodes from the
-    run's start, side by side."""
+def outcome(run_dir: str, args: Args, summary: dict, labelled: int = 0) -> tuple[str, list]:
+    """The night's outcome for the page: the final numbers (`labelled`: the steps the takes labelled), and TAMER's and
+    INFORM's deterministic episodes from the run's start, side by side."""
     if summary.get("status") != "completed":
         return f"the run ended: {summary.get('status')} ({summary.get('error', '')})", []
     yes, perfect, steps = (summary[f"feedback/{k}"] for k in ("positive", "perfect_positive", "steps"))
-    lines = [f"{yes} yes answers over the day's {steps} steps (the oracle, Eq. 4, would have said yes on {perfect})"]
+    driven = summary.get("feedback/driven_steps", 0)
+    heard = "H heard each as a yes" if args.driven_in_h else "kept out of H, for the night"
+    lines = [f"{yes} yes answers and {driven} steps you drove ({heard}) over the day's {steps} steps (the oracle, "
+             f"Eq. 4, would have said yes on {perfect})"]  # fmt: skip
+    if args.takeover_steps:
+        lines.append(f"{labelled} of the agent's steps labelled {args.takeover_label:g} by your takes of the arm")
     lines.append("below, from the run's start: TAMER (left) and INFORM (right)")
     for p in ("tamer", "inform"):
         distance, success = summary[f"eval/{p}_final_distance"], summary[f"eval/{p}_success_rate"]
@@ -176,7 +239,7 @@ def outcome(run_dir: str, args: Args, summary: dict) -> tuple[str, list]:
     films = []
     for p in ("tamer", "inform"):
         actor = isp.actor_from_checkpoint(torch.load(f"{run_dir}/{p}_actor.pt", weights_only=True))
-        env = gym.wrappers.RenderCollection(camera_env(args.env_id, OUTCOME_SIZE))
+        env = gym.wrappers.RenderCollection(camera_env(args.env_id, OUTCOME_SIZE, args.contact))
         isp.evaluate(actor, env, 1, lambda ep: args.seed, True, torch.Generator(), args.outcome())
         films.append(env.render()[::2])  # every second frame: 10 a second at 20 steps a second
         env.close()
@@ -240,7 +303,7 @@ def main() -> int:
             with open(f"{run_dir}/summary.json") as f:
                 summary = json.load(f)
             teacher.page.end_day(how_the_day_ended(summary))  # if the day was still on (a stop, a failure)
-            text, frames = outcome(run_dir, args, summary)
+            text, frames = outcome(run_dir, args, summary, len(teacher.labelled))
             teacher.page.show_outcome(text, image=frames or None)
         except (OSError, ValueError, KeyboardInterrupt) as e:  # no summary (a stop at once), or a second stop
             teacher.page.end_day(f"the run ended without a summary ({type(e).__name__})")

@@ -145,6 +145,18 @@ class FingertipController:
         return np.where(free, tau, hold)
 
 
+def arm_reach(model: mujoco.MjModel, height: float = WORK_HEIGHT) -> tuple[np.ndarray, float]:
+    """(the shoulder pan's axis in the table's plane, how far from it the fingertip reaches at `height`): the arm
+    stretched from the shoulder's lift joint (qpos 0 holds it straight and level), plus the lift's offset from the pan's
+    axis. The controller brings the fingertip within millimetres of a target on this circle (0.767 m on Pusher v4 and
+    v5) and stops a few centimetres short of one beyond it, above the table."""
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)  # at qpos 0
+    pan, lift = (data.xanchor[model.joint(name).id] for name in ("r_shoulder_pan_joint", "r_shoulder_lift_joint"))
+    arm = np.linalg.norm(data.xpos[model.body("tips_arm").id] - lift)
+    return pan[:2].copy(), float(np.linalg.norm((lift - pan)[:2]) + math.sqrt(arm**2 - (lift[2] - height) ** 2))
+
+
 # ---------------------------------------------------------------------------------------------------------------------
 # ALGO LOGIC: the pushing demonstrator
 class PushingDemonstrator:

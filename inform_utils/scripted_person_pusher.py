@@ -159,9 +159,10 @@ def teach_day(page, oracle, seed: int, args: Args, say) -> dict:
 
 # ---------------------------------------------------------------------------------------------------------------------
 # ALGO LOGIC: the driving person (--drive): what it sees on the map, and what it does about it
-MAP_VIEW = ((-0.1, 0.9), (-0.8, 0.2), 240)  # the page's map: x left to right, y bottom to top (metres), pixels a side
+# the page's map, turned as its 3D view: x from top to bottom, y from left to right (metres), pixels a side
+MAP_VIEW = ((-0.1, 0.9), (-0.8, 0.2), 240)
 ARROW = 0.02  # metres an arrow key moves the target (the page's)
-KEYS = {"ArrowRight": (1, 0), "ArrowLeft": (-1, 0), "ArrowUp": (0, 1), "ArrowDown": (0, -1)}
+KEYS = {"ArrowRight": (0, 1), "ArrowLeft": (0, -1), "ArrowUp": (-1, 0), "ArrowDown": (1, 0)}  # as the map shows them
 
 
 class DrivingPerson:
@@ -251,8 +252,8 @@ class DrivingPerson:
         aimed = wanted + self.rng.normal(0.0, self.aim_noise, 2)
         if target is not None and np.linalg.norm(aimed - np.array(target)) < self.small:
             presses = np.rint((aimed - np.array(target)) / ARROW).astype(int)
-            keys = [("ArrowRight" if presses[0] > 0 else "ArrowLeft", abs(presses[0])),
-                    ("ArrowUp" if presses[1] > 0 else "ArrowDown", abs(presses[1]))]  # fmt: skip
+            keys = [("ArrowDown" if presses[0] > 0 else "ArrowUp", abs(presses[0])),
+                    ("ArrowRight" if presses[1] > 0 else "ArrowLeft", abs(presses[1]))]  # fmt: skip
             return [("arrows", key, count) for key, count in keys if count]
         px, py = to_pixel(aimed)
         return [("click", px, py)]
@@ -261,15 +262,15 @@ class DrivingPerson:
 def to_pixel(point) -> tuple[int, int]:
     """The map's pixel of a point in the table's plane (as the page's toMap, rounded)."""
     (x0, x1), (y0, y1), size = MAP_VIEW
-    return int(np.clip(round((point[0] - x0) / (x1 - x0) * size), 0, size - 1)), int(
-        np.clip(round((y1 - point[1]) / (y1 - y0) * size), 0, size - 1)
-    )
+    px, py = (point[1] - y0) / (y1 - y0) * size, (point[0] - x0) / (x1 - x0) * size
+    return int(np.clip(round(px), 0, size - 1)), int(np.clip(round(py), 0, size - 1))
 
 
 def from_pixel(px: int, py: int) -> np.ndarray:
-    """The point a click on the map's pixel sets (as the page's fromMap)."""
+    """The point a click on the map's pixel sets (as the page's fromMap, before it holds a point beyond the arm's
+    reach on it)."""
     (x0, x1), (y0, y1), size = MAP_VIEW
-    return np.array([x0 + px / size * (x1 - x0), y1 - py / size * (y1 - y0)])
+    return np.array([x0 + py / size * (x1 - x0), y0 + px / size * (y1 - y0)])
 
 
 def distance_to_segment(p, a, b) -> float:
@@ -455,13 +456,15 @@ def rehearse(args: Args) -> dict[int, list[float]]:
     its target. Per seed, `--rehearse` episodes from the run's fixed start (reset with the seed), the person driving
     each from its first look (the agent's steps before the take are idle here, not TAMER's) and, as at the page,
     letting go once the object is at the goal. What it leaves out: the page's frames and timing, arrow presses taking
-    time. Returns {seed: final distances}."""
+    time. The page holds a target beyond the arm's reach on it, and so does the rehearsal. Returns {seed: final
+    distances}."""
     import inform_sac_pusher as isp
-    from inform_utils.pusher_control import FingertipController
+    from browser_teacher import clamp_to_reach
+    from inform_utils.pusher_control import FingertipController, arm_reach
 
     env_id = run_env_id(shlex.split(args.flags))
     env = isp.make_env(env_id, 0, contact=run_flag(shlex.split(args.flags), "--contact", "mujoco-2.3"))
-    controller = FingertipController(env.unwrapped.model)
+    controller, reach = FingertipController(env.unwrapped.model), arm_reach(env.unwrapped.model)
     finals = {}
     for seed in args.seeds:
         rng, finals[seed] = np.random.default_rng(seed), []
@@ -474,11 +477,12 @@ def rehearse(args: Args) -> dict[int, list[float]]:
                     for what, *how in acts:
                         if what == "release":
                             driving = False
-                        elif what == "arrows":
+                        elif what == "arrows":  # (the page moves the target a press at a time, each held to the reach)
                             key, presses = how
-                            target = np.array(target) + presses * ARROW * np.array(KEYS[key])
+                            for _ in range(presses):
+                                target = clamp_to_reach(np.array(target) + ARROW * np.array(KEYS[key]), reach)[0]
                         else:
-                            target, driving = from_pixel(*how), True
+                            target, driving = clamp_to_reach(from_pixel(*how), reach)[0], True
                     acts = None
                 if acts is None:  # look
                     view = {"tip": obs[14:16], "object": obs[17:19], "goal": obs[20:22]}

@@ -143,6 +143,46 @@ sys.exit({"completed": 0, "interrupted": 143 if received[-1:] == ["SIGTERM"] els
 SLOW_FILES = {"test_learning.py", "test_day_hack.py", "test_night_hack.py", "test_slurm.py", "test_track.py",
               "test_capture_video.py", "test_signals_under_trap.py", "test_scripted_person_browser.py"}  # fmt: skip
 SLOW_FIXTURES = {"browser", "new_page"}  # Playwright driving Chromium
+WAIT_S = 20.0  # the bound on every wait for a condition in a browser test (a loaded machine; a pass takes far less)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    from inform_utils.scripted_person_browser import browser_missing
+
+    why = browser_missing()
+    if why:
+        if os.environ.get("INFORM_REQUIRE_BROWSER") == "1":
+            pytest.fail(f"INFORM_REQUIRE_BROWSER=1 but {why}")
+        pytest.skip(why)
+    from playwright.sync_api import sync_playwright
+
+    from inform_utils.scripted_person_browser import CHROMIUM, CHROMIUM_ARGS
+
+    with sync_playwright() as playwright:
+        chromium = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield chromium
+        chromium.close()
+
+
+@pytest.fixture
+def new_page(browser):
+    """Open the page in a browser session of its own; at the end, no script error on any page."""
+    errors, contexts = [], []
+
+    def open_page(url: str):
+        context = browser.new_context(viewport={"width": 900, "height": 720})
+        contexts.append(context)
+        page = context.new_page()
+        page.on("pageerror", lambda error: errors.append(str(error)))
+        page.set_default_timeout(WAIT_S * 1000)
+        page.goto(url)
+        return page
+
+    yield open_page
+    for context in contexts:
+        context.close()
+    assert not errors, errors
 
 
 def pytest_collection_modifyitems(config, items):

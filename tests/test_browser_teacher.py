@@ -28,16 +28,15 @@ from http.cookiejar import CookieJar
 
 import numpy as np
 import pytest
-from conftest import REPO, Child, default_signals
+from conftest import REPO, WAIT_S, Child, default_signals
 
 import gridworld_env
 from browser_teacher import BrowserTeacher, credit_weights, png_bytes
-from inform_utils.scripted_person_browser import CHROMIUM, CHROMIUM_ARGS, browser_missing, on_the_page
+from inform_utils.scripted_person_browser import on_the_page
 
 SCREENSHOT = os.path.join(REPO, "docs", "figures", "browser_teacher.png")
 PUSHER_SCREENSHOT = os.path.join(REPO, "docs", "figures", "browser_pusher.png")
 MAZE_SCRIPT = os.path.join(REPO, "inform_dqn_gridworld.py")
-WAIT_S = 20.0  # the bound on every wait for a condition (a loaded machine; a pass takes far less)
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -491,41 +490,6 @@ def test_ctrl_c_while_waiting_ends_the_day_as_interrupted(tmp_path):
 # a real browser: Playwright driving Debian's chromium, headless
 
 
-@pytest.fixture(scope="module")
-def browser():
-    why = browser_missing()
-    if why:
-        if os.environ.get("INFORM_REQUIRE_BROWSER") == "1":
-            pytest.fail(f"INFORM_REQUIRE_BROWSER=1 but {why}")
-        pytest.skip(why)
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as playwright:
-        chromium = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield chromium
-        chromium.close()
-
-
-@pytest.fixture
-def new_page(browser):
-    """Open the page in a browser session of its own; at the end, no script error on any page."""
-    errors, contexts = [], []
-
-    def open_page(url: str):
-        context = browser.new_context(viewport={"width": 900, "height": 720})
-        contexts.append(context)
-        page = context.new_page()
-        page.on("pageerror", lambda error: errors.append(str(error)))
-        page.set_default_timeout(WAIT_S * 1000)
-        page.goto(url)
-        return page
-
-    yield open_page
-    for context in contexts:
-        context.close()
-    assert not errors, errors
-
-
 def wait_for_question(page, number: int):
     page.wait_for_selector(f'#day[data-open="1"][data-question="{number}"]')
 
@@ -863,7 +827,7 @@ def test_a_person_takes_the_arm_drives_its_fingertip_by_keys_and_gives_it_back(n
     page.keyboard.press("t")
     wait_until(lambda: page.get_attribute("#day", "data-driving") == "1", "the arm taken")
     start = page.evaluate("state.target")
-    for key, presses in (("ArrowLeft", 14), ("ArrowUp", 8)):  # 28 cm towards the arm, 16 cm towards the goal
+    for key, presses in (("ArrowUp", 14), ("ArrowRight", 8)):  # as the map is turned: 28 cm in x, 16 cm in y
         for _ in range(presses):
             page.keyboard.press(key)
             time.sleep(0.02)
