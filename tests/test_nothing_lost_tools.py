@@ -393,7 +393,7 @@ def test_a_spent_budget_ends_the_pages_day_as_such(pusher_page):
     teacher = object.__new__(PageTeacher)  # its day's part, without the arm and the camera
     arm = SimpleNamespace(unwrapped=SimpleNamespace(_get_obs=lambda: np.zeros(23)))
     teacher.__dict__.update(page=page, env=arm, budget=1, last_step=100, every=10**6, frame=np.zeros((4, 4, 3)),
-                            credited={}, positives=0, perfect_positives=0, drove=False)  # fmt: skip
+                            credited={}, positives=0, perfect_positives=0, drove=False, labelled={})  # fmt: skip
     teacher(3, 0.0)
     assert person.answer("yes", None, "y1", seq=4) == (200, {"taken": True})
     teacher(4, 0.0)
@@ -407,7 +407,7 @@ def test_an_interrupted_days_record_says_so(tmp_path, monkeypatch):
 
     class Teacher:  # PageTeacher without the arm and the camera
         def __init__(self, args, env, run_dir):
-            self.page = BrowserTeacher(run_dir, "pusher", quiet=True, linger=0)
+            self.page, self.labelled = BrowserTeacher(run_dir, "pusher", quiet=True, linger=0), {}
 
         def wait_for_person(self):
             pass

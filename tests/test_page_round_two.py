@@ -13,6 +13,7 @@ import os
 import threading
 
 import numpy as np
+import pytest
 import torch
 from conftest import REPO, WAIT_S
 from test_browser_teacher import Session, lines, wait_until
@@ -23,6 +24,15 @@ from inform_utils.browser_pusher import Args, DayWithoutDriven, PageTeacher
 from inform_utils.pusher_control import FingertipController, arm_reach
 
 SCREENSHOT = os.path.join(REPO, "docs", "figures", "browser_pusher_page.png")
+
+
+@pytest.fixture(autouse=True)
+def headless(monkeypatch):
+    """The page renders the arm in this process: EGL where there is no screen, as the scripts pick it (videos.py)."""
+    if not os.environ.get("MUJOCO_GL") and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+        monkeypatch.setenv("MUJOCO_GL", "egl")
+
+
 FAR = [0.9, 0.2]  # the map's bottom right corner: 1.2 m from the arm's base, beyond its reach
 
 

@@ -20,6 +20,7 @@ DECLARED = {
         "DAY",  # the mark of a day's flag (the page's Args redefine some)
         "TAMER_POLICY_LR",
         "Night",  # the night, which the study subclasses
+        "Day", "ReplayBuffer", "DAY_TENSORS",  # the day, which the page subclasses (--no-driven-in-h)
         "Evaluator", "evaluate", "obstacle_test", "obstacle_skipped", "object_xy", "check_video", "video_env",
         "mujoco_major", "read_checkpoint", "check_crc", "oracle_from_checkpoint", "actor_from_checkpoint",
         "PUSHER_IDS",  # teacher_check reports the push's pace, the page shows the arm: Pusher only
