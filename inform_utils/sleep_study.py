@@ -1138,7 +1138,7 @@ def method_rule(args: Args, rows: list[dict], methods: list[str]) -> str:
         on_days = [r for r in rows if task_of(r) == task and budget(r) == steps and r["day"] in days]
         lines += ["", f"{task}, {steps} gradient steps, the means over the {len(days)} days the methods and both "
                   "controls share:", ""]  # fmt: skip
-        lines += rule_means(on_days, [*methods, "bc", *CLONING, "sham", "default"])
+        lines += rule_means(on_days, list(dict.fromkeys([*methods, "bc", *CLONING, "sham", "default"])))
     return "\n".join(lines)
 
 

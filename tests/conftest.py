@@ -137,11 +137,13 @@ sys.exit({"completed": 0, "interrupted": 143 if received[-1:] == ["SIGTERM"] els
 '''
 
 
-# The slow set (`pytest -m slow`): the learning checks, a real browser, Slurm, Weights & Biases, the hacks on copies of
-# the scripts, filming, and signals under a trap; whole runs of tens of seconds each, or tests that need what a
-# newcomer's machine lacks. The README's command leaves it out (`-m "not slow"`); CI runs both sets, so every test.
-SLOW_FILES = {"test_learning.py", "test_day_hack.py", "test_night_hack.py", "test_slurm.py", "test_track.py",
-              "test_capture_video.py", "test_signals_under_trap.py", "test_scripted_person_browser.py"}  # fmt: skip
+# The slow set (`pytest -m slow`): the learning checks, the snapshots (every tiny run's numbers as before a refactor),
+# a real browser, Slurm, Weights & Biases, the hacks on copies of the scripts, filming, and signals under a trap; whole
+# runs of tens of seconds each, or tests that need what a newcomer's machine lacks. The README's command leaves it out
+# (`-m "not slow"`); CI runs both sets, so every test.
+SLOW_FILES = {"test_learning.py", "test_snapshot.py", "test_day_hack.py", "test_night_hack.py", "test_slurm.py",
+              "test_track.py", "test_capture_video.py", "test_signals_under_trap.py",
+              "test_scripted_person_browser.py"}  # fmt: skip
 SLOW_FIXTURES = {"browser", "new_page"}  # Playwright driving Chromium
 WAIT_S = 20.0  # the bound on every wait for a condition in a browser test (a loaded machine; a pass takes far less)
 

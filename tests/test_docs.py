@@ -262,7 +262,22 @@ def test_the_check_sees_a_wrong_flag():
     ]
 
 
-def test_the_front_page_stays_short():
-    """The README a newcomer reads in five minutes: at most 130 lines; the rest lives in docs/."""
+def test_the_front_page_stays_short_and_plain():
+    """The README a newcomer reads in five minutes: at most 100 lines above its links; the rest lives in docs/. No
+    word of the project's own slang ("the card": the scripts' one-file shape)."""
     with open(os.path.join(REPO, "README.md")) as f:
-        assert len(f.read().splitlines()) <= 130
+        text = f.read()
+    assert len(text.split("\n## Links")[0].splitlines()) <= 100
+    assert not re.search(r"\bcard\b", text, re.IGNORECASE)
+
+
+def test_the_python_version_is_the_same_everywhere():
+    """pyproject.toml's requires-python is what README.md and docs/usage.md say."""
+    import tomllib
+
+    with open(os.path.join(REPO, "pyproject.toml"), "rb") as f:
+        needs = tomllib.load(f)["project"]["requires-python"]
+    said = f"Python {needs.removeprefix('>=')} or newer"
+    for page in ("README.md", "docs/usage.md"):
+        with open(os.path.join(REPO, page)) as f:
+            assert said in " ".join(f.read().split()), f"{page} does not say {said!r} ({needs} in pyproject.toml)"
