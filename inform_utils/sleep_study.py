@@ -671,7 +671,7 @@ def obstacle_test(args: Args, nights: list[dict], policy: str, noise: float | No
     the pooled-episode Welch test (p_pooled), with TAMER's episodes counted once a day (they would repeat in every
     night), which treats episodes of one night, sharing a policy and a start, as independent. Margins are "beyond
     noise" where they exceed `noise` (tamer_spread())."""
-    from scipy.stats import ttest_ind, ttest_rel
+    from scipy.stats import ttest_ind
 
     mine, by_day = [], {}
     for r in nights:
@@ -687,6 +687,7 @@ def obstacle_test(args: Args, nights: list[dict], policy: str, noise: float | No
     means = [statistics.mean(m) for _, m in by_day.values()]
     margins = [t - m for t, m in zip(tamer, means, strict=True)]
     pooled = float(ttest_ind(mine, np.concatenate([t for t, _ in by_day.values()]), equal_var=False).pvalue)
+    interval = paired_interval(margins)  # the paired t-test over days, its interval and detectable effect
     return {
         "days": len(by_day),
         "margins": margins,
@@ -694,8 +695,8 @@ def obstacle_test(args: Args, nights: list[dict], policy: str, noise: float | No
         "closer_days": sum(m > 0 for m in margins),
         "beyond_noise": None if noise is None else sum(m > noise + TOLERANCE for m in margins),
         "noise": noise,
-        "p_day": float(ttest_rel(tamer, means).pvalue) if len(by_day) > 1 else None,
-        "interval": paired_interval(margins),
+        "p_day": None if interval is None else interval["p"],
+        "interval": interval,
         "p_pooled": pooled,
     }
 
