@@ -53,13 +53,21 @@ class Measure:
 
 MEASURES = {
     "inform_sac_pusher.py": Measure(
-        "random-start final distance", "random_starts/{p}_final_distance", -1, " m", 0.0,
+        "random-start final distance",
+        "random_starts/{p}_final_distance",
+        -1,
+        " m",
+        0.0,
         ("random-start success", "random_starts/{p}_success_rate", 1),
         ("successful episodes", "sleep/success_episodes"),
         ("fixed-start sampled return", ss.SAMPLED, 1, None),
     ),  # fmt: skip
     "inform_dqn_gridworld.py": Measure(
-        "held-out start cells: success", "eval/start_set/{p}_success_rate", 1, "", 0.1,
+        "held-out start cells: success",
+        "eval/start_set/{p}_success_rate",
+        1,
+        "",
+        0.1,
         ("all 29 cells: success", "eval/all_starts/{p}_success_rate", 1),
         ("success-set transitions", "sleep/expert_transitions"),
         ("length from S", "eval/{p}_episode_length", -1, 1.0),
