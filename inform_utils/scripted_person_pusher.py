@@ -67,6 +67,9 @@ class Args:
     """seconds from a look to the key press, uniformly"""
     flags: str = ""
     """extra flags for the day's run and the nights, as one string (e.g. --flags "--obstacle-episodes 20")"""
+    page_flags: str = ""
+    """flags of the page alone (browser_pusher's), for the day's run and not the nights, as one string (e.g.
+    --page-flags "--takeover-steps 5 --no-driven-in-h")"""
     timeout: float = 3600.0
     """seconds a seed may take, day and nights"""
     drive: bool = False
@@ -372,7 +375,7 @@ def run_seed(seed: int, args: Args, browser, oracle, work: str, out: str, say) -
     deadline, t0 = time.monotonic() + args.timeout, time.monotonic()
     cmd = [sys.executable, "-m", "inform_utils.browser_pusher", "--participant", "scripted", "--seed", str(seed),
            "--tamer-total-timesteps", str(args.steps), "--pace", str(args.pace), "--save-buffer",
-           "--exp-name", "browser_scripted", *shlex.split(args.flags)]  # fmt: skip
+           "--exp-name", "browser_scripted", *shlex.split(args.flags), *shlex.split(args.page_flags)]  # fmt: skip
     child, context = Child(cmd, cwd, os.path.join(cwd, "day.log")), None
     try:
         url = child.wait_for_line("[teacher] open the teaching page", timeout=300).split(": ", 1)[1].strip()
@@ -410,21 +413,23 @@ def run_seed(seed: int, args: Args, browser, oracle, work: str, out: str, say) -
                     os.path.join(out, f"seed{seed}", f"summary_{name}.json"))  # fmt: skip
         with open(os.path.join(new_run(cwd, before), "summary.json")) as f:
             summaries[name] = json.load(f)
-    held = None
-    if args.hold:  # the page's count of answers, each held key's repeats too
-        with open(os.path.join(out, f"seed{seed}", "answers.jsonl")) as f:
-            held = sum(json.loads(line).get("event") == "answer" for line in f)
-    row = seed_row(seed, given, summaries, held)
+    with open(os.path.join(out, f"seed{seed}", "answers.jsonl")) as f:
+        events = [json.loads(line) for line in f]
+    held = sum(e.get("event") == "answer" for e in events) if args.hold else None  # each held key's repeats too
+    labels = [e for e in events if e.get("event") == "take labels"]  # --takeover-steps: the steps each take labelled
+    row = seed_row(seed, given, summaries, held, sum(len(e["steps"]) for e in labels) if labels else None)
     row["seconds"] = round(time.monotonic() - t0, 1)
     say(f"[seed {seed}] done in {row['seconds']:.0f}s: " + ", ".join(f"{k} {v}" for k, v in row.items()))
     return row
 
 
-def seed_row(seed: int, given: dict, summaries: dict, held: int | None = None) -> dict:
+def seed_row(seed: int, given: dict, summaries: dict, held: int | None = None, labelled: int | None = None) -> dict:
     day = summaries["day"]
     row = {"seed": seed, "answers": given["yes"] + given["no"], "yes": given["yes"]}
     if held is not None:  # --hold: each look's answer repeated while its key was down; the page's count
         row["answers with the key held"] = held
+    if labelled is not None:  # the page's --takeover-steps: the agent's steps its takes labelled
+        row["steps labelled by the takes"] = labelled
     row.update({"steps": day["feedback/steps"], "yes labels reaching TAMER": day["feedback/positive"]})
     if "takes" in given:  # the driving person (--drive)
         row.update({"takes": given["takes"], "driven steps": day["feedback/driven_steps"]})
@@ -522,10 +527,12 @@ def check_args(args: Args) -> None:
         raise BadInput(f"--reaction must be LOW HIGH seconds with 0 <= LOW <= HIGH, got {low} {high}")
     if not (0 <= args.aim_noise < math.inf and math.isfinite(args.push_lead)):
         raise BadInput(f"--aim-noise must be 0 or more and --push-lead finite, got {args.aim_noise}, {args.push_lead}")
-    try:
-        env_id = run_env_id(shlex.split(args.flags))
-    except ValueError as e:  # an unclosed quote
-        raise BadInput(f"--flags {cut(repr(args.flags), 200)}: {e} (one string of a command line's words)") from None
+    for name, flags in (("--flags", args.flags), ("--page-flags", args.page_flags)):
+        try:
+            shlex.split(flags)
+        except ValueError as e:  # an unclosed quote
+            raise BadInput(f"{name} {cut(repr(flags), 200)}: {e} (one string of a command line's words)") from None
+    env_id = run_env_id(shlex.split(args.flags))
     if env_id not in isp.PUSHER_IDS:
         raise BadInput(f"--flags: --env-id {cut(env_id, 80)}: the person pushes Pusher's object at the page; pass one "
                        f"of {', '.join(isp.PUSHER_IDS)}")  # fmt: skip

@@ -285,6 +285,7 @@ def test_cut_keeps_names_whole_and_says_how_long():
         ({"drive": True, "rehearse": 1, "flags": "--env-id Reacher-v5"}, "--flags: --env-id Reacher-v5: the person"),
         ({"drive": True, "rehearse": 1, "flags": "--env-id=Reacher-v5"}, "--flags: --env-id Reacher-v5: the person"),
         ({"drive": True, "rehearse": 1, "flags": '--exp-name "x'}, "No closing quotation"),
+        ({"drive": True, "rehearse": 1, "page_flags": "--takeover-steps '5"}, "--page-flags .*No closing quotation"),
         ({"rehearse": 1}, "--rehearse rehearses the driving person's push: it needs --drive"),
         ({"drive": True, "rehearse": 1, "pace": 0.0}, r"--pace must be in \(0, 100\] steps a second"),
         ({"drive": True, "rehearse": 1, "reaction": (-5.0, -1.0)}, "--reaction must be LOW HIGH seconds with 0 <="),

@@ -81,8 +81,16 @@ def test_the_driving_person_takes_the_arm_pushes_and_its_steps_are_marked(tmp_pa
     monkeypatch.setenv("MUJOCO_GL", os.environ.get("MUJOCO_GL", "egl"))
     work, out = tmp_path / "work", tmp_path / "out"
     args = spp.Args(
-        seeds=[1], out_dir=str(out), work_dir=str(work), steps=300, pace=10.0, drive=True, flags=TINY, nights=("bc",)
-    )  # one night on the saved day: the others run as the study's tests run them
+        seeds=[1],
+        out_dir=str(out),
+        work_dir=str(work),
+        steps=300,
+        pace=10.0,
+        drive=True,
+        flags=TINY,
+        nights=("bc",),
+        page_flags="--takeover-steps 5",
+    )  # one night on the saved day (which would refuse the page's flag): the others run as the study's tests run them
     (row,) = spp.main(args)
     (run_dir,) = (work / "seed1" / "runs").glob("*browser_scripted__*")
     summary = json.loads((run_dir / "summary.json").read_text())
@@ -90,6 +98,10 @@ def test_the_driving_person_takes_the_arm_pushes_and_its_steps_are_marked(tmp_pa
     with open(run_dir / "answers.jsonl") as f:
         drives = [r for r in map(json.loads, f) if r["event"] == "drive"]
     assert drives[0]["drive"] == "take" and sum(r["drive"] == "target" for r in drives) >= 5
+    with open(run_dir / "answers.jsonl") as f:  # the page heard its own flag: each take labelled the steps before it
+        labels = [r for r in map(json.loads, f) if r["event"] == "take labels"]
+    assert labels and row["steps labelled by the takes"] == sum(len(r["steps"]) for r in labels) > 0
+    assert summary["args"]["takeover_steps"] == 5
     day = torch.load(run_dir / "day.pt", weights_only=True)
     driven = day["driven"].nonzero().squeeze(-1)
     assert driven.numel() == summary["feedback/driven_steps"] == row["driven steps"]
