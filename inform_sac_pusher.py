@@ -1273,8 +1273,8 @@ def main(args: Args, oracle_ckpt, stop: "StopSignals", saved=None, make_teacher=
         phase, t0 = "sleep", time.time() - evaluator.seconds
         if args.sleep_seed is not None:  # another night on the same day
             torch.manual_seed(args.sleep_seed)
-        night = args.night(day.actor, device, tamer={"h_net": day.h_net, "h_kwargs": day.h_kwargs,
-                                                     "ent_coef": stats["losses/tamer_entropy_coef"]})  # fmt: skip
+        tamer = {"h_net": day.h_net, "h_kwargs": day.h_kwargs, "day_settings": day.settings}  # the day's H and flags
+        night = args.night(day.actor, device, tamer={**tamer, "ent_coef": stats["losses/tamer_entropy_coef"]})
         summary.update(sleep_phase(night, buffer, args.sleep_gradient_steps, args.sleep_batch_size, evaluator, writer,
                                    device))  # fmt: skip
         q_net, inform_actor, selected = night.q_net, night.actor, night.selected

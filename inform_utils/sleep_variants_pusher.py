@@ -286,13 +286,22 @@ class ShamControl(StudyNight):
              "holdout_fraction"}  # fmt: skip
     fixed = {"policy_lr": core.TAMER_POLICY_LR, "init_actor_from_tamer": True}
 
-    def __init__(self, tamer_actor, device, *, h_net, h_kwargs: dict, ent_coef: float, h_lr: float, **settings):
+    def __init__(self, tamer_actor, device, *, h_net, h_kwargs: dict, day_settings: dict, ent_coef: float, h_lr: float,
+                 **settings):  # fmt: skip
         super().__init__(tamer_actor, device, **settings)
+        self.driven_in_h = day_settings.get("driven_in_h", True)  # a page's --no-driven-in-h: H never heard them
         self.h_net = core.QEnsemble(**h_kwargs).to(device)  # as the day built its H (a saved day: from its kwargs)
         self.h_net.load_state_dict(h_net.state_dict())
         self.h_optimizer = torch.optim.Adam(self.h_net.parameters(), lr=h_lr, foreach=True)
         self.log_ent_coef = torch.full((1,), math.log(ent_coef), device=device, requires_grad=True)
         self.ent_coef_optimizer = torch.optim.Adam([self.log_ent_coef], lr=h_lr, foreach=True)
+
+    def memories(self, buffer):  # H goes on hearing what it heard by day: not the person's steps, if kept out
+        replay_idx, expert_idx, fallback = super().memories(buffer)
+        if not self.driven_in_h:
+            rows = torch.arange(buffer.size, device=expert_idx.device) if replay_idx is None else replay_idx
+            replay_idx = rows[~buffer.driven[rows]]
+        return replay_idx, expert_idx, fallback
 
     def update_actor(self, batch):  # Eq. 1 on the replay rows, then TAMER's actor step on H
         obs, actions, _, feedback, _ = batch

@@ -155,7 +155,9 @@ def test_the_pusher_sham_builds_h_as_the_day_built_it():
     kwargs = {"obs_dim": 23, "act_dim": 7, "hidden": 64, "n": 2, "layer_norm": True}
     h_net, actor = isp.QEnsemble(**kwargs), isp.Actor(23, 7, isp.HIDDEN_SIZE)
     args = svp.Args(sleep_control="sham", sleep_batch_size=4)
-    night = args.night(actor, torch.device("cpu"), tamer={"h_net": h_net, "h_kwargs": kwargs, "ent_coef": 0.5})
+    night = args.night(
+        actor, torch.device("cpu"), tamer={"h_net": h_net, "h_kwargs": kwargs, "day_settings": {}, "ent_coef": 0.5}
+    )
     assert night.h_net.norm is not None and night.h_net.fc1.weight.shape[2] == 64
     theirs = h_net.state_dict()
     assert all(torch.equal(value, theirs[name]) for name, value in night.h_net.state_dict().items())

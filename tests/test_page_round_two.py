@@ -20,6 +20,7 @@ from test_browser_teacher import Session, lines, wait_until
 
 import inform_sac_pusher as isp
 from browser_teacher import BrowserTeacher, clamp_to_reach
+from inform_utils import sleep_variants_pusher as svp
 from inform_utils.browser_pusher import Args, DayWithoutDriven, PageTeacher
 from inform_utils.pusher_control import FingertipController, arm_reach
 
@@ -147,6 +148,7 @@ def test_a_take_labels_the_agents_last_k_steps_and_driven_rows_stay_out_of_h(tmp
     for name in isp.DAY_TENSORS:
         setattr(nan, name, getattr(buffer, name).clone())
     nan.size, nan.feedback[nan.driven] = buffer.size, float("nan")  # a driven row in H's batch: a NaN loss
+    nan.success[:20] = True  # an expert set for the night (the agent's first steps)
     for _ in range(300):
         assert torch.isfinite(learner.update(nan, 119))
     with torch.no_grad():
@@ -154,6 +156,13 @@ def test_a_take_labels_the_agents_last_k_steps_and_driven_rows_stay_out_of_h(tmp
     assert h[labelled].mean() < -0.5 and abs(h[others].mean()) < 0.25, (h[labelled].mean(), h[others].mean())
     core = isp.Day(settings, torch.device("cpu"), day.env.action_space, 23)
     assert not torch.isfinite(core.update(nan, 119))  # the core's Day samples the driven rows: the check bites
+    for heard, finite in ((settings, True), ({**settings, "driven_in_h": True}, False)):  # the sham night goes on
+        sham = svp.Args(sleep_control="sham", sleep_batch_size=32).night(learner.actor, torch.device("cpu"), tamer={
+            "h_net": learner.h_net, "h_kwargs": learner.h_kwargs, "day_settings": heard, "ent_coef": 0.5})  # fmt: skip
+        replay_idx, expert_idx, _ = sham.memories(nan)  # from the H the day left, hearing what it heard
+        for step in range(1, 21):
+            sham.update(step, isp.sleep_batch(nan, 32, expert_idx, replay_idx))
+        assert bool(torch.isfinite(sham.pi_loss)) is finite, heard["driven_in_h"]
 
 
 # ---------------------------------------------------------------------------------------------------------------------
