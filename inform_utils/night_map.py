@@ -46,33 +46,27 @@ class Measure:
     sign: int  # +1: higher is better
     unit: str
     floor: float  # one unit of the measure: the least bar
-    beside: tuple[str, str, int]  # (name, key, sign)
+    beside: tuple[tuple[str, str, int], ...]  # (name, key, sign) of each measure printed beside (not the rule's)
     day_size: tuple[str, str]  # (what the day's success set is counted in, its summary key)
     plain: tuple[str, str, int, float]  # (name, key, sign, TAMER's spread on it if a constant, else None)
 
 
 MEASURES = {
     "inform_sac_pusher.py": Measure(
-        "random-start final distance",
-        "random_starts/{p}_final_distance",
-        -1,
-        " m",
-        0.0,
-        ("random-start success", "random_starts/{p}_success_rate", 1),
-        ("successful episodes", "sleep/success_episodes"),
-        ("fixed-start sampled return", ss.SAMPLED, 1, None),
-    ),  # fmt: skip
+        name="random-start final distance", key="random_starts/{p}_final_distance", sign=-1, unit=" m", floor=0.0,
+        beside=(("random-start success", "random_starts/{p}_success_rate", 1),
+                ("fixed start with the boxes, distance", ss.OBSTACLE, -1),
+                ("fixed start, the authors' sampled test, distance", "eval/authors_test/{p}_final_distance", -1)),
+        day_size=("successful episodes", "sleep/success_episodes"),
+        plain=("fixed-start sampled return", ss.SAMPLED, 1, None),
+    ),
     "inform_dqn_gridworld.py": Measure(
-        "held-out start cells: success",
-        "eval/start_set/{p}_success_rate",
-        1,
-        "",
-        0.1,
-        ("all 29 cells: success", "eval/all_starts/{p}_success_rate", 1),
-        ("success-set transitions", "sleep/expert_transitions"),
-        ("length from S", "eval/{p}_episode_length", -1, 1.0),
-    ),  # fmt: skip
-}
+        name="held-out start cells: success", key="eval/start_set/{p}_success_rate", sign=1, unit="", floor=0.1,
+        beside=(("all 29 cells: success", "eval/all_starts/{p}_success_rate", 1),),
+        day_size=("success-set transitions", "sleep/expert_transitions"),
+        plain=("length from S", "eval/{p}_episode_length", -1, 1.0),
+    ),
+}  # fmt: skip
 
 
 @dataclass
@@ -168,7 +162,7 @@ def judge(args: Args, campaign: str) -> dict | None:
     for night in [n for n in NIGHTS if any(r["variant"] == n for r in rows)]:
         tests = {c: against(rows, night, c, measure, bar, ceiling) for c in CONTROLS}
         plain = plain_task(args, rows, night, measure, campaign)
-        beside = {c: ss.paired(rows, night, c, measure.beside[1], measure.beside[2]) for c in CONTROLS}
+        beside = [[ss.paired(rows, night, c, key, sign) for c in CONTROLS] for _, key, sign in measure.beside]
         n = min(len(t["days"]) for t in tests.values())
         if all(t["passes"] for t in tests.values()) and plain[1] and n >= MAP_DAYS:
             verdict = "yes"
@@ -209,17 +203,18 @@ def table(args: Args, cells: list[dict]) -> str:
              f"consolidates if better than each control with p < {MAP_P} over {MAP_DAYS} days and the plain task "
              f"({measure.plain[0]}) within TAMER's spread", ""]  # fmt: skip
     head = ["cell", "days", f"{measure.day_size[0]} a day", "expert", "TAMER", "night", "night's value",
-            *(f"vs {c}" for c in CONTROLS), f"{measure.beside[0]} vs bc, vs sham", "plain task vs TAMER",
+            *(f"vs {c}" for c in CONTROLS), *(f"{name} vs bc, vs sham" for name, _, _ in measure.beside),
+            "plain task vs TAMER",
             "consolidates?", "bar"]  # fmt: skip
     lines += ss.table_head(head)
     for cell in cells:
         for night, judged in cell["nights"].items():
-            beside = ", ".join(f"{statistics.mean(g):+.3f}" if g else "-" for g in judged["beside"].values())
+            beside = [", ".join(f"{statistics.mean(g):+.3f}" if g else "-" for g in pair) for pair in judged["beside"]]
             ok = [s for s in cell["successes"] if s is not None]
             lines.append(ss.table_row([
                 cell["label"], str(cell["days"]), f"{min(ok)}-{max(ok)}" if ok else "-", mean_of(cell["expert"]),
                 mean_of(cell["tamer"]), night, mean_of(judged["value"]),
-                *(test_text(judged["tests"][c], measure.unit) for c in CONTROLS), beside, judged["plain"][0],
+                *(test_text(judged["tests"][c], measure.unit) for c in CONTROLS), *beside, judged["plain"][0],
                 judged["verdict"], "-" if cell["bar"] is None else f"{cell['bar']:.3g}",
             ]))  # fmt: skip
     rules_out = []
