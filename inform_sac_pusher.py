@@ -1821,7 +1821,7 @@ def check_run_name(env_id: str, exp_name: str, seed: int) -> None:  # one plain,
     name = f"{env_id}__{exp_name}__{seed}__{int(time.time())}_99.tmp"  # the longest a run's files get
     plain = exp_name.isprintable() and not any(c in name for c in "/\\")  # no newline, no separator, no NUL
     if not exp_name or exp_name in (".", "..") or not plain or len(name.encode()) > 255:
-        raise InputError(f"--exp-name {exp_name!r}: a run name must be one short directory name inside runs/")
+        raise InputError(f"--exp-name {exp_name[:60]!r}{'...' * (len(exp_name) > 60)}: not one folder name in runs/")
 
 
 def make_run_dir(run_name: str) -> str:  # runs/{run_name}, never an existing directory: a clash gets a suffix

@@ -387,3 +387,11 @@ def test_bad_input_to_the_study_is_one_line_and_exit_2(tmp_path, flags, phrase):
     (tmp_path / "results" / "c").mkdir(parents=True)
     (tmp_path / "results" / "afile").write_text("")
     one_error_line(study(tmp_path, *flags), phrase)
+
+
+@pytest.mark.parametrize("core", [isp, maze])
+def test_a_long_run_name_is_refused_in_a_short_line(core):
+    """A 5,000-character --exp-name was echoed whole in its error."""
+    with pytest.raises(core.InputError) as refused:
+        core.check_run_name("Pusher-v5", "x" * 5000, 1)
+    assert len(str(refused.value)) < 200 and "'xxxx" in str(refused.value) and "..." in str(refused.value)

@@ -53,7 +53,7 @@ def test_a_success_return_that_is_not_a_number_is_refused(tmp_path, value):
 
 @pytest.mark.parametrize("name", ["../x", "a/b", "x" * 300, ".."])
 def test_run_names_stay_inside_runs(tmp_path, name):
-    refused(tmp_path, "--exp-name", name, needle="one short directory name inside runs/")
+    refused(tmp_path, "--exp-name", name, needle="not one folder name in runs/")
 
 
 @pytest.mark.parametrize("flag", ["--seed", "--sleep-seed"])

@@ -510,7 +510,7 @@ BAD_FLAGS = [
     (["--sleep-temperature", "inf"], "--sleep-temperature must be in (0, inf), got inf"),
     (["--seed", str(2**32)], "--seed must be >= 0 and < 4294967296"),
     (["--sleep-seed", "-1"], "--sleep-seed must be >= 0 and < 4294967296"),
-    (["--exp-name", "../x"], "one short directory name inside runs/"),
+    (["--exp-name", "../x"], "not one folder name in runs/"),
     (["--sleep-chi2-coef", "-0.1"], "--sleep-chi2-coef must be in [0, inf)"),
     (["--oracle-path", "x.pt", "--train-oracle"], "exclude each other"),
 ]
