@@ -10,9 +10,10 @@ request without it gets 403; only the routes below exist (any other path: 404) a
 file system. One person per run, by a session cookie and a tab: loading the page takes no role (a `curl` of the
 address, a link preview or a prefetch teaches nothing); the first tab to act (answer, take the arm, or end the day)
 teaches, and every other watches read-only, a second tab of the same browser as a second browser does (two tabs would
-drive the arm each from its own target). A reload stays the same tab (its id is in the tab's sessionStorage). If the
-teaching tab goes silent for `takeover_after` seconds (no long poll open: a crashed browser, a closed lid), another
-page holding the token may take over by acting; nothing answered is lost.
+drive the arm each from its own target). A reload stays the same tab (its id is in the tab's sessionStorage; a
+duplicated tab, which copies it, is a tab of its own). If the teaching tab goes silent for `takeover_after` seconds
+(no long poll open: a crashed browser, a closed lid), another page holding the token may take over by acting; nothing
+answered is lost.
 
     GET  /            the page
     GET  /state       the page's state as JSON; ?since=VERSION waits (up to 10 s) until it changes (long polling)
@@ -947,7 +948,9 @@ let state = null, receivedAt = 0, shownSeq = 0, offline = false, endArmed = 0, g
 const answered = new Set();  // the questions this page answered (the state may not say so yet)
 let outcomeShown = null;  // the outcome whose picture was fetched
 const PAGE = nonce();  // this load of the page: the server tells a reload from a closed page by it
-const TAB = sessionStorage.getItem("inform_tab") || nonce();  // this tab, the same after a reload: one tab teaches
+const RELOAD = (performance.getEntriesByType("navigation")[0] || {}).type === "reload";
+const TAB = (RELOAD && sessionStorage.getItem("inform_tab")) || nonce();  // this tab, the same after a reload (a
+// duplicated tab copies sessionStorage, but is not a reload: a tab of its own): one tab teaches
 sessionStorage.setItem("inform_tab", TAB);
 const TASK_LINES = {pusher: "Your task: teach the arm to push the white object onto the red goal."};
 

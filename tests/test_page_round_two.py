@@ -227,6 +227,14 @@ def test_a_second_tab_of_the_same_browser_only_watches(new_page, tmp_path):
         status = second.evaluate("""fetch(url("/drive"), {method: "POST", headers: {"Content-Type": "application/json"},
             body: JSON.stringify({drive: "target", target: [0.4, -0.3]})}).then((r) => r.status)""")
         assert status == 403 and day.teacher.page.target == target
+        tab = first.evaluate("TAB")  # a duplicated tab: the teaching tab's sessionStorage, copied, then a new load
+        third = first.context.new_page()
+        third.set_default_timeout(WAIT_S * 1000)
+        third.add_init_script(f"sessionStorage.setItem('inform_tab', {json.dumps(tab)})")
+        third.goto(day.teacher.page.url)
+        streaming(third)
+        third.wait_for_selector("#banner:has-text('watching read-only')")
+        assert third.evaluate("TAB") != tab and third.is_disabled("#take")
         first.reload()  # the same tab: it still teaches
         streaming(first)
         first.wait_for_selector('#day[data-driving="1"]')
