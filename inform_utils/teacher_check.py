@@ -22,7 +22,7 @@ import torch
 import tyro
 
 import inform_sac_pusher as isp
-from inform_utils.files import atomic, cut
+from inform_utils.files import atomic, cut, run_tool
 from oracle_train import EXPERT_FINAL_DISTANCE, EXPERT_SUCCESS_RATE
 
 SUCCESS_DISTANCE = 0.08  # the paper's success tag, on v4 and v5 alike
@@ -184,4 +184,4 @@ def main(args: Args) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main(tyro.cli(Args)))
+    run_tool(main, tyro.cli(Args))

@@ -300,6 +300,30 @@ def test_the_scripted_person_checks_its_flags_first(monkeypatch, flags, phrase):
         scripted_person_pusher.main(scripted_person_pusher.Args(**{"seeds": [1], **flags}))
 
 
+CTRL_C_AT_THE_ENV = """
+import os, runpy, signal, sys
+import inform_sac_pusher as isp
+real = isp.make_env
+isp.make_env = lambda *a, **k: (os.kill(os.getpid(), signal.SIGINT), real(*a, **k))[1]  # Ctrl-C as the work starts
+sys.argv = ["tool", *{flags!r}]
+runpy.run_module({module!r}, run_name="__main__")
+"""
+
+
+@pytest.mark.parametrize(
+    ("module", "flags"),
+    [
+        ("inform_utils.teacher_check", [os.path.join(REPO, "oracles", "Pusher-v5__sac_oracle.pt"), "--episodes", "1"]),
+        ("inform_utils.scripted_person_pusher", ["--drive", "--rehearse", "1", "--seeds", "1"]),
+    ],
+)
+def test_ctrl_c_in_a_tool_without_stop_points_is_one_line(tmp_path, module, flags):
+    """Ctrl-C during teacher_check or the scripted person's rehearsal was a KeyboardInterrupt traceback."""
+    proc = run_module(tmp_path, "-c", CTRL_C_AT_THE_ENV.format(flags=flags, module=module))
+    one_error_line(proc, 130, "interrupted (SIGINT) before the work was done")
+    assert os.listdir(tmp_path) == []
+
+
 def test_the_scripted_persons_folders_are_checked_writable_first(monkeypatch):
     """--out-dir where nothing can be written: refused before the browser starts (os.makedirs' traceback came after
     it), in one line through the helper both scripted persons share."""
