@@ -1183,7 +1183,7 @@ def pusher_with_boxes(env_id: str, obstacles, **render) -> gym.Env:
             space = gym.spaces.Box(-np.inf, np.inf, (23,), np.float64)
             MujocoEnv.__init__(self, xml, 5, observation_space=space, **kwargs)
 
-    return gym.wrappers.TimeLimit(PusherObstacleV4(**render), max_episode_steps=100)
+    return gym.make(dataclasses.replace(gym.spec(env_id), entry_point=PusherObstacleV4), **render)  # v4's spec too
 
 
 _OBSTACLE_DIR: list[str] = []

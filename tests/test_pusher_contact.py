@@ -50,6 +50,8 @@ def test_make_env_gives_pusher_mujoco_2_3s_contact_and_nothing_else_its_own():
         arm = [b for b in range(firm.nbody) if firm.body(b).name not in ("object", "goal")]
         np.testing.assert_allclose(firm.body_invweight0[arm], soft.body_invweight0[arm], rtol=1e-12)
     assert isp.make_env("Reacher-v5", 0).unwrapped.model.body_invweight0.max() < 1e3  # another task: untouched
+    for obstacles in (None, [(0.5, -0.1)]):  # Pusher-v4 in its own class keeps v4's spec: episodes of 100 steps
+        assert isp.make_env("Pusher-v4", 0, obstacles).spec.max_episode_steps == 100  # (it had none: None)
 
 
 def test_a_body_on_two_slides_by_hand():
