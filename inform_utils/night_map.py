@@ -21,6 +21,7 @@ on the same starts minus the control's).
 
 import glob
 import os
+import re
 import statistics
 import subprocess
 import sys
@@ -270,7 +271,8 @@ def main(args: Args) -> list[dict]:
         raise BadInput(f"--map-dir {args.map_dir}: no such folder (the map's campaigns, sleep_study's --results-dir)")
     if args.figure is not None and os.path.lexists(args.figure):
         raise BadInput(f"--figure {args.figure} exists: name a new file")
-    names = args.cells or sorted(os.path.basename(p) for p in glob.glob(os.path.join(args.map_dir, "nights_*")))
+    found = [os.path.basename(p) for p in glob.glob(os.path.join(args.map_dir, "nights_*"))]
+    names = args.cells or sorted(found, key=lambda n: [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", n)])
     cells = [c for c in (judge(args, name) for name in names) if c is not None]
     if not cells:
         raise BadInput(f"--map-dir {args.map_dir}: no completed nights in {', '.join(names) or 'any nights_* folder'}")
