@@ -261,7 +261,8 @@ def figure(args: Args, cells: list[dict], path: str) -> None:
         ax.axhline(0.0, color="black", lw=0.8)
         ax.set_title(f"the night's gain over {control} (grey dash: the room left to the expert)", fontsize=8)
         ax.set_xlabel(f"the day's quality: TAMER's {measure.name}{measure.unit}")
-    fig.axes[0].set_ylabel(f"the night's gain{measure.unit} (positive = better), 95% interval over the days")
+    fig.axes[0].set_ylabel(f"gain{measure.unit} (+ = better), 95% interval over days")
+    fig.suptitle(f"{measure.name}: the night against each control, cell by cell", fontsize=9)
     fig.axes[0].legend(fontsize=7)
     save(fig, path)
 
