@@ -134,3 +134,23 @@ def test_the_verdicts_on_the_night_are_the_studys_tables():
                           ("tamer", f"{said[2]} of 5 days")):  # fmt: skip
         assert re.search(rf"\| {policy} \| [-\d.]+ \| {count} \|", v5), (policy, count)
     assert f"| Pusher-v5 | 5000 | default (5e-06) | 5 | +{said[3]} m, p = {said[4]}," in v5
+
+
+def test_the_map_and_the_persons_arm_day_are_said_as_they_ran():
+    """The maze map's bullet, from night_map's own judgement of the committed cells; the person's count, from the
+    five days of results/browser_pusher_takeover_v5/drive."""
+    from inform_utils import night_map
+
+    text = readme()
+    said = re.search(r"the maze: (\d+) qualities of day, (\d+) nights; .*? the night beats cloning from held-out start "
+                     r"cells in (\d+) cells \(p < 0\.05\), TAMER's update continued in none", text)  # fmt: skip
+    args = night_map.Args(map_dir=os.path.join(REPO, "results", "map_maze"), script="inform_dqn_gridworld.py")
+    names = sorted(os.path.basename(p) for p in glob.glob(os.path.join(args.map_dir, "nights_*")))
+    cells = [night_map.judge(args, name) for name in names]
+    nights = len(glob.glob(os.path.join(args.map_dir, "nights_*", "*", "*__sleep*", "summary.json")))
+    passed = {c: sum(cell["nights"]["default"]["tests"][c]["passes"] for cell in cells) for c in ("bc", "sham")}
+    assert said and (int(said[1]), int(said[2]), int(said[3]), passed["sham"]) == (len(cells), nights, passed["bc"], 0)
+    days = [json.load(open(p)) for p in glob.glob(os.path.join(REPO, "results", "browser_pusher_takeover_v5", "drive",
+                                                               "seed*", "summary.json"))]  # fmt: skip
+    count = sum(d["eval/inform_success_rate"] >= 1 for d in days)
+    assert len(days) == 5 and f"INFORM succeeds at the fixed start on {count} of 5 seeds, the goal 4" in text
