@@ -7,9 +7,9 @@ The map's rule (fixed before the first night of the map; docs/protocol.md, "The 
 and night (the default IQ-Learn night; on the Pusher also DWBC as released), on a measure with room to gain (the
 Pusher: the final distance over the random-start test's held-out starts, deterministic actions; the maze: the success
 rate from the ten held-out start cells), the night consolidates if it is better than each control (cloning the
-success set at the night's step size; the sham) with p < 0.05 by the paired t-test over the cell's days, on all five
-days, and does not lose the plain task beyond TAMER's spread (the Pusher: the fixed start's sampled return against
-TAMER's sampling spread; the maze: the length from S, one step). Beside every p: the paired 95% interval and the
+success set at the default night's step size; the sham) with p < 0.05 by the paired t-test over the cell's days, on
+all five days, and does not lose the plain task beyond TAMER's spread (the Pusher: the fixed start's sampled return
+against TAMER's sampling spread; the maze: the length from S, one step). Beside every p: the paired 95% interval and the
 smallest effect detectable at 80% power, "equivalent" where the interval lies within the bar (these tests are
 deterministic, so TAMER has no sampling spread on them: the bar is the default night's spread between its sleep
 seeds, at least one unit of the measure) and "cannot tell" where it is wider than the room left (the expert's value
@@ -49,7 +49,7 @@ class Measure:
     floor: float  # one unit of the measure: the least bar
     beside: tuple[tuple[str, str, int], ...]  # (name, key, sign) of each measure printed beside (not the rule's)
     day_size: tuple[str, str]  # (what the day's success set is counted in, its summary key)
-    plain: tuple[str, str, int, float]  # (name, key, sign, TAMER's spread on it if a constant, else None)
+    plain: tuple[str, str, int, float | None]  # (name, key, sign, TAMER's spread on it if a constant, else None)
 
 
 MEASURES = {
@@ -105,7 +105,10 @@ def expert(args: Args, rows: list[dict], key: str) -> dict:
             cmd += ["--eval-episodes", str(night["random_starts/episodes"])]
             cmd += ["--contact", night["contact"]] if night.get("contact") else []
             proc = subprocess.run(cmd, capture_output=True, text=True, env=ss.child_env())
-            test = ss.last_json(proc, f"the expert's random-start test ({' '.join(cmd[2:])})")
+            try:
+                test = ss.last_json(proc, f"the expert's random-start test ({' '.join(cmd[2:])})")
+            except ss.NightFailed as e:  # e.g. a teacher this venv's MuJoCo cannot run: one line, nothing written
+                raise BadInput(f"{e}; run it where the days were made (--no-run-expert: without the ceiling)") from None
             os.makedirs(os.path.dirname(path), exist_ok=True)
             write_json(path, {**{k.replace("policy", "oracle"): v for k, v in test.items()}, "command": cmd[1:]})
         if os.path.isfile(path):
@@ -187,7 +190,7 @@ def mean_of(values) -> str:
     return f"{statistics.mean(values):.3f}" if values else "-"
 
 
-def test_text(test: dict, unit: str) -> str:
+def comparison_text(test: dict, unit: str) -> str:
     if not test["days"]:
         return "-"
     stats, mean = test["stats"], statistics.mean(test["gains"])
@@ -215,7 +218,7 @@ def table(args: Args, cells: list[dict]) -> str:
             lines.append(ss.table_row([
                 cell["label"], str(cell["days"]), f"{min(ok)}-{max(ok)}" if ok else "-", mean_of(cell["expert"]),
                 mean_of(cell["tamer"]), night, mean_of(judged["value"]),
-                *(test_text(judged["tests"][c], measure.unit) for c in CONTROLS), *beside, judged["plain"][0],
+                *(comparison_text(judged["tests"][c], measure.unit) for c in CONTROLS), *beside, judged["plain"][0],
                 judged["verdict"], "-" if cell["bar"] is None else f"{cell['bar']:.3g}",
             ]))  # fmt: skip
     rules_out = []
