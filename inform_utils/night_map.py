@@ -23,8 +23,6 @@ import glob
 import os
 import re
 import statistics
-import subprocess
-import sys
 from dataclasses import dataclass, replace
 from typing import Literal
 
@@ -100,13 +98,11 @@ def expert(args: Args, rows: list[dict], key: str) -> dict:
         if not os.path.isfile(path) and args.run_expert:
             run = night["args"]
             oracle = run.get("oracle_path") or os.path.join(ss.REPO, "oracles", f"{run['env_id']}__sac_oracle.pt")
-            cmd = [sys.executable, "-m", "inform_utils.evaluate_policy", "pusher", oracle, "--env-id", run["env_id"]]
-            cmd += ["--seed", str(night["seed"]), "--random-starts", "--obstacle-episodes", "1"]
-            cmd += ["--eval-episodes", str(night["random_starts/episodes"])]
-            cmd += ["--contact", night["contact"]] if night.get("contact") else []
-            proc = subprocess.run(cmd, capture_output=True, text=True, env=ss.child_env())
+            cmd = ss.random_start_command(
+                oracle, night["seed"], run["env_id"], night["random_starts/episodes"], night.get("contact")
+            )  # the nights' own test, on the expert
             try:
-                test = ss.last_json(proc, f"the expert's random-start test ({' '.join(cmd[2:])})")
+                test = ss.last_json(ss.run_child(cmd, ss.Stop()), f"the expert's random-start test of {oracle}")
             except ss.NightFailed as e:  # e.g. a teacher this venv's MuJoCo cannot run: one line, nothing written
                 raise BadInput(f"{e}; run it where the days were made (--no-run-expert: without the ceiling)") from None
             os.makedirs(os.path.dirname(path), exist_ok=True)

@@ -488,17 +488,23 @@ def completed(path: str, pusher: bool = False) -> bool:
     return read_night(path, pusher)[0] is not None
 
 
+def random_start_command(path: str, seed: int, env_id: str, episodes: int, contact: str | None) -> list[str]:
+    """The random-start test of one saved actor (a night's policy, or a teacher): inform_utils.evaluate_policy on the
+    seed's random starts (deterministic actions; a short obstacle part), under the Pusher `contact`."""
+    cmd = [sys.executable, "-m", "inform_utils.evaluate_policy", "pusher", path, "--env-id", env_id]
+    cmd += ["--seed", str(seed), "--random-starts", "--eval-episodes", str(episodes), "--obstacle-episodes", "1"]
+    return cmd + (["--contact", contact] if contact else [])
+
+
 def random_starts(run_dir: str, seed: int, env_id: str, episodes: int, stop: Stop, contact: str | None) -> dict:
-    """inform_utils.evaluate_policy of each saved policy on random starts (deterministic actions; a short obstacle
-    part), under the night's Pusher contact, as its summary records it."""
+    """The random-start test of each saved policy of a night, under the night's Pusher contact, as its summary
+    records it."""
     out = {}
     for name in ("tamer", "inform", "inform_selected"):
         path = os.path.join(run_dir, f"{name}_actor.pt")
         if not os.path.isfile(path):
             continue
-        cmd = [sys.executable, "-m", "inform_utils.evaluate_policy", "pusher", path, "--env-id", env_id]
-        cmd += ["--seed", str(seed), "--random-starts", "--eval-episodes", str(episodes), "--obstacle-episodes", "1"]
-        cmd += ["--contact", contact] if contact else []
+        cmd = random_start_command(path, seed, env_id, episodes, contact)
         metrics = last_json(run_child(cmd, stop), f"the random-start test of {path}")
         for key in ("return", "final_distance", "success_rate"):
             out[f"random_starts/{name}_{key}"] = metrics[f"eval/policy_{key}"]
