@@ -150,7 +150,5 @@ def test_the_map_and_the_persons_arm_day_are_said_as_they_ran():
     nights = len(glob.glob(os.path.join(args.map_dir, "nights_*", "*", "*__sleep*", "summary.json")))
     passed = {c: sum(cell["nights"]["default"]["tests"][c]["passes"] for cell in cells) for c in ("bc", "sham")}
     assert said and (int(said[1]), int(said[2]), int(said[3]), passed["sham"]) == (len(cells), nights, passed["bc"], 0)
-    days = [json.load(open(p)) for p in glob.glob(os.path.join(REPO, "results", "browser_pusher_takeover_v5", "drive",
-                                                               "seed*", "summary.json"))]  # fmt: skip
-    count = sum(d["eval/inform_success_rate"] >= 1 for d in days)
-    assert len(days) == 5 and f"INFORM succeeds at the fixed start on {count} of 5 seeds, the goal 4" in text
+    count = sum(d["eval/inform_success_rate"] >= 1 for d in runs("browser_pusher_takeover_v5/drive"))  # seeds 1-5
+    assert f"INFORM succeeds at the fixed start on {count} of 5 seeds, the goal 4" in text
