@@ -21,7 +21,8 @@ answered is lost.
     GET  /outcome     the picture of what came of the night (PNG, or an animated GIF)
     POST /answer      {"nonce", "answer": "yes" | "no" | "none", "question": id | null, "seq": frame, "waited_ms"}
     POST /drive       the Pusher: {"drive": "take" | "target" | "release", "target": [x, y]}: the person takes the
-                      arm (its fingertip follows the target, metres in the table's plane) or gives it back; a target
+                      arm (its fingertip, or with drive_by "object" the object, goes to the target, metres in
+                      the table's plane) or gives it back; a target
                       beyond the arm's `reach` is moved onto it, and the page says so
     POST /end         the person ends the day
     POST /bye         the page is being closed or reloaded: the day ends if, `close_grace` s later, no page is open
@@ -225,6 +226,7 @@ class BrowserTeacher:
         no_value: float = 0.0,
         reach: tuple[tuple[float, float], float] | None = None,
         day_steps: int | None = None,
+        drive_by: str = "fingertip",
     ):
         if task not in TASKS:
             raise ValueError(f"task must be one of {TASKS}, got {task!r}")
@@ -232,6 +234,8 @@ class BrowserTeacher:
             raise ValueError(f"pace must be above 0 steps a second, got {pace}")
         if not 0 <= delay[0] < delay[1]:
             raise ValueError(f"delay must be (low, high) seconds with 0 <= low < high, got {delay}")
+        if drive_by not in ("fingertip", "object"):
+            raise ValueError(f"drive_by must be fingertip or object (what the person's target moves), got {drive_by!r}")
         if no_value not in (0.0, -1.0):
             raise ValueError(f"no_value must be 0 (the paper's no feedback) or -1 (TAMER's), got {no_value}")
         self.values = {**LABELS, "no": float(no_value)}  # the label each answer gives: a No 0, or TAMER's -1
@@ -239,6 +243,7 @@ class BrowserTeacher:
         self.target: tuple[float, float] | None = None
         self.reach = None if reach is None else ((float(reach[0][0]), float(reach[0][1])), float(reach[1]))
         self.clamped = False  # the newest target was beyond the reach, and moved onto it
+        self.drive_by = drive_by  # what a person's target moves: the fingertip, or the object (a planner pushes it)
         self.day_steps = day_steps  # the day's steps at most (the page shows the steps and the time left)
         self.task = task
         self.participant = participant
@@ -293,7 +298,7 @@ class BrowserTeacher:
         self._log = open(self.answers_path, "a", encoding="utf-8")
         start = {"event": "start", "task": task, "participant": participant, "budget": budget, "pace": pace}
         start |= {"delay": self.delay, "host": host, "port": self.port, "no_value": self.values["no"]}
-        self._record(start | {"reach": self.reach, "day_steps": day_steps})
+        self._record(start | {"reach": self.reach, "day_steps": day_steps, "drive_by": drive_by})
         shown_host = socket.gethostname() if host in ("", "0.0.0.0", "::") else host
         shown_host = f"[{shown_host}]" if ":" in shown_host else shown_host
         self.url = f"http://{shown_host}:{self.port}/?token={self.token}"
@@ -553,6 +558,7 @@ class BrowserTeacher:
             "reach": None if self.reach is None else {"base": self.reach[0], "radius": self.reach[1]},
             "clamped": self.clamped,
             "day_steps": self.day_steps,
+            "drive_by": self.drive_by,
             "rate": self._rate() if self._mode == "stream" else None,
         }
 
@@ -924,7 +930,7 @@ kbd{border:1px solid #aaa;border-radius:3px;padding:0 .25rem;font-size:.85em;bac
 &#9675; object, <b style="color:#1e88e5">&#9679;</b> fingertip, <b>&#9632;</b> the arm's base, the circle its reach,
 <b style="color:#2e7d32">+</b> your target.</div><div id="clamp"></div></div></div>
 <div id="keys" hidden>Keys: <kbd>y</kbd> yes and <kbd>n</kbd> no (hold one down to keep answering);
-<kbd>t</kbd> or a click on the map takes the arm, and its fingertip follows your target: click again, or move it
+<kbd>t</kbd> or a click on the map takes the arm, and <span class="follows"></span>: click again, or move it
 with the arrow keys (2 cm a press, as the map is turned); <kbd>g</kbd> gives it back to the agent.</div>
 <div id="drive" hidden><button id="take">Take the arm <kbd>t</kbd></button>
 <button id="release">Give it back <kbd>g</kbd></button><div id="drive-status"></div></div>
@@ -952,6 +958,8 @@ const RELOAD = (performance.getEntriesByType("navigation")[0] || {}).type === "r
 const TAB = (RELOAD && sessionStorage.getItem("inform_tab")) || nonce();  // this tab, the same after a reload (a
 // duplicated tab copies sessionStorage, but is not a reload: a tab of its own): one tab teaches
 sessionStorage.setItem("inform_tab", TAB);
+const FOLLOWS = {fingertip: "its fingertip follows your target",
+  object: "it pushes the object to your target (a planner finds the push)"};
 const TASK_LINES = {pusher: "Your task: teach the arm to push the white object onto the red goal."};
 
 function url(path, extra) {
@@ -1172,7 +1180,8 @@ function render() {
   $("drive-status").textContent = drivingHere
     ? "You drive the arm: click the map or use the arrow keys (2 cm a press); g gives it back."
     : s.driving ? "The page that teaches drives the arm."
-    : "The agent drives. t, or a click on the map, takes the arm: its fingertip follows your target.";
+    : `The agent drives. t, or a click on the map, takes the arm: ${FOLLOWS[s.drive_by]}.`;
+  for (const e of document.querySelectorAll(".follows")) e.textContent = FOLLOWS[s.drive_by];
   if (!s.driving) myTarget = null;
   const clamped = s.driving && (myTarget ? clampedHere : s.clamped);
   $("clamp").textContent = clamped ? "Out of reach: your target is held on the circle, as far as the arm reaches." : "";

@@ -17,7 +17,8 @@ day.
 The page says the task, shows the table from above turned as the 3D view (the arm's base, its reach, the fingertip,
 the object and the goal), the steps and time left in the day and whether it keeps its pace, and the keys. A person who
 takes the arm (t, or a click on the map) moves the fingertip's target; one beyond the arm's reach is held on it, and
-the page says so. One tab drives: a second tab watches, as a second browser does.
+the page says so. One tab drives: a second tab watches, as a second browser does. With `--drive-by object` (shared
+autonomy) the target is where the object should go, and a planner on the true model (MPPI) pushes it there.
 
 The take-over as a signal (RLIF, Luo et al. ICLR 2024: the agent's action before a person takes over earns -1):
 `--takeover-steps k` gives the agent's last k actions of the episode before each take the label `--takeover-label`
@@ -50,7 +51,7 @@ import json  # noqa: E402
 import math  # noqa: E402
 import sys  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
-from typing import Annotated  # noqa: E402
+from typing import Annotated, Literal  # noqa: E402
 
 import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
@@ -89,6 +90,10 @@ class Args(isp.Args):
     get --takeover-label (0: off)"""
     takeover_label: Annotated[float, isp.In(-1, 0, "[]"), isp.DAY] = -1.0
     """the label a take gives the steps before it: -1 (RLIF's reward, TAMER's negative answer) or up to 0"""
+    drive_by: Annotated[Literal["fingertip", "object"], isp.DAY] = "fingertip"
+    """what the person's target moves while they hold the arm: the fingertip (the operational-space controller of
+    inform_utils/pusher_control.py), or the object (shared autonomy: MPPI on the true model, inform_utils/pusher_mpc.py,
+    pushes the object to the target; the person says when and where, the planner how)"""
     driven_in_h: Annotated[bool, isp.DAY] = True
     """H hears the steps the person drove as yes answers; --no-driven-in-h keeps them out of H's regression (they stay
     in the buffer, marked, for the night)"""
@@ -130,7 +135,7 @@ class PageTeacher:
         self.page = browser_teacher.BrowserTeacher(run_dir, "pusher", host, port, participant=args.participant,
                                                    budget=args.feedback_budget, pace=args.pace,
                                                    delay=args.credit_delay, no_value=args.no_label,
-                                                   reach=(tuple(base), radius),
+                                                   reach=(tuple(base), radius), drive_by=args.drive_by,
                                                    day_steps=args.tamer_total_timesteps)  # fmt: skip
         signal = {k: getattr(args, k) for k in ("takeover_steps", "takeover_label", "driven_in_h")}
         self.page.note("take-over signal", **signal)
@@ -142,6 +147,12 @@ class PageTeacher:
         self.credited: dict[int, tuple[float, float]] = {}  # step: (sum of weight * answer, sum of weights)
         self.positives = self.perfect_positives = 0
         self.controller, self.drove = FingertipController(env.unwrapped.model), False
+        if args.drive_by == "object":  # the planner pushes the object to the person's target, from the day's state
+            from inform_utils.pusher_mpc import MPPIDemonstrator
+
+            self.planner = MPPIDemonstrator(env)
+            self.planner.reset(args.seed)
+        self.drive_by = args.drive_by
         self.takeover_steps, self.takeover_label = args.takeover_steps, args.takeover_label
         # Pusher never terminates: an episode starts every this many steps (forward_phase resets at its TimeLimit)
         self.episode_steps = env.get_wrapper_attr("_max_episode_steps")
@@ -159,12 +170,19 @@ class PageTeacher:
 
     def drive(self, obs_t: torch.Tensor) -> torch.Tensor | None:
         """The person's action while they hold the arm: joint torques that bring the fingertip to their target (the
-        operational-space controller of inform_utils/pusher_control.py, within the action limits); None otherwise."""
-        target = self.page.target
+        operational-space controller of inform_utils/pusher_control.py, within the action limits), or with --drive-by
+        object the planner's towards the object at their target; None otherwise."""
+        target, was = self.page.target, self.drove
         self.drove = self.page.driving and target is not None and not self.gone
         if not self.drove:
             return None
-        return torch.as_tensor(self.controller(obs_t.cpu().numpy(), target), dtype=torch.float32, device=obs_t.device)
+        if self.drive_by == "fingertip":
+            action = self.controller(obs_t.cpu().numpy(), target)
+        else:
+            if not was:  # a new take: the last plan was made for a state the agent has since moved on from
+                self.planner.replan()
+            action = self.planner(goal=target)
+        return torch.as_tensor(action, dtype=torch.float32, device=obs_t.device)
 
     def __call__(self, step: int, h_star: float, action=None) -> dict[int, float]:
         self.perfect_positives += int(h_star > 0)

@@ -60,12 +60,17 @@ class MPPIDemonstrator:
 
     def reset(self, seed: int | None = None) -> None:
         self.rng = np.random.default_rng(seed)
+        self.replan()
+
+    def replan(self) -> None:
+        """Forget the plan (all zeros): for a start from a state the last plan did not lead to."""
         self.plan = np.zeros((self.horizon, self.nu))
 
-    def __call__(self, obs: np.ndarray | None = None) -> np.ndarray:
-        """The action at the env's current state (obs is not read: the state is the simulator's)."""
+    def __call__(self, obs: np.ndarray | None = None, goal=None) -> np.ndarray:
+        """The action at the env's current state (obs is not read: the state is the simulator's), towards the goal's
+        body, or `goal` ((x, y) in the table's plane, at the goal's height) in its place."""
         candidates = np.clip(self.plan + self._noise(), -ACTION_LIMIT, ACTION_LIMIT)
-        costs = np.array([self.cost(actions) for actions in candidates])
+        costs = np.array([self.cost(actions, goal) for actions in candidates])
         weights = np.exp(-(costs - costs.min()) / (self.temperature * costs.std() + 1e-12))
         self.plan = np.tensordot(weights / weights.sum(), candidates, axes=1)
         action = self.plan[0].copy()
@@ -82,8 +87,8 @@ class MPPIDemonstrator:
         frac = (position - left)[None, :, None]
         return (1 - frac) * at_knots[:, left] + frac * at_knots[:, left + 1]
 
-    def cost(self, actions: np.ndarray) -> float:
-        """C of one action sequence, rolled out from the env's current state."""
+    def cost(self, actions: np.ndarray, goal=None) -> float:
+        """C of one action sequence, rolled out from the env's current state (g: `goal` in the goal's place)."""
         data, src = self.data, self.env_data
         data.time = src.time
         data.qpos[:], data.qvel[:], data.qacc_warmstart[:] = src.qpos, src.qvel, src.qacc_warmstart
@@ -92,6 +97,9 @@ class MPPIDemonstrator:
             data.ctrl[:] = action
             mujoco.mj_step(self.model, data, self.frame_skip)
             tips[h], objects[h] = data.xpos[self.tip], data.xpos[self.object]
-        dist = np.linalg.norm(objects - data.xpos[self.goal], axis=1)
+        g = data.xpos[self.goal].copy()
+        if goal is not None:
+            g[:2] = goal
+        dist = np.linalg.norm(objects - g, axis=1)
         near = np.linalg.norm(tips - objects, axis=1)
         return float(self.w_dist * dist.sum() + self.w_near * near.sum() + self.w_ctrl * np.square(actions).sum())

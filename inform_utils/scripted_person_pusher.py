@@ -179,8 +179,9 @@ class DrivingPerson:
     back (g) when the object is at the goal, or at the start of an episode it will not drive. Every point it aims at
     is off by `aim_noise` (metres, Gaussian, per axis) and lands on the map's pixel; a move of less than `small` is
     made by arrow presses (2 cm each, as many as the noisy difference rounds to), a bigger one by a click. It drives
-    every `every`-th episode it sees start (1: every one) and watches the others. Its rules are a script's, tuned by
-    nobody: its numbers are the page's reference numbers, not a person's."""
+    every `every`-th episode it sees start (1: every one) and watches the others. With the page's `--drive-by object`
+    (a planner pushes the object to the target) it aims the target at the goal itself. Its rules are a script's, tuned
+    by nobody: its numbers are the page's reference numbers, not a person's."""
 
     STANDOFF = 0.11  # metres behind the object's centre where the push starts (0.15 is out of the arm's reach at
     # the table's height at seed 1's fixed start, 0.76 m from the shoulder)
@@ -192,8 +193,10 @@ class DrivingPerson:
     PAST = 0.03  # the last aim: this far past the goal
     JUMP = 0.2  # the fingertip this much nearer its start pose than a look before: a reset (no drive is so fast)
 
-    def __init__(self, rng, aim_noise: float = 0.01, lead: float = 0.05, small: float = 0.05, every: int = 1):
+    def __init__(self, rng, aim_noise: float = 0.01, lead: float = 0.05, small: float = 0.05, every: int = 1,
+                 drive_by: str = "fingertip"):  # fmt: skip
         self.rng, self.aim_noise, self.lead, self.small, self.every = rng, aim_noise, lead, small, every
+        self.drive_by = drive_by  # the page's --drive-by: what the target moves
         self.tip_start = self.object_start = self.last = None
         self.episodes = 0  # the episodes seen start
         self.mine = self.pushing = False  # this episode is one it drives (until done); it is pushing now
@@ -229,7 +232,7 @@ class DrivingPerson:
         if distance < self.AT_GOAL:
             self.mine = False
             return [("release",)] if driving else []
-        wanted = self.aim(tip, obj, goal, distance)
+        wanted = goal if self.drive_by == "object" else self.aim(tip, obj, goal, distance)
         return self.move(wanted, target if driving else None)
 
     def aim(self, tip, obj, goal, distance) -> np.ndarray:
@@ -294,7 +297,8 @@ def drive_day(page, oracle, seed: int, args: Args, say) -> dict:
     is over; while the agent drives, answer y/n as teach_day does. What was given: answers, takes, clicks, arrow
     presses, releases."""
     rng = random.Random(seed)
-    person = DrivingPerson(np.random.default_rng(seed), args.aim_noise, args.push_lead, every=args.drive_every)
+    person = DrivingPerson(np.random.default_rng(seed), args.aim_noise, args.push_lead, every=args.drive_every,
+                           drive_by=run_flag(shlex.split(args.page_flags), "--drive-by", "fingertip"))  # fmt: skip
     given = dict.fromkeys(("yes", "no", "takes", "clicks", "arrow presses", "releases"), 0)
     keys, state = Keys(page, args.hold), wait_for_stream(page)
     while True:
@@ -461,19 +465,24 @@ def rehearse(args: Args) -> dict[int, list[float]]:
     its target. Per seed, `--rehearse` episodes from the run's fixed start (reset with the seed), the person driving
     each from its first look (the agent's steps before the take are idle here, not TAMER's) and, as at the page,
     letting go once the object is at the goal. What it leaves out: the page's frames and timing, arrow presses taking
-    time. The page holds a target beyond the arm's reach on it, and so does the rehearsal. Returns {seed: final
-    distances}."""
+    time. The page holds a target beyond the arm's reach on it, and so does the rehearsal. With `--drive-by object` in
+    --page-flags the planner (MPPI, seeded with the seed) pushes the object to the target, as at the page. Returns
+    {seed: final distances}."""
     import inform_sac_pusher as isp
     from browser_teacher import clamp_to_reach
     from inform_utils.pusher_control import FingertipController, arm_reach
+    from inform_utils.pusher_mpc import MPPIDemonstrator
 
     env_id = run_env_id(shlex.split(args.flags))
     env = isp.make_env(env_id, 0, contact=run_flag(shlex.split(args.flags), "--contact", "mujoco-2.3"))
     controller, reach = FingertipController(env.unwrapped.model), arm_reach(env.unwrapped.model)
+    drive_by = run_flag(shlex.split(args.page_flags), "--drive-by", "fingertip")
+    planner = MPPIDemonstrator(env)
     finals = {}
     for seed in args.seeds:
         rng, finals[seed] = np.random.default_rng(seed), []
-        person = DrivingPerson(np.random.default_rng(seed), args.aim_noise, args.push_lead)
+        person = DrivingPerson(np.random.default_rng(seed), args.aim_noise, args.push_lead, drive_by=drive_by)
+        planner.reset(seed)
         for _ in range(args.rehearse):
             obs, _ = env.reset(seed=seed)
             target, driving, acts, due, info = None, False, None, 0, {}
@@ -487,13 +496,18 @@ def rehearse(args: Args) -> dict[int, list[float]]:
                             for _ in range(presses):
                                 target = clamp_to_reach(np.array(target) + ARROW * np.array(KEYS[key]), reach)[0]
                         else:
+                            if not driving:  # a take: the planner starts afresh, as the page's does
+                                planner.replan()
                             target, driving = clamp_to_reach(from_pixel(*how), reach)[0], True
                     acts = None
                 if acts is None:  # look
                     view = {"tip": obs[14:16], "object": obs[17:19], "goal": obs[20:22]}
                     acts = person.decide(view, driving, None if target is None else list(target))
                     due = step + round(rng.uniform(*args.reaction) * args.pace)
-                action = controller(obs, target) if driving else np.zeros(env.action_space.shape)
+                if not driving:
+                    action = np.zeros(env.action_space.shape)
+                else:
+                    action = controller(obs, target) if drive_by == "fingertip" else planner(goal=target)
                 obs, _, _, _, info = env.step(action)
             finals[seed].append(abs(float(info["reward_dist"])))
         d = np.array(finals[seed])
