@@ -1085,11 +1085,12 @@ function drawMap() {
 let driving = Promise.resolve();
 function drive(kind, target) {  // take the arm at `target`, move its target, or give it back
   if (!canDrive() || (kind === "target" && !state.driving)) return;
+  const asked = target;  // sent as asked: the server holds it on the reach too, and records both
   if (target) [target, clampedHere] = toReach(target);
   myTarget = kind === "release" ? null : target;
   state.driving = kind !== "release";  // shown at once; the server's state follows
   if (target) state.target = target;
-  const body = JSON.stringify(kind === "release" ? {drive: kind} : {drive: kind, target});
+  const body = JSON.stringify(kind === "release" ? {drive: kind} : {drive: kind, target: asked});
   const post = () => fetch(url("/drive"), {method: "POST", headers: {"Content-Type": "application/json"}, body});
   driving = driving.then(post).catch(() => setOffline(true));  // in the order given
   render();

@@ -41,7 +41,7 @@ from typing import Literal
 import numpy as np
 import tyro
 
-from inform_utils.files import BadInput, cut, run_tool
+from inform_utils.files import BadInput, atomic, cut, run_tool, write_json
 from inform_utils.scripted_person_browser import Child, check_before_writing, each_seed, new_run, runs_in
 
 POLICIES = ("tamer", "inform", "bc", "sham", "core")  # the day's two, then the nights on the saved day
@@ -560,16 +560,18 @@ def main(args: Args) -> list[dict] | dict:
     oracle = load_oracle(shlex.split(args.flags))
     what = f"the scripted person teaches the Pusher, seeds {args.seeds}, at the page"
 
-    def run_one(seed, browser, work):
-        return run_seed(seed, args, browser, oracle, work, args.out_dir, say)
+    rows, command = [], "python -m inform_utils.scripted_person_pusher " + " ".join(sys.argv[1:])
 
-    rows = each_seed(args, "scripted_person_pusher_", what, run_one)
-    text = markdown(rows, "python -m inform_utils.scripted_person_pusher " + " ".join(sys.argv[1:]))
-    with open(os.path.join(args.out_dir, "table.md"), "w") as f:
-        f.write(text)
-    with open(os.path.join(args.out_dir, "table.json"), "w") as f:
-        json.dump(rows, f, indent=1)
-    say("\n" + text)
+    def run_one(seed, browser, work):  # the table after every seed: a stopped run keeps the seeds it finished
+        rows.append(run_seed(seed, args, browser, oracle, work, args.out_dir, say))
+        text = markdown(rows, command) + ("" if len(rows) == len(args.seeds) else
+                                         f"\n{len(rows)} of {len(args.seeds)} seeds so far\n")  # fmt: skip
+        with atomic(os.path.join(args.out_dir, "table.md")) as f:
+            f.write(text)
+        write_json(os.path.join(args.out_dir, "table.json"), rows)
+        return text
+
+    say("\n" + each_seed(args, "scripted_person_pusher_", what, run_one)[-1])
     return rows
 
 

@@ -2,7 +2,8 @@
 
 Without a browser: the arm's reach is where the controller gets the fingertip; the server holds a far target on it and
 says so; a take labels the agent's last k steps of the episode before it (RLIF's -1, in answers.jsonl) and
---no-driven-in-h keeps the driven rows out of H's batch while the labels reach H. In Chromium (skipping, saying why,
+--no-driven-in-h keeps the driven rows out of H's batch while the labels reach H; with --drive-by object the planner
+pushes the object to the person's target, not to the goal. In Chromium (skipping, saying why,
 without it): the page says the task, shows the keys before the first take, and holds a far target on the reach with a
 word; a second tab of the same browser only watches, a reload of the teaching tab still teaches, and a watcher shows
 one state. INFORM_WRITE_SCREENSHOT=1 saves the page mid-day to docs/figures/browser_pusher_page.png (docs/teachers.md).
@@ -165,6 +166,33 @@ def test_a_take_labels_the_agents_last_k_steps_and_driven_rows_stay_out_of_h(tmp
         assert bool(torch.isfinite(sham.pi_loss)) is finite, heard["driven_in_h"]
 
 
+def test_with_drive_by_object_the_planner_pushes_the_object_to_the_persons_target(tmp_path):
+    """--drive-by object (shared autonomy): a take at the second step with a target 15 cm beside the object, away from
+    the goal; after one episode the object is at the person's target (the planner's goal is theirs, not the env's),
+    every step driven and heard as a yes, and the day's record and the page's state say what the target moved."""
+    person = []
+
+    def before(step):
+        if step == 1:  # once the page streams
+            start = day.env.unwrapped._get_obs()[17:19]  # the object, at seed 1's fixed start
+            person.append(start + np.array([0.0, -0.15]))
+            status, _, _ = session.request("POST", "/drive", body={"drive": "take", "target": person[0].tolist()})
+            assert status == 200
+
+    day = PageDay(tmp_path, 100, before, pace=100.0, drive_by="object")
+    session = Session(day.teacher.page)
+    session.load()
+    assert session.state()["drive_by"] == "object"
+    day.run()
+    day.teacher.page.close()
+    obs = day.buffer.next_obs[99].numpy()  # the episode's last state (the env has since been reset)
+    assert np.linalg.norm(obs[17:19] - person[0]) < 0.03, (obs[17:19], person[0])
+    assert np.linalg.norm(obs[17:19] - obs[20:22]) > 0.25  # not the goal's way
+    assert day.buffer.driven[1:100].all() and (day.buffer.feedback[1:100] == 1).all()
+    (start,) = lines(day.teacher.page, "start")
+    assert start["drive_by"] == "object" and day.args.day_settings()["drive_by"] == "object"
+
+
 # ---------------------------------------------------------------------------------------------------------------------
 # in Chromium
 
@@ -175,7 +203,9 @@ def streaming(page):
 
 def test_the_page_says_the_task_and_holds_a_far_target_on_the_reach(new_page, tmp_path):
     """A newcomer's page: the task in a line, the keys before any take, the steps left and the pace; a click far
-    beyond the arm's reach takes the arm at the reach (at the server too), and the page says so in words."""
+    beyond the arm's reach takes the arm at the reach (at the server too, which records the click as asked: a page that
+    sent its own held point left the server unsure whether it was held, and its word went at the next poll), and the
+    page says so in words."""
     day = PageDay(tmp_path, 4000, pace=20.0)
     day.start()
     try:
@@ -183,6 +213,7 @@ def test_the_page_says_the_task_and_holds_a_far_target_on_the_reach(new_page, tm
         streaming(page)
         assert "push the white object onto the red goal" in page.text_content("#task") and page.is_visible("#task")
         assert page.is_visible("#keys") and "arrow keys" in page.text_content("#keys")  # before the first take
+        assert "its fingertip follows your target" in page.text_content("#keys")
         wait_until(lambda: "steps left in the day" in page.text_content("#pace"), "the steps left")
         assert page.get_attribute("#day", "data-clamped") == "0" and page.text_content("#clamp") == ""
         box = page.locator("#map").bounding_box()
@@ -200,6 +231,7 @@ def test_the_page_says_the_task_and_holds_a_far_target_on_the_reach(new_page, tm
         day.finish()
     (take,) = lines(day.teacher.page, "drive")
     assert take["drive"] == "take" and np.isclose(np.linalg.norm(np.array(take["target"]) - base), radius)
+    assert np.linalg.norm(np.array(take["asked"]) - base) > radius + 0.3  # the click, as asked: the far corner
 
 
 def test_a_second_tab_of_the_same_browser_only_watches(new_page, tmp_path):
@@ -249,3 +281,15 @@ def test_a_second_tab_of_the_same_browser_only_watches(new_page, tmp_path):
         day.finish()
     assert [r["drive"] for r in lines(day.teacher.page, "drive")] == ["take", "target"]
     assert not lines(day.teacher.page, "takeover")
+
+
+def test_with_drive_by_object_the_page_says_the_target_is_the_objects(new_page, tmp_path):
+    day = PageDay(tmp_path, 4000, pace=20.0, drive_by="object")
+    day.start()
+    try:
+        page = new_page(day.teacher.page.url)
+        streaming(page)
+        assert "it pushes the object to your target" in page.text_content("#keys")
+        assert "it pushes the object to your target" in page.text_content("#drive-status")
+    finally:
+        day.finish()

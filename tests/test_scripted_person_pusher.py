@@ -68,6 +68,19 @@ def test_a_rehearsal_without_the_page_pushes_the_object_nearer_the_goal():
     assert abs(still - start) < 0.01 and final < still - 0.01, (start, still, final)  # (the arm drifts from its reset)
 
 
+def test_with_the_pages_drive_by_object_the_person_aims_at_the_goal_and_the_planner_pushes_it_home():
+    """--page-flags "--drive-by object": the person's one click puts the target on the goal (no way round), and in the
+    rehearsal the planner pushes the object home from seed 1's fixed start, where the person's own push does not."""
+    person = spp.DrivingPerson(np.random.default_rng(0), aim_noise=0.0, drive_by="object")
+    start = {"tip": [0.82, -0.6], "object": [0.6, -0.2], "goal": [0.45, -0.05]}
+    ((what, *pixel),) = person.decide(start, driving=False, target=None)
+    assert what == "click" and np.allclose(spp.from_pixel(*pixel), start["goal"], atol=0.005)
+    args = spp.Args(seeds=[1], drive=True, rehearse=1, pace=5.0, page_flags="--drive-by object")
+    ((assisted,),) = spp.rehearse(args).values()
+    ((own,),) = spp.rehearse(spp.Args(seeds=[1], drive=True, rehearse=1, pace=5.0)).values()
+    assert assisted < 0.08 < own, (assisted, own)
+
+
 @pytest.mark.slow  # Chromium
 def test_the_driving_person_takes_the_arm_pushes_and_its_steps_are_marked(tmp_path, monkeypatch):
     why = browser_missing()
@@ -114,3 +127,27 @@ def test_the_driving_person_takes_the_arm_pushes_and_its_steps_are_marked(tmp_pa
     )
     assert reached.min() < start - 0.002, (start, reached.min())  # Pusher-v5's contact: millimetres in a short day
     assert (out / "table.md").exists() and "driven steps" in (out / "table.md").read_text()
+
+
+def test_a_stopped_run_keeps_the_table_of_the_seeds_it_finished(tmp_path, monkeypatch):
+    """The table is written after every seed: a run stopped during its second seed leaves the first one's row, saying
+    how many of the seeds it holds; a finished run's table says nothing of the kind."""
+    row = {"seed": 1, "answers": 3, "yes": 1}
+    monkeypatch.setattr(spp, "check_before_writing", lambda args: None)  # (it wants a browser; none is started)
+    monkeypatch.setattr(spp, "load_oracle", lambda flags: None)
+    monkeypatch.setattr(spp, "run_seed", lambda seed, *rest: {**row, "seed": seed})
+
+    def stopped_after_one(args, prefix, what, run_one):
+        os.makedirs(args.out_dir)
+        run_one(1, None, None)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(spp, "each_seed", stopped_after_one)
+    out = tmp_path / "out"
+    with pytest.raises(KeyboardInterrupt):
+        spp.main(spp.Args(seeds=[1, 2], out_dir=str(out)))
+    assert "| 1 | 3 | 1 |" in (out / "table.md").read_text() and "1 of 2 seeds so far" in (out / "table.md").read_text()
+    assert json.loads((out / "table.json").read_text()) == [row]
+    monkeypatch.setattr(spp, "each_seed", lambda args, p, w, run_one: [os.makedirs(args.out_dir), run_one(1, 0, 0)])
+    spp.main(spp.Args(seeds=[1], out_dir=str(tmp_path / "whole")))
+    assert "so far" not in (tmp_path / "whole" / "table.md").read_text()
