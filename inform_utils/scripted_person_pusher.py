@@ -92,6 +92,10 @@ class Args:
     push_lead: float = 0.05
     """with --drive: metres ahead of the object's centre, on its line to the goal, that the person keeps the target
     while pushing"""
+    take_after_noes: int = 0
+    """with --drive: 0, take the arm at the start of each episode it drives; N, watch the agent first, answering y/n,
+    and take the arm once it has said no N times in a row in the episode (a person who takes over when the agent goes
+    wrong, as RLIF's do)"""
 
 
 def judge(oracle, state: dict, alpha: tuple[float, float], steps: int) -> bool:
@@ -179,7 +183,8 @@ class DrivingPerson:
     back (g) when the object is at the goal, or at the start of an episode it will not drive. Every point it aims at
     is off by `aim_noise` (metres, Gaussian, per axis) and lands on the map's pixel; a move of less than `small` is
     made by arrow presses (2 cm each, as many as the noisy difference rounds to), a bigger one by a click. It drives
-    every `every`-th episode it sees start (1: every one) and watches the others. With the page's `--drive-by object`
+    every `every`-th episode it sees start (1: every one) and watches the others; with `take_after` N > 0 it takes the
+    arm in those only after N no answers in a row about the agent (`heard`). With the page's `--drive-by object`
     (a planner pushes the object to the target) it aims the target at the goal itself. Its rules are a script's, tuned
     by nobody: its numbers are the page's reference numbers, not a person's."""
 
@@ -194,9 +199,10 @@ class DrivingPerson:
     JUMP = 0.2  # the fingertip this much nearer its start pose than a look before: a reset (no drive is so fast)
 
     def __init__(self, rng, aim_noise: float = 0.01, lead: float = 0.05, small: float = 0.05, every: int = 1,
-                 drive_by: str = "fingertip"):  # fmt: skip
+                 drive_by: str = "fingertip", take_after: int = 0):  # fmt: skip
         self.rng, self.aim_noise, self.lead, self.small, self.every = rng, aim_noise, lead, small, every
         self.drive_by = drive_by  # the page's --drive-by: what the target moves
+        self.take_after, self.noes = take_after, 0  # take after this many no's in a row; the no's so far
         self.tip_start = self.object_start = self.last = None
         self.episodes = 0  # the episodes seen start
         self.mine = self.pushing = False  # this episode is one it drives (until done); it is pushing now
@@ -222,10 +228,10 @@ class DrivingPerson:
         also takes the arm) or [("arrows", key, presses), ...]."""
         if self.new_episode(view):
             self.episodes += 1
-            self.mine, self.pushing = (self.episodes - 1) % self.every == 0, False
-            if not self.mine:
+            self.mine, self.pushing, self.noes = (self.episodes - 1) % self.every == 0, False, 0
+            if not self.mine or self.take_after:  # not its episode, or it watches the agent first
                 return [("release",)] if driving else []
-        if not self.mine:
+        if not self.mine or (not driving and self.noes < self.take_after):  # not its episode, or the agent's so far
             return []
         tip, obj, goal = (np.array(view[k]) for k in ("tip", "object", "goal"))
         distance = np.linalg.norm(goal - obj)
@@ -234,6 +240,10 @@ class DrivingPerson:
             return [("release",)] if driving else []
         wanted = goal if self.drive_by == "object" else self.aim(tip, obj, goal, distance)
         return self.move(wanted, target if driving else None)
+
+    def heard(self, yes: bool) -> None:
+        """The person's own answer about the agent's step: a yes ends a run of no's."""
+        self.noes = 0 if yes else self.noes + 1
 
     def aim(self, tip, obj, goal, distance) -> np.ndarray:
         """The point the person wants the target at: behind the object, round it, or ahead of it on the push."""
@@ -298,7 +308,8 @@ def drive_day(page, oracle, seed: int, args: Args, say) -> dict:
     presses, releases."""
     rng = random.Random(seed)
     person = DrivingPerson(np.random.default_rng(seed), args.aim_noise, args.push_lead, every=args.drive_every,
-                           drive_by=run_flag(shlex.split(args.page_flags), "--drive-by", "fingertip"))  # fmt: skip
+                           drive_by=run_flag(shlex.split(args.page_flags), "--drive-by", "fingertip"),
+                           take_after=args.take_after_noes)  # fmt: skip
     given = dict.fromkeys(("yes", "no", "takes", "clicks", "arrow presses", "releases"), 0)
     keys, state = Keys(page, args.hold), wait_for_stream(page)
     while True:
@@ -317,6 +328,7 @@ def drive_day(page, oracle, seed: int, args: Args, say) -> dict:
             time.sleep(rng.uniform(*args.reaction))
             keys.answer("y" if yes else "n")
             given["yes" if yes else "no"] += 1
+            person.heard(yes)
             if (given["yes"] + given["no"]) % 60 == 0:
                 say(f"[seed {seed}] day: step {state['step']}, " + ", ".join(f"{k} {v}" for k, v in given.items()))
         time.sleep(max(0.0, args.period - args.reaction[1]))
@@ -527,12 +539,15 @@ def check_args(args: Args) -> None:
 
     if args.rehearse is not None and not args.drive:
         raise BadInput("--rehearse rehearses the driving person's push: it needs --drive")
+    if args.take_after_noes and not args.drive:
+        raise BadInput("--take-after-noes is when the driving person takes the arm: it needs --drive")
     if args.rehearse is not None and args.rehearse < 1:
         raise BadInput(f"--rehearse must be >= 1 episode, got {args.rehearse}")
     if not args.seeds or min(args.seeds) < 0:
         raise BadInput(f"--seeds must be one or more seeds >= 0, got {' '.join(map(str, args.seeds)) or 'none'}")
-    if min(args.steps, args.drive_every) < 1:
-        raise BadInput(f"--steps and --drive-every must be >= 1, got {args.steps} and {args.drive_every}")
+    if min(args.steps, args.drive_every) < 1 or args.take_after_noes < 0:
+        raise BadInput(f"--steps and --drive-every must be >= 1 and --take-after-noes >= 0, got {args.steps}, "
+                       f"{args.drive_every} and {args.take_after_noes}")  # fmt: skip
     if not (0 < args.pace <= 100 and 0 < args.period < math.inf and 0 < args.timeout < math.inf):  # the page's pace
         raise BadInput(f"--pace must be in (0, 100] steps a second, --period and --timeout above 0 seconds, got "
                        f"{args.pace}, {args.period}, {args.timeout}")  # fmt: skip

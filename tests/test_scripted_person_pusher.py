@@ -31,6 +31,23 @@ def test_the_map_pixels_round_trip_and_the_person_goes_round_an_object_in_its_wa
     assert person.decide(at_goal, driving=True, target=[0.45, -0.05]) == [("release",)]
 
 
+def test_a_person_who_takes_when_the_agent_goes_wrong_watches_until_its_nth_no_in_a_row():
+    """--take-after-noes 3: at an episode's start the person watches; a yes ends a run of no's; the third no in a row
+    has it take the arm at its next look; at the next episode's start it gives the arm back and watches again."""
+    person = spp.DrivingPerson(np.random.default_rng(0), aim_noise=0.0, take_after=3)
+    start = {"tip": [0.82, -0.6], "object": [0.6, -0.2], "goal": [0.45, -0.05]}
+    assert person.decide(start, driving=False, target=None) == []
+    for yes in (False, False, True, False, False):
+        person.heard(yes)
+        assert person.decide(start, driving=False, target=None) == []
+    person.heard(False)
+    assert person.decide(start, driving=False, target=None)[0][0] == "click"
+    back = {"tip": [0.82, -0.6], "object": [0.6, -0.2], "goal": [0.45, -0.05]}  # reset: the object back at its start
+    person.decide({**start, "object": [0.5, -0.1]}, driving=True, target=[0.5, -0.1])
+    assert person.decide(back, driving=True, target=[0.5, -0.1]) == [("release",)] and person.noes == 0
+    assert person.decide(back, driving=False, target=None) == []
+
+
 def test_a_holding_person_keeps_its_key_down_from_look_to_look_and_changes_it_with_its_answer():
     class Keyboard:
         def __init__(self):
