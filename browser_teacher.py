@@ -1097,8 +1097,10 @@ function drive(kind, target) {  // take the arm at `target`, move its target, or
 }
 // the arrow keys: the target 2 cm as the map shows it (right: +y; up: -x)
 const ARROWS = {ArrowRight: [0, 0.02], ArrowLeft: [0, -0.02], ArrowUp: [-0.02, 0], ArrowDown: [0.02, 0]};
+// what a take without a point holds: the fingertip where it is, or with drive_by "object" the object where it is
+function here() { const m = tableMap(); return m && (state.drive_by === "object" ? m.object : m.tip); }
 function nudge(dx, dy) {
-  const t = myTarget || state.target || (tableMap() || {}).tip;
+  const t = myTarget || state.target || here();
   if (t) drive("target", [t[0] + dx, t[1] + dy]);
 }
 
@@ -1265,7 +1267,7 @@ $("end").addEventListener("click", async (e) => {
 });
 $("take").addEventListener("click", (e) => {
   e.currentTarget.blur();
-  if (tableMap()) drive("take", tableMap().tip);
+  if (tableMap()) drive("take", here());
 });
 $("release").addEventListener("click", (e) => { e.currentTarget.blur(); drive("release"); });
 $("map").addEventListener("click", (e) => {
@@ -1278,7 +1280,7 @@ document.addEventListener("keydown", (e) => {
   const step = ARROWS[e.key];
   if (step && state && state.driving) { e.preventDefault(); nudge(...step); return; }
   if (e.repeat) return;
-  if ((e.key === "t" || e.key === "T") && tableMap() && !state.driving) { drive("take", tableMap().tip); return; }
+  if ((e.key === "t" || e.key === "T") && tableMap() && !state.driving) { drive("take", here()); return; }
   if ((e.key === "g" || e.key === "G") && state && state.driving) { drive("release"); return; }
   const label = {y: "yes", Y: "yes", n: "no", N: "no", " ": "none"}[e.key];
   if (label) { e.preventDefault(); answer(label); }

@@ -122,7 +122,8 @@ class PageTeacher:
     """The person at the page, with the simulated Teacher's interface: called once a step with the oracle's perfect
     answer h* (kept for the record only) and the action; shows the step and returns {step: label} of the answers
     that arrived since. `gone`: the person ended the day, closed the page, or spent the budget. `drive`: while the
-    person holds the arm, the step's action is theirs (the fingertip controller towards their target), and H hears
+    person holds the arm, the step's action is theirs (the fingertip controller towards their target, or with
+    --drive-by object the planner's, pushing the object towards it), and H hears
     it as a yes: a person's own action is what they would have answered yes to (docs/protocol.md). With
     --takeover-steps, a take also labels the agent's last steps before it (RLIF's signal; `labelled`)."""
 

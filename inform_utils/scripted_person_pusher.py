@@ -14,6 +14,8 @@ With --drive the scripted person also takes the arm (issue 53): at each episode'
 clicks the map to take the arm and pushes the object to the goal with the target (clicks for big moves, arrow keys for
 small ones), a reaction time from each look at the map to what it does, its aim off by --aim-noise; it gives the arm
 back when the object is at the goal, and answers y/n as above while the agent drives (DrivingPerson says its rules).
+With --take-after-noes N it watches the agent first and takes the arm only after N no's in a row in the episode; with
+"--page-flags=--drive-by object" its target is the goal, and the page's planner pushes the object there.
 Its rules are a script's: its numbers are the page's reference numbers, not a person's. The table adds its takes, the
 steps it drove and the day's episodes and successful ones. With --hold the person keeps its y or n down from one look
 to the next (the page answers again every 250 ms while a key is down), and the table adds the page's count.
@@ -184,7 +186,8 @@ class DrivingPerson:
     is off by `aim_noise` (metres, Gaussian, per axis) and lands on the map's pixel; a move of less than `small` is
     made by arrow presses (2 cm each, as many as the noisy difference rounds to), a bigger one by a click. It drives
     every `every`-th episode it sees start (1: every one) and watches the others; with `take_after` N > 0 it takes the
-    arm in those only after N no answers in a row about the agent (`heard`). With the page's `--drive-by object`
+    arm in those only after N no answers in a row about the agent (`heard`), and gives it back at each episode's start
+    to watch again. With the page's `--drive-by object`
     (a planner pushes the object to the target) it aims the target at the goal itself. Its rules are a script's, tuned
     by nobody: its numbers are the page's reference numbers, not a person's."""
 
@@ -463,10 +466,11 @@ def seed_row(seed: int, given: dict, summaries: dict, held: int | None = None, l
 
 
 def markdown(rows: list[dict], command: str) -> str:
-    keys = list(rows[0])
-    mean = {k: round(sum(r[k] for r in rows) / len(rows), 4) for k in keys if k != "seed"}
+    """The table; a column some seeds lack (a count of what did not happen that day) is "-" there, out of its mean."""
+    keys = list(dict.fromkeys(k for r in rows for k in r))
+    mean = {k: round(float(np.mean([r[k] for r in rows if k in r])), 4) for k in keys if k != "seed"}
     lines = [f"`{command}`", "", "| " + " | ".join(keys) + " |", "|" + " --- |" * len(keys)]
-    lines += ["| " + " | ".join(str(r[k]) for k in keys) + " |" for r in rows]
+    lines += ["| " + " | ".join(str(r.get(k, "-")) for k in keys) + " |" for r in rows]
     lines.append("| mean | " + " | ".join(str(mean[k]) for k in keys[1:]) + " |")
     return "\n".join(lines) + "\n"
 
@@ -539,15 +543,15 @@ def check_args(args: Args) -> None:
 
     if args.rehearse is not None and not args.drive:
         raise BadInput("--rehearse rehearses the driving person's push: it needs --drive")
-    if args.take_after_noes and not args.drive:
-        raise BadInput("--take-after-noes is when the driving person takes the arm: it needs --drive")
+    if args.take_after_noes < 0 or (args.take_after_noes and (not args.drive or args.rehearse is not None)):
+        raise BadInput(f"--take-after-noes must be >= 0, and is when the driving person takes the arm at the page: it "
+                       f"needs --drive and no --rehearse, got {args.take_after_noes}")  # fmt: skip
     if args.rehearse is not None and args.rehearse < 1:
         raise BadInput(f"--rehearse must be >= 1 episode, got {args.rehearse}")
     if not args.seeds or min(args.seeds) < 0:
         raise BadInput(f"--seeds must be one or more seeds >= 0, got {' '.join(map(str, args.seeds)) or 'none'}")
-    if min(args.steps, args.drive_every) < 1 or args.take_after_noes < 0:
-        raise BadInput(f"--steps and --drive-every must be >= 1 and --take-after-noes >= 0, got {args.steps}, "
-                       f"{args.drive_every} and {args.take_after_noes}")  # fmt: skip
+    if min(args.steps, args.drive_every) < 1:
+        raise BadInput(f"--steps and --drive-every must be >= 1, got {args.steps} and {args.drive_every}")
     if not (0 < args.pace <= 100 and 0 < args.period < math.inf and 0 < args.timeout < math.inf):  # the page's pace
         raise BadInput(f"--pace must be in (0, 100] steps a second, --period and --timeout above 0 seconds, got "
                        f"{args.pace}, {args.period}, {args.timeout}")  # fmt: skip
@@ -561,6 +565,10 @@ def check_args(args: Args) -> None:
             shlex.split(flags)
         except ValueError as e:  # an unclosed quote
             raise BadInput(f"{name} {cut(repr(flags), 200)}: {e} (one string of a command line's words)") from None
+    drive_by = run_flag(shlex.split(args.page_flags), "--drive-by", "fingertip")
+    if drive_by not in ("fingertip", "object") or "--drive-by" in " ".join(shlex.split(args.flags)):
+        raise BadInput(f"--page-flags: --drive-by must be fingertip or object, got {cut(drive_by, 40)} (a page flag: "
+                       "in --page-flags, not --flags)")  # fmt: skip
     env_id = run_env_id(shlex.split(args.flags))
     if env_id not in isp.PUSHER_IDS:
         raise BadInput(f"--flags: --env-id {cut(env_id, 80)}: the person pushes Pusher's object at the page; pass one "

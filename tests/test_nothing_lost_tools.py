@@ -290,6 +290,11 @@ def test_cut_keeps_names_whole_and_says_how_long():
         ({"drive": True, "rehearse": 1, "pace": 0.0}, r"--pace must be in \(0, 100\] steps a second"),
         ({"drive": True, "rehearse": 1, "reaction": (-5.0, -1.0)}, "--reaction must be LOW HIGH seconds with 0 <="),
         ({"drive": True, "rehearse": 1, "reaction": (0.8, 0.3)}, "--reaction must be LOW HIGH seconds with 0 <="),
+        ({"drive": True, "take_after_noes": -1}, "--take-after-noes must be >= 0, .* got -1"),
+        ({"take_after_noes": 3}, "--take-after-noes .* needs --drive and no --rehearse, got 3"),
+        ({"drive": True, "rehearse": 1, "take_after_noes": 3}, "--take-after-noes .* needs --drive and no --rehearse"),
+        ({"drive": True, "page_flags": "--drive-by Object"}, "--drive-by must be fingertip or object, got Object"),
+        ({"drive": True, "flags": "--drive-by object"}, "--drive-by .* in --page-flags, not --flags"),
     ],
 )  # fmt: skip
 def test_the_scripted_person_checks_its_flags_first(monkeypatch, flags, phrase):

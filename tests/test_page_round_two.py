@@ -284,6 +284,8 @@ def test_a_second_tab_of_the_same_browser_only_watches(new_page, tmp_path):
 
 
 def test_with_drive_by_object_the_page_says_the_target_is_the_objects(new_page, tmp_path):
+    """With --drive-by object the page says a target is where the object goes, and `t` takes the arm with the target
+    on the object (the planner holds it there), not on the fingertip (it would push the object towards the arm)."""
     day = PageDay(tmp_path, 4000, pace=20.0, drive_by="object")
     day.start()
     try:
@@ -291,5 +293,10 @@ def test_with_drive_by_object_the_page_says_the_target_is_the_objects(new_page, 
         streaming(page)
         assert "it pushes the object to your target" in page.text_content("#keys")
         assert "it pushes the object to your target" in page.text_content("#drive-status")
+        seen = page.evaluate("state.info._map")
+        page.keyboard.press("t")
+        wait_until(lambda: day.teacher.page.target is not None, "the take at the server")
+        target = np.array(day.teacher.page.target)
+        assert np.linalg.norm(target - seen["object"]) < 0.02, (target, seen)
     finally:
         day.finish()
