@@ -138,7 +138,7 @@ def test_the_verdicts_on_the_night_are_the_studys_tables():
 
 def test_the_map_and_the_persons_arm_day_are_said_as_they_ran():
     """The maze map's bullet, from night_map's own judgement of the committed cells; the person's count, from the
-    five days of results/browser_pusher_takeover_v5/drive."""
+    five days of results/browser_pusher_takeover_v5/drive, and the planner's days beside them."""
     from inform_utils import night_map
 
     text = readme()
@@ -152,3 +152,9 @@ def test_the_map_and_the_persons_arm_day_are_said_as_they_ran():
     assert said and (int(said[1]), int(said[2]), int(said[3]), passed["sham"]) == (len(cells), nights, passed["bc"], 0)
     count = sum(d["eval/inform_success_rate"] >= 1 for d in runs("browser_pusher_takeover_v5/drive"))  # seeds 1-5
     assert f"INFORM succeeds at the fixed start on {count} of 5 seeds, the goal 4" in text
+    assisted = []  # --drive-by object: the days that ran (seed 5 did not)
+    for path in sorted(glob.glob(os.path.join(REPO, "results", "browser_pusher_takeover_v5", "drive_by_object", "*",
+                                              "summary.json"))):  # fmt: skip
+        with open(path) as f:
+            assisted.append(json.load(f)["eval/inform_success_rate"] >= 1)
+    assert f"and on {sum(assisted)} of {len(assisted)} when a planner pushes where the person points" in text
