@@ -136,20 +136,32 @@ def test_the_verdicts_on_the_night_are_the_studys_tables():
     assert f"| Pusher-v5 | 5000 | default (5e-06) | 5 | +{said[3]} m, p = {said[4]}," in v5
 
 
-def test_the_map_and_the_persons_arm_day_are_said_as_they_ran():
-    """The maze map's bullet, from night_map's own judgement of the committed cells; the person's count, from the
-    five days of results/browser_pusher_takeover_v5/drive, and the planner's days beside them."""
+def judged(map_dir: str, **flags) -> tuple[list[dict], int]:
+    """night_map's own judgement of a map's committed cells, and how many nights the cells hold."""
     from inform_utils import night_map
 
+    args = night_map.Args(map_dir=os.path.join(REPO, "results", map_dir), **flags)
+    names = sorted(os.path.basename(p) for p in glob.glob(os.path.join(args.map_dir, "nights_*")))
+    nights = len(glob.glob(os.path.join(args.map_dir, "nights_*", "*", "*__sleep*", "summary.json")))
+    return [night_map.judge(args, name) for name in names], nights
+
+
+def test_the_map_and_the_persons_arm_day_are_said_as_they_ran():
+    """The maps' bullet, from night_map's own judgement of the committed cells (the Pusher's expert from its cached
+    tests); the person's count, from the five days of results/browser_pusher_takeover_v5/drive, and the planner's days
+    beside them."""
     text = readme()
     said = re.search(r"the maze: (\d+) qualities of day, (\d+) nights; .*? the night beats cloning from held-out start "
                      r"cells in (\d+) cells \(p < 0\.05\), TAMER's update continued in none", text)  # fmt: skip
-    args = night_map.Args(map_dir=os.path.join(REPO, "results", "map_maze"), script="inform_dqn_gridworld.py")
-    names = sorted(os.path.basename(p) for p in glob.glob(os.path.join(args.map_dir, "nights_*")))
-    cells = [night_map.judge(args, name) for name in names]
-    nights = len(glob.glob(os.path.join(args.map_dir, "nights_*", "*", "*__sleep*", "summary.json")))
+    cells, nights = judged("map_maze", script="inform_dqn_gridworld.py")
     passed = {c: sum(cell["nights"]["default"]["tests"][c]["passes"] for cell in cells) for c in ("bc", "sham")}
     assert said and (int(said[1]), int(said[2]), int(said[3]), passed["sham"]) == (len(cells), nights, passed["bc"], 0)
+    said = re.search(r"the paper's Pusher-v4: (\d+) lengths of day, (\d+) nights; .*? on the Pusher neither the night "
+                     r"nor DWBC beats either control in any cell", text)  # fmt: skip
+    cells, nights = judged("map_v4", run_expert=False)
+    tests = [test for cell in cells for night in cell["nights"].values() for test in night["tests"].values()]
+    assert said and (int(said[1]), int(said[2]), sum(t["passes"] for t in tests)) == (len(cells), nights, 0)
+    assert all(set(cell["nights"]) == {"default", "dwbc"} for cell in cells)
     count = sum(d["eval/inform_success_rate"] >= 1 for d in runs("browser_pusher_takeover_v5/drive"))  # seeds 1-5
     assert f"INFORM succeeds at the fixed start on {count} of 5 seeds, the goal 4" in text
     assisted = []  # --drive-by object: the days that ran (seed 5 did not)
