@@ -129,7 +129,7 @@ class PageTeacher:
 
     def __init__(self, args: Args, env, run_dir: str):
         import browser_teacher
-        from inform_utils.pusher_control import FingertipController, arm_reach
+        from inform_utils.pusher_control import PersonHand, arm_reach
 
         base, radius = arm_reach(env.unwrapped.model)  # a target beyond it: the fingertip would stop short, above
         host, port = browser_teacher.host_and_port(args.host)
@@ -147,13 +147,7 @@ class PageTeacher:
         self.frame = None
         self.credited: dict[int, tuple[float, float]] = {}  # step: (sum of weight * answer, sum of weights)
         self.positives = self.perfect_positives = 0
-        self.controller, self.drove = FingertipController(env.unwrapped.model), False
-        if args.drive_by == "object":  # the planner pushes the object to the person's target, from the day's state
-            from inform_utils.pusher_mpc import MPPIDemonstrator
-
-            self.planner = MPPIDemonstrator(env)
-            self.planner.reset(args.seed)
-        self.drive_by = args.drive_by
+        self.hand, self.drove = PersonHand(env, args.drive_by, args.seed), False
         self.takeover_steps, self.takeover_label = args.takeover_steps, args.takeover_label
         # Pusher never terminates: an episode starts every this many steps (forward_phase resets at its TimeLimit)
         self.episode_steps = env.get_wrapper_attr("_max_episode_steps")
@@ -177,13 +171,9 @@ class PageTeacher:
         self.drove = self.page.driving and target is not None and not self.gone
         if not self.drove:
             return None
-        if self.drive_by == "fingertip":
-            action = self.controller(obs_t.cpu().numpy(), target)
-        else:
-            if not was:  # a new take: the last plan was made for a state the agent has since moved on from
-                self.planner.replan()
-            action = self.planner(goal=target)
-        return torch.as_tensor(action, dtype=torch.float32, device=obs_t.device)
+        if not was:  # a new take
+            self.hand.take()
+        return torch.as_tensor(self.hand(obs_t.cpu().numpy(), target), dtype=torch.float32, device=obs_t.device)
 
     def __call__(self, step: int, h_star: float, action=None) -> dict[int, float]:
         self.perfect_positives += int(h_star > 0)

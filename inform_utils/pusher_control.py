@@ -157,6 +157,27 @@ def arm_reach(model: mujoco.MjModel, height: float = WORK_HEIGHT) -> tuple[np.nd
     return pan[:2].copy(), float(np.linalg.norm((lift - pan)[:2]) + math.sqrt(arm**2 - (lift[2] - height) ** 2))
 
 
+class PersonHand:
+    """A person's hand on the arm at the page (browser_pusher's --drive-by): the action that takes their target, in
+    the table's plane, to the fingertip (FingertipController), or with drive_by "object" to the object (MPPI on the
+    env's own model and state, pushing it there: shared autonomy). `take()` at each take: the planner starts afresh."""
+
+    def __init__(self, env: gym.Env, drive_by: str = "fingertip", seed: int | None = None):
+        self.drive_by = drive_by
+        if drive_by == "fingertip":
+            self.controller = FingertipController(env.unwrapped.model)
+        else:
+            self.planner = MPPIDemonstrator(env)
+            self.planner.reset(seed)
+
+    def take(self) -> None:
+        if self.drive_by == "object":  # the last plan was made for a state the agent has since moved on from
+            self.planner.replan()
+
+    def __call__(self, obs: np.ndarray, target) -> np.ndarray:
+        return self.controller(obs, target) if self.drive_by == "fingertip" else self.planner(goal=target)
+
+
 # ---------------------------------------------------------------------------------------------------------------------
 # ALGO LOGIC: the pushing demonstrator
 class PushingDemonstrator:

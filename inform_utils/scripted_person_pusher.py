@@ -311,8 +311,7 @@ def drive_day(page, oracle, seed: int, args: Args, say) -> dict:
     presses, releases."""
     rng = random.Random(seed)
     person = DrivingPerson(np.random.default_rng(seed), args.aim_noise, args.push_lead, every=args.drive_every,
-                           drive_by=run_flag(shlex.split(args.page_flags), "--drive-by", "fingertip"),
-                           take_after=args.take_after_noes)  # fmt: skip
+                           drive_by=page_drive_by(args), take_after=args.take_after_noes)  # fmt: skip
     given = dict.fromkeys(("yes", "no", "takes", "clicks", "arrow presses", "releases"), 0)
     keys, state = Keys(page, args.hold), wait_for_stream(page)
     while True:
@@ -376,6 +375,11 @@ def run_flag(run_flags: list[str], flag: str, default: str) -> str:
 
 def run_env_id(run_flags: list[str]) -> str:
     return run_flag(run_flags, "--env-id", "Pusher-v5")
+
+
+def page_drive_by(args: Args) -> str:
+    """The page's --drive-by in --page-flags: what the person's target moves."""
+    return run_flag(shlex.split(args.page_flags), "--drive-by", "fingertip")
 
 
 def load_oracle(run_flags: list[str]):
@@ -486,19 +490,15 @@ def rehearse(args: Args) -> dict[int, list[float]]:
     {seed: final distances}."""
     import inform_sac_pusher as isp
     from browser_teacher import clamp_to_reach
-    from inform_utils.pusher_control import FingertipController, arm_reach
-    from inform_utils.pusher_mpc import MPPIDemonstrator
+    from inform_utils.pusher_control import PersonHand, arm_reach
 
     env_id = run_env_id(shlex.split(args.flags))
     env = isp.make_env(env_id, 0, contact=run_flag(shlex.split(args.flags), "--contact", "mujoco-2.3"))
-    controller, reach = FingertipController(env.unwrapped.model), arm_reach(env.unwrapped.model)
-    drive_by = run_flag(shlex.split(args.page_flags), "--drive-by", "fingertip")
-    planner = MPPIDemonstrator(env)
-    finals = {}
+    reach, drive_by, finals = arm_reach(env.unwrapped.model), page_drive_by(args), {}
     for seed in args.seeds:
         rng, finals[seed] = np.random.default_rng(seed), []
         person = DrivingPerson(np.random.default_rng(seed), args.aim_noise, args.push_lead, drive_by=drive_by)
-        planner.reset(seed)
+        hand = PersonHand(env, drive_by, seed)
         for _ in range(args.rehearse):
             obs, _ = env.reset(seed=seed)
             target, driving, acts, due, info = None, False, None, 0, {}
@@ -512,18 +512,15 @@ def rehearse(args: Args) -> dict[int, list[float]]:
                             for _ in range(presses):
                                 target = clamp_to_reach(np.array(target) + ARROW * np.array(KEYS[key]), reach)[0]
                         else:
-                            if not driving:  # a take: the planner starts afresh, as the page's does
-                                planner.replan()
+                            if not driving:  # a take, as the page's
+                                hand.take()
                             target, driving = clamp_to_reach(from_pixel(*how), reach)[0], True
                     acts = None
                 if acts is None:  # look
                     view = {"tip": obs[14:16], "object": obs[17:19], "goal": obs[20:22]}
                     acts = person.decide(view, driving, None if target is None else list(target))
                     due = step + round(rng.uniform(*args.reaction) * args.pace)
-                if not driving:
-                    action = np.zeros(env.action_space.shape)
-                else:
-                    action = controller(obs, target) if drive_by == "fingertip" else planner(goal=target)
+                action = hand(obs, target) if driving else np.zeros(env.action_space.shape)
                 obs, _, _, _, info = env.step(action)
             finals[seed].append(abs(float(info["reward_dist"])))
         d = np.array(finals[seed])
@@ -565,7 +562,7 @@ def check_args(args: Args) -> None:
             shlex.split(flags)
         except ValueError as e:  # an unclosed quote
             raise BadInput(f"{name} {cut(repr(flags), 200)}: {e} (one string of a command line's words)") from None
-    drive_by = run_flag(shlex.split(args.page_flags), "--drive-by", "fingertip")
+    drive_by = page_drive_by(args)
     if drive_by not in ("fingertip", "object") or "--drive-by" in " ".join(shlex.split(args.flags)):
         raise BadInput(f"--page-flags: --drive-by must be fingertip or object, got {cut(drive_by, 40)} (a page flag: "
                        "in --page-flags, not --flags)")  # fmt: skip
