@@ -1034,6 +1034,8 @@ async function flush() {  // send the kept answers, oldest first, until the serv
 // down the map, y to the right
 const MAP = {x0: -0.1, x1: 0.9, y0: -0.8, y1: 0.2};
 let myTarget = null;  // the target this page last sent, while it holds the arm (a poll's reply may lag behind it)
+let myDriving = false;  // whether this page last took the arm or gave it back
+let drivesSent = 0, drivesDone = 0;  // this page's drive posts: a poll's reply may predate those not yet answered
 let clampedHere = false;  // this page moved its newest target onto the arm's reach
 function toMap(p) {
   const c = $("map");
@@ -1088,11 +1090,12 @@ function drive(kind, target) {  // take the arm at `target`, move its target, or
   const asked = target;  // sent as asked: the server holds it on the reach too, and records both
   if (target) [target, clampedHere] = toReach(target);
   myTarget = kind === "release" ? null : target;
-  state.driving = kind !== "release";  // shown at once; the server's state follows
+  myDriving = state.driving = kind !== "release";  // shown at once; the server's state follows
   if (target) state.target = target;
   const body = JSON.stringify(kind === "release" ? {drive: kind} : {drive: kind, target: asked});
   const post = () => fetch(url("/drive"), {method: "POST", headers: {"Content-Type": "application/json"}, body});
-  driving = driving.then(post).catch(() => setOffline(true));  // in the order given
+  drivesSent += 1;
+  driving = driving.then(post).catch(() => setOffline(true)).finally(() => { drivesDone += 1; });  // in the order given
   render();
 }
 // the arrow keys: the target 2 cm as the map shows it (right: +y; up: -x)
@@ -1236,6 +1239,7 @@ async function poll() {  // the state, long-polled: each reply comes when someth
   let version = null;
   while (true) {
     let r;
+    const sent = drivesSent, settled = drivesDone === drivesSent;  // this request sees every drive the server answered
     try {
       r = await fetch(url("/state", version === null ? {} : {since: version}), {cache: "no-store"});
     } catch (e) {
@@ -1247,6 +1251,10 @@ async function poll() {  // the state, long-polled: each reply comes when someth
     if (r.status === 403) { $("progress").textContent = "Not this run's address: use the one printed."; return; }
     if (!r.ok) { setOffline(true); await sleep(1000); continue; }
     state = await r.json();
+    if (!settled || sent !== drivesSent) {  // it may predate this page's take or give-back: the page's own holds
+      state.driving = myDriving;
+      if (myDriving && myTarget) state.target = myTarget;
+    }
     receivedAt = Date.now();
     version = state.version;
     setOffline(false);

@@ -184,16 +184,28 @@ class Stop:
             raise Stopped
 
 
+class Interrupted(BaseException):
+    """SIGTERM or SIGHUP in a tool without `stops`, raised where it is as Ctrl-C's KeyboardInterrupt is, so that the
+    tool's `finally` and `except BaseException` end what it started (a day's run in its own session, a browser)."""
+
+
+def interrupt(signum, frame) -> None:
+    raise Interrupted(signum)
+
+
 def run_tool(main, *args, stops: bool = False):
     """A tool's command line: main(*args), whose return value, if an int, is the exit code (else 0). BadInput (BadFile
     too) is one line `error: ...` on stderr and exit 2. With `stops` a stop signal is recorded and main stops at its
     next Stop.check(): one line, exit 128 + the signal (130 SIGINT, 143 SIGTERM); one that comes after main's last
-    check (during its save) lets the save finish whole, then the same exit. Without `stops`, Ctrl-C is one line and
-    exit 130 too."""
-    if stops:
-        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-            if signal.getsignal(sig) is not signal.SIG_IGN:  # nohup, `&`: an ignored signal stays ignored
-                signal.signal(sig, Stop.record)
+    check (during its save) lets the save finish whole, then the same exit. Without `stops`, Ctrl-C, SIGTERM and
+    SIGHUP are raised where main is (its writes are whole or not made): one line and exit 128 + the signal too."""
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        if signal.getsignal(sig) is signal.SIG_IGN:  # nohup, `&`: an ignored signal stays ignored
+            continue
+        if stops:
+            signal.signal(sig, Stop.record)
+        elif sig != signal.SIGINT:  # Python raises KeyboardInterrupt for SIGINT itself
+            signal.signal(sig, interrupt)
     try:
         code = main(*args)
     except BadInput as e:
@@ -203,9 +215,10 @@ def run_tool(main, *args, stops: bool = False):
         print(f"interrupted ({signal.Signals(Stop.signum).name}) before the work was done; nothing was written",
               file=sys.stderr)  # fmt: skip
         sys.exit(128 + Stop.signum)
-    except KeyboardInterrupt:  # a tool without `stops` (its writes are whole or not made): Python's own Ctrl-C
-        print("interrupted (SIGINT) before the work was done", file=sys.stderr)
-        sys.exit(130)
+    except (KeyboardInterrupt, Interrupted) as e:
+        signum = e.args[0] if isinstance(e, Interrupted) else signal.SIGINT
+        print(f"interrupted ({signal.Signals(signum).name}) before the work was done", file=sys.stderr)
+        sys.exit(128 + signum)
     if Stop.signum is not None:
         print(f"{signal.Signals(Stop.signum).name} received at the end; what was written is whole", file=sys.stderr)
         sys.exit(128 + Stop.signum)

@@ -4,10 +4,13 @@ at the page, then the nights; the browser test skips (saying why) without /usr/b
 
 import json
 import os
+import signal
+import subprocess
+import sys
 
 import numpy as np
 import pytest
-from conftest import REPO
+from conftest import REPO, default_signals
 
 from inform_utils import scripted_person_pusher as spp
 from inform_utils.scripted_person_browser import browser_missing
@@ -143,6 +146,52 @@ def test_the_driving_person_takes_the_arm_pushes_and_its_steps_are_marked(tmp_pa
     )
     assert reached.min() < start - 0.002, (start, reached.min())  # Pusher-v5's contact: millimetres in a short day
     assert (out / "table.md").exists() and "driven steps" in (out / "table.md").read_text()
+
+
+# the day's run records its id, and this tool gets a SIGTERM once the run has opened its page
+SIGTERM_MID_DAY = """
+import os, runpy, signal, sys
+from inform_utils import scripted_person_browser
+
+
+class Recorded(scripted_person_browser.Child):
+    def wait_for_line(self, prefix, timeout):
+        line = super().wait_for_line(prefix, timeout)
+        with open("day.pid", "w") as f:
+            f.write(str(self.proc.pid))
+        os.kill(os.getpid(), signal.SIGTERM)
+        return line
+
+
+scripted_person_browser.Child = Recorded
+sys.argv = ["scripted_person_pusher", "--seeds", "1", "--drive", "--steps", "300", "--out-dir", "out"]
+runpy.run_module("inform_utils.scripted_person_pusher", run_name="__main__")
+"""
+
+
+@pytest.mark.slow  # Chromium
+def test_a_sigterm_mid_day_ends_the_days_run_too(tmp_path):
+    """The day's run is in a session of its own (a Ctrl-C at the terminal is the tool's to pass on): a SIGTERM killed
+    the tool and left the run, its page and its Pusher going. Now it ends the run as Ctrl-C does: one line, exit 143."""
+    why = browser_missing()
+    if why:
+        pytest.skip(why)
+    env = {**os.environ, "PYTHONPATH": REPO, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run([sys.executable, "-c", SIGTERM_MID_DAY], cwd=tmp_path, env=env, capture_output=True,
+                          text=True, timeout=300, preexec_fn=default_signals)  # fmt: skip
+    pid = int((tmp_path / "day.pid").read_text())
+    try:
+        os.kill(pid, 0)
+        alive = open(f"/proc/{pid}/stat").read().split()[2] != "Z"  # a zombie has ended
+    except ProcessLookupError:
+        alive = False
+    if alive:
+        os.kill(pid, signal.SIGKILL)
+    assert not alive, "the day's run outlived its tool"
+    assert proc.returncode == 143 and proc.stderr.strip().splitlines()[-1] == (
+        "interrupted (SIGTERM) before the work was done"
+    ), proc.stderr[-2000:]
+    assert os.listdir(tmp_path / "out") == []
 
 
 def test_a_stopped_run_keeps_the_table_of_the_seeds_it_finished(tmp_path, monkeypatch):
