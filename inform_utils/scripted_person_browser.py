@@ -354,7 +354,7 @@ def each_seed(args, prefix: str, what: str, run_one) -> list:
     from playwright.sync_api import sync_playwright
 
     os.makedirs(args.out_dir)
-    work = args.work_dir or tempfile.mkdtemp(prefix=prefix)
+    work = os.path.abspath(args.work_dir or tempfile.mkdtemp(prefix=prefix))  # the nights run in each seed's folder
     os.makedirs(work, exist_ok=args.work_dir is None)
     say(f"{what}; runs in {work}")
     rows = []

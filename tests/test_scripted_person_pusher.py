@@ -112,10 +112,11 @@ def test_the_driving_person_takes_the_arm_pushes_and_its_steps_are_marked(tmp_pa
     monkeypatch.setenv("PYTHONPATH", REPO)
     monkeypatch.setenv("MUJOCO_GL", os.environ.get("MUJOCO_GL", "egl"))
     work, out = tmp_path / "work", tmp_path / "out"
+    monkeypatch.chdir(tmp_path)  # --work-dir relative: the nights, run in the seed's folder, still find the day
     args = spp.Args(
         seeds=[1],
-        out_dir=str(out),
-        work_dir=str(work),
+        out_dir="out",
+        work_dir="work",
         steps=300,
         pace=10.0,
         drive=True,
