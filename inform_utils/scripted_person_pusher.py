@@ -24,7 +24,10 @@ to the next (the page answers again every 250 ms while a key is down), and the t
 
 {out_dir}/table.md and table.json, and each seed's summary.json (the day's, and each night's as
 summary_{bc,sham,core}.json) and answers.jsonl under {out_dir}/seed{S}/; the runs themselves in a temporary directory,
-removed, or kept in --work-dir. Neither directory may exist: nothing is overwritten.
+removed, or kept in --work-dir. Neither directory may exist: nothing is overwritten. A condition run in parts (a
+seed stopped and run again) is one table with --join: the seed folders of earlier --out-dirs, copied into a new one.
+
+    python -m inform_utils.scripted_person_pusher --join /tmp/drive /tmp/drive_seeds2to5 --out-dir /tmp/drive_all
 """
 
 import contextlib
@@ -32,10 +35,12 @@ import json
 import math
 import os
 import random
+import re
 import shlex
 import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from typing import Literal
@@ -98,6 +103,9 @@ class Args:
     """with --drive: 0, take the arm at the start of each episode it drives; N, watch the agent first, answering y/n,
     and take the arm once it has said no N times in a row in the episode (a person who takes over when the agent goes
     wrong, as RLIF's do)"""
+    join: tuple[str, ...] = ()
+    """no day is taught: the seed{S} folders of these --out-dirs of earlier runs are copied into the new --out-dir and
+    its table is made from their files (recount says how)"""
 
 
 def judge(oracle, state: dict, alpha: tuple[float, float], steps: int) -> bool:
@@ -572,7 +580,62 @@ def check_args(args: Args) -> None:
                        f"of {', '.join(isp.PUSHER_IDS)}")  # fmt: skip
 
 
+def recount(folder: str) -> dict:
+    """A seed's row of the table from its folder's files: the runs' summaries, and answers.jsonl for the counts the
+    person's own tally gave (the page's count of the answers, yes and takes that reached it: an answer or a take sent
+    as the day ended is not there; with --hold each repeat is an answer). No seconds: the files do not say."""
+    with open(os.path.join(folder, "answers.jsonl")) as f:
+        events = [json.loads(line) for line in f]
+    answers = [e["answer"] for e in events if e.get("event") == "answer"]
+    given = {"yes": answers.count("yes"), "no": answers.count("no")}
+    if drives := [e["drive"] for e in events if e.get("event") == "drive"]:
+        given["takes"] = drives.count("take")
+    labels = [len(e["steps"]) for e in events if e.get("event") == "take labels"]
+    summaries = {}
+    for name, file in (("day", "summary.json"), *((n, f"summary_{n}.json") for n in CONTROLS)):
+        if os.path.exists(os.path.join(folder, file)):
+            with open(os.path.join(folder, file)) as f:
+                summaries[name] = json.load(f)
+    return seed_row(int(os.path.basename(folder)[4:]), given, summaries, None, sum(labels) if labels else None)
+
+
+def join(args: Args) -> list[dict]:
+    """--join: every seed's row read before anything is written, then the new --out-dir made whole or not at all."""
+    found = {}
+    for out in args.join:
+        if not os.path.isdir(out):
+            raise BadInput(f"--join {cut(out, 200)}: no such folder (give --out-dirs of earlier runs)")
+        for name in filter(re.compile(r"seed\d+").fullmatch, os.listdir(out)):
+            if name in found:
+                raise BadInput(f"--join: {name} is in {cut(found[name], 100)} and in {cut(out, 100)}; give a seed "
+                               "once")  # fmt: skip
+            found[name] = out
+    if not found:
+        raise BadInput(f"--join: no seed{{S}} folder in {cut(' '.join(args.join), 200)}")
+    if os.path.lexists(args.out_dir):
+        raise BadInput(f"--out-dir {args.out_dir} exists; give a new directory (nothing is overwritten)")
+    names = sorted(found, key=lambda n: int(n[4:]))
+    rows = [recount(os.path.join(found[n], n)) for n in names]
+    parent = os.path.dirname(os.path.abspath(args.out_dir))
+    os.makedirs(parent, exist_ok=True)
+    staging = tempfile.mkdtemp(prefix=".join_", dir=parent)
+    try:
+        for n in names:
+            shutil.copytree(os.path.join(found[n], n), os.path.join(staging, n))
+        text = markdown(rows, "python -m inform_utils.scripted_person_pusher " + " ".join(sys.argv[1:]))
+        with open(os.path.join(staging, "table.md"), "w") as f:
+            f.write(text)
+        write_json(os.path.join(staging, "table.json"), rows)
+        os.rename(staging, args.out_dir)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    say(text + f"\n{len(rows)} seeds joined into {args.out_dir}")
+    return rows
+
+
 def main(args: Args) -> list[dict] | dict:
+    if args.join:
+        return join(args)
     check_args(args)
     if args.rehearse is not None:
         return rehearse(args)

@@ -224,3 +224,38 @@ def test_the_table_leaves_a_count_a_seed_lacks_blank_and_out_of_its_mean():
     the seeds that have it (the table was a KeyError, or dropped the column, when seeds differed)."""
     text = spp.markdown([{"seed": 1, "yes": 2, "labelled": 4}, {"seed": 2, "yes": 4}], "cmd")
     assert "| 2 | 4 | - |" in text and "| mean | 3.0 | 4.0 |" in text, text
+
+
+def test_a_condition_run_in_parts_joins_into_one_table_recounted_from_its_files(tmp_path):
+    """--join: the committed five days of results/browser_pusher_takeover_v5/drive, split into two earlier --out-dirs,
+    join into one table that gives the run's own table again from the files (the page's counts: the person's tally
+    can hold an answer sent as the day ended); a seed given twice, an --out-dir that exists or a folder that does not
+    are one line each, and nothing is written."""
+    import shutil
+
+    drive = os.path.join(REPO, "results", "browser_pusher_takeover_v5", "drive")
+    for part, seeds in (("a", (1, 2)), ("b", (3, 4, 5))):
+        for s in seeds:
+            shutil.copytree(os.path.join(drive, f"seed{s}"), tmp_path / part / f"seed{s}")
+    rows = spp.main(spp.Args(join=(str(tmp_path / "a"), str(tmp_path / "b")), out_dir=str(tmp_path / "all")))
+    with open(os.path.join(drive, "table.json")) as f:
+        ran = json.load(f)
+    assert [r["seed"] for r in rows] == [1, 2, 3, 4, 5] and json.loads(
+        (tmp_path / "all" / "table.json").read_text()
+    ) == rows
+    for got, row in zip(rows, ran, strict=True):
+        counts = ("answers", "yes")
+        assert {k: v for k, v in got.items() if k not in counts} == {
+            k: row[k] for k in row if k not in (*counts, "seconds")
+        }
+        assert all(0 <= row[k] - got[k] <= 1 for k in counts)  # the person's tally against the page's
+    assert sorted(os.listdir(tmp_path / "all" / "seed3")) == sorted(os.listdir(os.path.join(drive, "seed3")))
+    before = sorted(os.listdir(tmp_path))
+    for join, out, phrase in (
+        ((tmp_path / "a", tmp_path / "all"), tmp_path / "new", "seed1 is in"),
+        ((tmp_path / "a",), tmp_path / "all", "exists; give a new directory"),
+        ((tmp_path / "nowhere",), tmp_path / "new", "no such folder"),
+    ):
+        with pytest.raises(spp.BadInput, match=phrase):
+            spp.main(spp.Args(join=tuple(map(str, join)), out_dir=str(out)))
+    assert sorted(os.listdir(tmp_path)) == before
