@@ -164,7 +164,7 @@ def test_the_map_and_the_persons_arm_day_are_said_as_they_ran():
     assert all(set(cell["nights"]) == {"default", "dwbc"} for cell in cells)
     count = sum(d["eval/inform_success_rate"] >= 1 for d in runs("browser_pusher_takeover_v5/drive"))  # seeds 1-5
     assert f"INFORM succeeds at the fixed start on {count} of 5 seeds, the goal 4" in text
-    assisted = []  # --drive-by object: the days that ran (seed 5 did not)
+    assisted = []  # --drive-by object: seeds 1-5
     for path in sorted(glob.glob(os.path.join(REPO, "results", "browser_pusher_takeover_v5", "drive_by_object", "*",
                                               "summary.json"))):  # fmt: skip
         with open(path) as f:
