@@ -296,3 +296,44 @@ def test_a_copy_under_another_name_reads_the_originals_days_and_the_original_rea
     assert copys_day["oracle_path"] == str(repo / "oracles" / "Pusher-v5__sac_oracle.pt")
     _, by_original = by(SCRIPT, "--sleep-from", copys_dir)
     assert {k: by_original[k] for k in keys} == {k: copys_day[k] for k in keys}
+
+
+def test_clonable_fits_a_function_of_the_state_and_not_noise_on_held_out_episodes():
+    """inform_utils/clonable.py's measure: R^2 by hand; a demonstrator whose action is a function of the observation
+    is learnt on episodes never seen (R^2 near 1), one whose action is noise is not (near 0 or below), though both
+    are fitted where they were seen."""
+    from inform_utils import clonable
+
+    target = torch.tensor([[1.0, 0.0], [3.0, 2.0]])  # the mean (2, 1): deviations' squares sum to 4
+    assert clonable.r_squared(target, target) == 1.0
+    assert clonable.r_squared(torch.tensor([[2.0, 1.0], [2.0, 1.0]]), target) == 0.0
+    assert clonable.r_squared(torch.tensor([[1.0, 0.0], [3.0, 0.0]]), target) == 0.0  # an error of 2: 1 - 4/4
+    gen = torch.Generator().manual_seed(0)
+    obs = torch.randn(2000, 23, generator=gen)
+    held = (torch.arange(2000) // 100) % clonable.HELD_OUT == 0  # 20 episodes of 100 steps
+    train, test = (~held).nonzero().squeeze(-1), held.nonzero().squeeze(-1)
+    function = torch.tanh(obs @ torch.randn(23, 7, generator=gen) / 3)
+    noise = torch.randn(2000, 7, generator=gen)
+    fitted, held_out = clonable.fit(obs, function, train, test, steps=1500, seed=0)
+    assert fitted > 0.9 and held_out > 0.8, (fitted, held_out)
+    fitted, held_out = clonable.fit(obs, noise, train, test, steps=1500, seed=0)
+    assert fitted > held_out + 0.1 and held_out < 0.05, (fitted, held_out)
+
+
+def test_clonable_runs_on_a_saved_day_and_refuses_in_one_line(day, tmp_path):
+    cwd, run_dir, _ = day
+    out = tmp_path / "clonable.json"
+    cmd = [sys.executable, "-m", "inform_utils.clonable", run_dir, "--rows", "all", "--steps", "200", "--out", str(out)]
+    proc = subprocess.run(cmd, cwd=cwd, env={**os.environ, "PYTHONPATH": REPO}, capture_output=True, text=True,
+                          timeout=300)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    (row,) = json.loads(out.read_text())
+    assert (row["fitted rows"], row["held-out rows"]) == (400, 200)  # 6 episodes of 100: the first and sixth held out
+    assert row["expert R2 fitted"] > 0.5 and row["R2 fitted"] <= 1.0
+    for flags, phrase in (([run_dir, "--out", str(out)], "give a new file"),
+                          ([str(tmp_path)], "no day.pt there"),
+                          ([run_dir, "--rows", "driven"], "0 driven rows to fit")):  # fmt: skip
+        proc = subprocess.run([*cmd[:3], *flags], cwd=cwd, env={**os.environ, "PYTHONPATH": REPO},
+                              capture_output=True, text=True, timeout=300)  # fmt: skip
+        lines = proc.stderr.strip().splitlines()
+        assert proc.returncode == 2 and len(lines) == 1 and phrase in lines[0], proc.stderr[-2000:]
