@@ -314,9 +314,9 @@ def test_clonable_fits_a_function_of_the_state_and_not_noise_on_held_out_episode
     train, test = (~held).nonzero().squeeze(-1), held.nonzero().squeeze(-1)
     function = torch.tanh(obs @ torch.randn(23, 7, generator=gen) / 3)
     noise = torch.randn(2000, 7, generator=gen)
-    fitted, held_out = clonable.fit(obs, function, train, test, steps=1500, seed=0)
-    assert fitted > 0.9 and held_out > 0.8, (fitted, held_out)
-    fitted, held_out = clonable.fit(obs, noise, train, test, steps=1500, seed=0)
+    fitted, held_out = clonable.fit(obs, function, train, test, steps=300, seed=0)
+    assert fitted > 0.85 and held_out > 0.8, (fitted, held_out)
+    fitted, held_out = clonable.fit(obs, noise, train, test, steps=300, seed=0)
     assert fitted > held_out + 0.1 and held_out < 0.05, (fitted, held_out)
 
 
