@@ -1094,8 +1094,10 @@ function drive(kind, target) {  // take the arm at `target`, move its target, or
   if (target) state.target = target;
   const body = JSON.stringify(kind === "release" ? {drive: kind} : {drive: kind, target: asked});
   const post = () => fetch(url("/drive"), {method: "POST", headers: {"Content-Type": "application/json"}, body});
+  const refused = () => { myDriving = false; myTarget = null; };  // the next poll says what the server holds
   drivesSent += 1;
-  driving = driving.then(post).catch(() => setOffline(true)).finally(() => { drivesDone += 1; });  // in the order given
+  driving = driving.then(post).then((r) => { if (!r.ok) refused(); })  // in the order given
+    .catch(() => setOffline(true)).finally(() => { drivesDone += 1; });
   render();
 }
 // the arrow keys: the target 2 cm as the map shows it (right: +y; up: -x)
@@ -1251,7 +1253,7 @@ async function poll() {  // the state, long-polled: each reply comes when someth
     if (r.status === 403) { $("progress").textContent = "Not this run's address: use the one printed."; return; }
     if (!r.ok) { setOffline(true); await sleep(1000); continue; }
     state = await r.json();
-    if (!settled || sent !== drivesSent) {  // it may predate this page's take or give-back: the page's own holds
+    if (state.role === "teacher" && (!settled || sent !== drivesSent)) {  // it may predate this page's drive
       state.driving = myDriving;
       if (myDriving && myTarget) state.target = myTarget;
     }

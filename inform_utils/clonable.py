@@ -63,26 +63,28 @@ def fit(obs: torch.Tensor, actions: torch.Tensor, train: torch.Tensor, test: tor
         return r_squared(net(obs[train]), actions[train]), r_squared(net(obs[test]), actions[test])
 
 
-def load(run_dir: str) -> dict:
+def split(run_dir: str, rows: str) -> tuple[dict, torch.Tensor, torch.Tensor]:
+    """The day read and checked (isp.load_day), and its chosen rows: those of the episodes fitted, those held out."""
     try:
-        return isp.load_day(run_dir)
+        day = isp.load_day(run_dir)
     except isp.InputError as e:
         raise BadInput(str(e).replace("--sleep-from ", "")) from None
-
-
-def measure(run_dir: str, args: Args) -> dict:
-    day = load(run_dir)
-    obs, actions = day["obs"], day["actions"]
-    episode = torch.zeros(len(obs), dtype=torch.long)
+    episode = torch.zeros(len(day["obs"]), dtype=torch.long)
     for i, (start, end) in enumerate(zip(day["episode_start"].tolist(), day["episode_end"].tolist(), strict=True)):
         episode[start:end] = i
-    chosen = {"driven": day["driven"].bool(), "success": day["success"].bool(), "all": torch.ones(len(obs), dtype=bool)}
-    rows = chosen[args.rows]
+    chosen = {"driven": day["driven"].bool(), "success": day["success"].bool(), "all": torch.ones_like(episode) > 0}
     held = episode % HELD_OUT == 0
-    train, test = (rows & ~held).nonzero().squeeze(-1), (rows & held).nonzero().squeeze(-1)
+    train, test = (chosen[rows] & ~held).nonzero().squeeze(-1), (chosen[rows] & held).nonzero().squeeze(-1)
     if min(len(train), len(test)) < 2:
-        raise BadInput(f"{cut(run_dir, 200)}: {len(train)} {args.rows} rows to fit and {len(test)} held out; it needs "
-                       f"2 or more of each (a day whose rows span {HELD_OUT} episodes or more)")  # fmt: skip
+        raise BadInput(f"{cut(run_dir, 200)}: {len(train)} {rows} rows to fit and {len(test)} held out; it needs 2 "
+                       f"or more of each (a day whose rows span {HELD_OUT} episodes or more)")  # fmt: skip
+    if any(bool((day["actions"][idx] == day["actions"][idx][0]).all()) for idx in (train, test)):
+        raise BadInput(f"{cut(run_dir, 200)}: the {rows} rows' actions are all the same: R^2 measures nothing there")
+    return day, train, test
+
+
+def measure(run_dir: str, day: dict, train: torch.Tensor, test: torch.Tensor, args: Args) -> dict:
+    obs, actions = day["obs"], day["actions"]
     expert = isp.actor_from_checkpoint(day["oracle"])
     with torch.no_grad():
         expert_actions = expert.get_action(obs)[2]  # its mean action on the day's states
@@ -98,14 +100,13 @@ def main(args: Args) -> list[dict]:
         raise BadInput(f"--steps must be >= 1, got {args.steps}")
     if args.out is not None and (os.path.lexists(args.out) or not os.path.isdir(os.path.dirname(args.out) or ".")):
         raise BadInput(f"--out {cut(args.out, 200)}: give a new file in an existing folder (nothing is overwritten)")
-    for run_dir in args.days:  # every day read and checked before the first fit
-        load(run_dir)
+    days = [(run_dir, *split(run_dir, args.rows)) for run_dir in args.days]  # every day checked before the first fit
     torch.set_num_threads(1)
     results = []
     print("| day | rows fitted / held out | R^2 fitted | R^2 held out | the expert's R^2 fitted | held out |")
     print("| --- | --- | --- | --- | --- | --- |", flush=True)
-    for run_dir in args.days:
-        r = measure(run_dir, args)
+    for run_dir, day, train, test in days:
+        r = measure(run_dir, day, train, test, args)
         results.append(r)
         print(f"| {run_dir} | {r['fitted rows']} / {r['held-out rows']} | {r['R2 fitted']} | {r['R2 held out']} | "
               f"{r['expert R2 fitted']} | {r['expert R2 held out']} |", flush=True)  # fmt: skip

@@ -190,6 +190,8 @@ class Interrupted(BaseException):
 
 
 def interrupt(signum, frame) -> None:
+    for sig in (signal.SIGTERM, signal.SIGHUP):  # a second one must not cut short the cleanup the first one started
+        signal.signal(sig, signal.SIG_IGN)
     raise Interrupted(signum)
 
 

@@ -583,20 +583,25 @@ def check_args(args: Args) -> None:
 def recount(folder: str) -> dict:
     """A seed's row of the table from its folder's files: the runs' summaries, and answers.jsonl for the counts the
     person's own tally gave (the page's count of the answers, yes and takes that reached it: an answer or a take sent
-    as the day ended is not there; with --hold each repeat is an answer). No seconds: the files do not say."""
-    with open(os.path.join(folder, "answers.jsonl")) as f:
-        events = [json.loads(line) for line in f]
-    answers = [e["answer"] for e in events if e.get("event") == "answer"]
-    given = {"yes": answers.count("yes"), "no": answers.count("no")}
-    if drives := [e["drive"] for e in events if e.get("event") == "drive"]:
-        given["takes"] = drives.count("take")
-    labels = [len(e["steps"]) for e in events if e.get("event") == "take labels"]
-    summaries = {}
-    for name, file in (("day", "summary.json"), *((n, f"summary_{n}.json") for n in CONTROLS)):
-        if os.path.exists(os.path.join(folder, file)):
-            with open(os.path.join(folder, file)) as f:
-                summaries[name] = json.load(f)
-    return seed_row(int(os.path.basename(folder)[4:]), given, summaries, None, sum(labels) if labels else None)
+    as the day ended is not there; with --hold each repeat is an answer, and a --drive day without a take has no
+    takes column). No seconds: the files do not say. BadInput if a file is missing or not a run's."""
+    try:
+        with open(os.path.join(folder, "answers.jsonl")) as f:
+            events = [json.loads(line) for line in f]
+        answers = [e["answer"] for e in events if e.get("event") == "answer"]
+        given = {"yes": answers.count("yes"), "no": answers.count("no")}
+        if drives := [e["drive"] for e in events if e.get("event") == "drive"]:
+            given["takes"] = drives.count("take")
+        labels = [len(e["steps"]) for e in events if e.get("event") == "take labels"]
+        summaries = {}
+        for name, file in (("day", "summary.json"), *((n, f"summary_{n}.json") for n in CONTROLS)):
+            if name == "day" or os.path.exists(os.path.join(folder, file)):
+                with open(os.path.join(folder, file)) as f:
+                    summaries[name] = json.load(f)
+        return seed_row(int(os.path.basename(folder)[4:]), given, summaries, None, sum(labels) if labels else None)
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
+        raise BadInput(f"--join: {cut(folder, 200)} is not a seed's folder of a finished day ({type(e).__name__}: "
+                       f"{cut(e, 100)})") from None  # fmt: skip
 
 
 def join(args: Args) -> list[dict]:
@@ -616,9 +621,14 @@ def join(args: Args) -> list[dict]:
         raise BadInput(f"--out-dir {args.out_dir} exists; give a new directory (nothing is overwritten)")
     names = sorted(found, key=lambda n: int(n[4:]))
     rows = [recount(os.path.join(found[n], n)) for n in names]
+    nights = {n: sorted(f for f in os.listdir(os.path.join(found[n], n)) if f.startswith("summary_")) for n in names}
+    if len({tuple(v) for v in nights.values()}) > 1:  # the folder is made before the nights: one may have stopped
+        said = "; ".join(f"{n}: {' '.join(v) or 'none'}" for n, v in nights.items())
+        raise BadInput(f"--join: the seeds' nights differ ({cut(said, 300)}); join seeds whose nights all ran")
     parent = os.path.dirname(os.path.abspath(args.out_dir))
     os.makedirs(parent, exist_ok=True)
     staging = tempfile.mkdtemp(prefix=".join_", dir=parent)
+    os.chmod(staging, 0o755)  # as a folder made by makedirs (mkdtemp's is the owner's alone)
     try:
         for n in names:
             shutil.copytree(os.path.join(found[n], n), os.path.join(staging, n))

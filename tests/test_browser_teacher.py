@@ -683,7 +683,7 @@ def test_a_held_key_answers_four_times_a_second_each_answer_a_line(new_page, tmp
     steps = [row["step"] for row in rows]
     # each about what was on the screen then: never an earlier step (under load two answers 250 ms apart may see the
     # same one)
-    assert steps == sorted(steps) and steps[0] >= 0
+    assert steps == sorted(steps)
 
 
 def test_through_the_page_the_scripted_person_teaches_tamer_the_19_steps_from_s(new_page, tmp_path):

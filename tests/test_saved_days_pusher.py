@@ -329,7 +329,7 @@ def test_clonable_runs_on_a_saved_day_and_refuses_in_one_line(day, tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     (row,) = json.loads(out.read_text())
     assert (row["fitted rows"], row["held-out rows"]) == (400, 200)  # 6 episodes of 100: the first and sixth held out
-    assert row["expert R2 fitted"] > 0.5 and row["R2 fitted"] <= 1.0
+    assert row["expert R2 fitted"] > 0.5
     for flags, phrase in (([run_dir, "--out", str(out)], "give a new file"),
                           ([str(tmp_path)], "no day.pt there"),
                           ([run_dir, "--rows", "driven"], "0 driven rows to fit")):  # fmt: skip

@@ -181,10 +181,10 @@ def test_a_sigterm_mid_day_ends_the_days_run_too(tmp_path):
     proc = subprocess.run([sys.executable, "-c", SIGTERM_MID_DAY], cwd=tmp_path, env=env, capture_output=True,
                           text=True, timeout=300, preexec_fn=default_signals)  # fmt: skip
     pid = int((tmp_path / "day.pid").read_text())
-    try:
-        os.kill(pid, 0)
-        alive = open(f"/proc/{pid}/stat").read().split()[2] != "Z"  # a zombie has ended
-    except ProcessLookupError:
+    try:  # (an id used again by another process is not the day's run)
+        with open(f"/proc/{pid}/cmdline") as f:
+            alive = "inform_utils.browser_pusher" in f.read() and open(f"/proc/{pid}/stat").read().split()[2] != "Z"
+    except FileNotFoundError:
         alive = False
     if alive:
         os.kill(pid, signal.SIGKILL)
@@ -250,11 +250,17 @@ def test_a_condition_run_in_parts_joins_into_one_table_recounted_from_its_files(
         }
         assert all(0 <= row[k] - got[k] <= 1 for k in counts)  # the person's tally against the page's
     assert sorted(os.listdir(tmp_path / "all" / "seed3")) == sorted(os.listdir(os.path.join(drive, "seed3")))
+    for name, kept in (("stopped", ("summary.json", "answers.jsonl")), ("empty", ())):  # a seed stopped mid-night
+        os.makedirs(tmp_path / name / "seed6")
+        for file in kept:
+            shutil.copy(os.path.join(drive, "seed5", file), tmp_path / name / "seed6" / file)
     before = sorted(os.listdir(tmp_path))
     for join, out, phrase in (
         ((tmp_path / "a", tmp_path / "all"), tmp_path / "new", "seed1 is in"),
         ((tmp_path / "a",), tmp_path / "all", "exists; give a new directory"),
         ((tmp_path / "nowhere",), tmp_path / "new", "no such folder"),
+        ((tmp_path / "a", tmp_path / "stopped"), tmp_path / "new", "the seeds' nights differ"),
+        ((tmp_path / "empty",), tmp_path / "new", "is not a seed's folder of a finished day"),
     ):
         with pytest.raises(spp.BadInput, match=phrase):
             spp.main(spp.Args(join=tuple(map(str, join)), out_dir=str(out)))
