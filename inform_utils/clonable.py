@@ -10,6 +10,8 @@ above it says that the demonstrator acted on what the observation does not show 
 the object's velocity): cloning learns its noise, at any step size and for any number of steps.
 
     python -m inform_utils.clonable runs/<day> [runs/<day> ...] --out clonable.json
+
+Also in the JSON: the night's success set (its rows) and how many of them a person drove.
 """
 
 import os
@@ -90,7 +92,9 @@ def measure(run_dir: str, day: dict, train: torch.Tensor, test: torch.Tensor, ar
         expert_actions = expert.get_action(obs)[2]  # its mean action on the day's states
     fitted, held_out = fit(obs, actions, train, test, args.steps, args.seed)
     expert_fitted, expert_held_out = fit(obs, expert_actions, train, test, args.steps, args.seed)
-    return {"day": run_dir, "rows": args.rows, "fitted rows": len(train), "held-out rows": len(test),
+    success, driven = day["success"].bool(), day["driven"].bool()
+    return {"day": run_dir, "success set rows": int(success.sum()), "of them driven": int((success & driven).sum()),
+            "rows": args.rows, "fitted rows": len(train), "held-out rows": len(test),
             "R2 fitted": round(fitted, 3), "R2 held out": round(held_out, 3),
             "expert R2 fitted": round(expert_fitted, 3), "expert R2 held out": round(expert_held_out, 3)}  # fmt: skip
 

@@ -164,9 +164,11 @@ def test_the_map_and_the_persons_arm_day_are_said_as_they_ran():
     assert all(set(cell["nights"]) == {"default", "dwbc"} for cell in cells)
     count = sum(d["eval/inform_success_rate"] >= 1 for d in runs("browser_pusher_takeover_v5/drive"))  # seeds 1-5
     assert f"INFORM succeeds at the fixed start on {count} of 5 seeds, the goal 4" in text
-    assisted = []  # --drive-by object: seeds 1-5
-    for path in sorted(glob.glob(os.path.join(REPO, "results", "browser_pusher_takeover_v5", "drive_by_object", "*",
-                                              "summary.json"))):  # fmt: skip
-        with open(path) as f:
-            assisted.append(json.load(f)["eval/inform_success_rate"] >= 1)
-    assert f"and on {sum(assisted)} of {len(assisted)} when a planner pushes where the person points" in text
+    counts = [  # --drive-by object: the person at each episode's start, then after three no's (-1), then out of H
+        sum(d["eval/inform_success_rate"] >= 1 for d in runs(f"browser_pusher_takeover_v5/{condition}"))
+        for condition in ("drive_by_object", "drive_by_object_takeover", "drive_by_object_takeover_no_driven_in_h")
+    ]
+    assert (
+        f"and on {counts[0]} of 5 when a planner pushes where the person points, {counts[1]} and {counts[2]} of 5 "
+        "when the person takes over after three no's, heard as -1 (and with the driven steps out of H)"
+    ) in text
