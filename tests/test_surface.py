@@ -26,6 +26,7 @@ DECLARED = {
         "PUSHER_IDS",  # teacher_check reports the push's pace, the page shows the arm: Pusher only
         "CONTACTS", "contact_of", "made_under", "contact_as_mujoco23",  # Pusher's contact; contact_check applies it
         "load_oracle",  # the scripted person judges with the teacher the runs load
+        "load_day",  # clonable reads a saved day as --sleep-from does, checked
     },
     "inform_dqn_gridworld": {
         "Args", "Sleep", "cli", "main", "check_args", "Evaluator", "StopSignals", "Teacher", "ReplayBuffer",
