@@ -447,11 +447,25 @@ def run_seed(seed: int, args: Args, browser, oracle, work: str, out: str, say) -
     with open(os.path.join(out, f"seed{seed}", "answers.jsonl")) as f:
         events = [json.loads(line) for line in f]
     held = sum(e.get("event") == "answer" for e in events) if args.hold else None  # each held key's repeats too
-    labels = [e for e in events if e.get("event") == "take labels"]  # --takeover-steps: the steps each take labelled
-    row = seed_row(seed, given, summaries, held, sum(len(e["steps"]) for e in labels) if labels else None)
+    row = seed_row(seed, given, summaries, held, take_labelled(events))
     row["seconds"] = round(time.monotonic() - t0, 1)
     say(f"[seed {seed}] done in {row['seconds']:.0f}s: " + ", ".join(f"{k} {v}" for k, v in row.items()))
     return row
+
+
+def take_labelled(events: list[dict]) -> int | None:
+    """The page's --takeover-steps: the agent's steps its takes labelled, from answers.jsonl (None: no take did)."""
+    labels = [len(e["steps"]) for e in events if e.get("event") == "take labels"]
+    return sum(labels) if labels else None
+
+
+def write_table(folder: str, rows: list[dict], note: str = "") -> str:
+    """{folder}/table.md (the command that made it, the rows, their mean, then `note`) and table.json; the markdown."""
+    text = markdown(rows, "python -m inform_utils.scripted_person_pusher " + " ".join(sys.argv[1:])) + note
+    with atomic(os.path.join(folder, "table.md")) as f:
+        f.write(text)
+    write_json(os.path.join(folder, "table.json"), rows)
+    return text
 
 
 def seed_row(seed: int, given: dict, summaries: dict, held: int | None = None, labelled: int | None = None) -> dict:
@@ -592,13 +606,12 @@ def recount(folder: str) -> dict:
         given = {"yes": answers.count("yes"), "no": answers.count("no")}
         if drives := [e["drive"] for e in events if e.get("event") == "drive"]:
             given["takes"] = drives.count("take")
-        labels = [len(e["steps"]) for e in events if e.get("event") == "take labels"]
         summaries = {}
         for name, file in (("day", "summary.json"), *((n, f"summary_{n}.json") for n in CONTROLS)):
             if name == "day" or os.path.exists(os.path.join(folder, file)):
                 with open(os.path.join(folder, file)) as f:
                     summaries[name] = json.load(f)
-        return seed_row(int(os.path.basename(folder)[4:]), given, summaries, None, sum(labels) if labels else None)
+        return seed_row(int(os.path.basename(folder)[4:]), given, summaries, None, take_labelled(events))
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
         raise BadInput(f"--join: {cut(folder, 200)} is not a seed's folder of a finished day ({type(e).__name__}: "
                        f"{cut(e, 100)})") from None  # fmt: skip
@@ -632,10 +645,7 @@ def join(args: Args) -> list[dict]:
     try:
         for n in names:
             shutil.copytree(os.path.join(found[n], n), os.path.join(staging, n))
-        text = markdown(rows, "python -m inform_utils.scripted_person_pusher " + " ".join(sys.argv[1:]))
-        with open(os.path.join(staging, "table.md"), "w") as f:
-            f.write(text)
-        write_json(os.path.join(staging, "table.json"), rows)
+        text = write_table(staging, rows)
         os.rename(staging, args.out_dir)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
@@ -653,16 +663,12 @@ def main(args: Args) -> list[dict] | dict:
     oracle = load_oracle(shlex.split(args.flags))
     what = f"the scripted person teaches the Pusher, seeds {args.seeds}, at the page"
 
-    rows, command = [], "python -m inform_utils.scripted_person_pusher " + " ".join(sys.argv[1:])
+    rows = []
 
     def run_one(seed, browser, work):  # the table after every seed: a stopped run keeps the seeds it finished
         rows.append(run_seed(seed, args, browser, oracle, work, args.out_dir, say))
-        text = markdown(rows, command) + ("" if len(rows) == len(args.seeds) else
-                                         f"\n{len(rows)} of {len(args.seeds)} seeds so far\n")  # fmt: skip
-        with atomic(os.path.join(args.out_dir, "table.md")) as f:
-            f.write(text)
-        write_json(os.path.join(args.out_dir, "table.json"), rows)
-        return text
+        return write_table(args.out_dir, rows, "" if len(rows) == len(args.seeds) else
+                           f"\n{len(rows)} of {len(args.seeds)} seeds so far\n")  # fmt: skip
 
     say("\n" + each_seed(args, "scripted_person_pusher_", what, run_one)[-1])
     return rows
