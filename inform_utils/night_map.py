@@ -172,8 +172,9 @@ def judge(args: Args, campaign: str) -> dict | None:
             words = {t["word"] for t in tests.values()}
             verdict = "no" + (f" ({' and '.join(sorted(w for w in words if w))})" if words - {""} else "")
         value = ss.day_means(rows, night, measure.key)
+        tamer = {d: cell["tamer"][d] for d in value if d in cell["tamer"]}  # TAMER on the days this night ran
         cell["nights"][night] = {"tests": tests, "plain": plain, "beside": beside, "verdict": verdict,
-                                 "value": value}  # fmt: skip
+                                 "value": value, "tamer": tamer}  # fmt: skip
     return cell
 
 
@@ -184,6 +185,16 @@ def judge(args: Args, campaign: str) -> dict | None:
 def mean_of(values) -> str:
     values = list(values.values()) if isinstance(values, dict) else [v for v in values if v is not None]
     return f"{statistics.mean(values):.3f}" if values else "-"
+
+
+def value_text(cell: dict, judged: dict) -> str:
+    """The night's value; where it ran on fewer days than the cell holds, TAMER's on those same days beside it (the
+    TAMER column is over every day)."""
+    text = mean_of(judged["value"])
+    if judged["tamer"] and set(judged["tamer"]) != set(cell["tamer"]):
+        n = len(judged["tamer"])
+        text += f" (TAMER {mean_of(judged['tamer'])} on its {n} day{'s' * (n > 1)})"
+    return text
 
 
 def comparison_text(test: dict, unit: str) -> str:
@@ -213,7 +224,7 @@ def table(args: Args, cells: list[dict]) -> str:
             ok = [s for s in cell["successes"] if s is not None]
             lines.append(ss.table_row([
                 cell["label"], str(cell["days"]), f"{min(ok)}-{max(ok)}" if ok else "-", mean_of(cell["expert"]),
-                mean_of(cell["tamer"]), night, mean_of(judged["value"]),
+                mean_of(cell["tamer"]), night, value_text(cell, judged),
                 *(comparison_text(judged["tests"][c], measure.unit) for c in CONTROLS), *beside, judged["plain"][0],
                 judged["verdict"], "-" if cell["bar"] is None else f"{cell['bar']:.3g}",
             ]))  # fmt: skip

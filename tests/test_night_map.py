@@ -12,10 +12,10 @@ CONTROL = [0.2, 0.3, 0.4, 0.5, 0.6]  # both controls' held-out success, days 1-5
 GAINS = [0.1, 0.2, 0.1, 0.2, 0.1]  # the night's over them, day by day
 
 
-def night(path, seed, variant, success, length=19.0):
+def night(path, seed, variant, success, length=19.0, tamer=0.3):
     path.mkdir(parents=True)
     summary = {"status": "completed", "seed": seed, "args": {"env_id": "KnoxStoneMaze-v0"},
-               "eval/start_set/inform_success_rate": success, "eval/start_set/tamer_success_rate": 0.3,
+               "eval/start_set/inform_success_rate": success, "eval/start_set/tamer_success_rate": tamer,
                "eval/start_set/oracle_success_rate": 1.0, "eval/all_starts/inform_success_rate": success,
                "eval/inform_episode_length": length, "eval/tamer_episode_length": 19.0,
                "sleep/expert_transitions": 100 * seed}  # fmt: skip
@@ -23,13 +23,13 @@ def night(path, seed, variant, success, length=19.0):
     (path / "random_starts.json").write_text("{}")
 
 
-def cell(root, name, night_values, skip_day=None, length=19.0):
+def cell(root, name, night_values, skip_day=None, length=19.0, tamer=None):
     for day in range(1, 6):
         base = root / name / f"KnoxStoneMaze-v0__mazemap__{day}__1"
         for variant, values in (("bc", CONTROL), ("sham", CONTROL), ("default", night_values)):
             if variant == "default" and day == skip_day:
                 continue  # a day without a successful episode: no night to judge
-            night(base / f"{variant}__sleep1", day, variant, values[day - 1], length)
+            night(base / f"{variant}__sleep1", day, variant, values[day - 1], length, tamer[day - 1] if tamer else 0.3)
 
 
 def args(root, **kw):
@@ -60,6 +60,19 @@ def test_a_night_that_loses_the_plain_task_or_misses_a_day_does_not_consolidate(
     assert a["nights"]["default"]["verdict"] == "no" and a["nights"]["default"]["plain"][1] is False
     assert b["nights"]["default"]["verdict"] == "no: it ran beside both controls on 4 of 5 days"
     assert c["nights"]["default"]["verdict"] == "no (equivalent)"  # within the bar: one tenth of the start cells
+
+
+def test_a_night_run_on_fewer_days_is_shown_beside_tamer_on_those_days(tmp_path):
+    """TAMER's column is over every day of the cell; a night that ran on days 1-4 only is read beside TAMER's value
+    on days 1-4 (0.25 here, against 0.30 over all five), not beside the cell's."""
+    cell(tmp_path, "nights_a", [0.9] * 5, skip_day=5, tamer=[0.1, 0.2, 0.3, 0.4, 0.5])
+    (judged,) = night_map.main(args(tmp_path))
+    row = next(line for line in night_map.table(args(tmp_path), [judged]).splitlines() if line.startswith("| a |"))
+    assert "| 0.300 | default | 0.900 (TAMER 0.250 on its 4 days) |" in row
+    cell(tmp_path, "nights_b", [0.9] * 5, tamer=[0.1, 0.2, 0.3, 0.4, 0.5])  # every day: nothing beside the value
+    text = night_map.table(args(tmp_path), [night_map.judge(args(tmp_path), "nights_b")])
+    row = next(line for line in text.splitlines() if line.startswith("| b |"))
+    assert "| 0.300 | default | 0.900 |" in row
 
 
 def test_the_figure_is_drawn_and_bad_input_is_one_line(tmp_path):
