@@ -151,7 +151,7 @@ class PageTeacher:
         self.takeover_steps, self.takeover_label = args.takeover_steps, args.takeover_label
         # Pusher never terminates: an episode starts every this many steps (forward_phase resets at its TimeLimit)
         self.episode_steps = env.get_wrapper_attr("_max_episode_steps")
-        self.last_driven = -1  # the last step the person drove
+        self.last_driven, self.next_step = -1, 0  # the last step the person drove; the step drive() is asked about
         self.labelled: dict[int, float] = {}  # step: the label a take gave it (an answer about it later moves it not)
 
     def wait_for_person(self) -> None:  # the day starts when the person opens the page (a stop ends the wait)
@@ -171,12 +171,13 @@ class PageTeacher:
         self.drove = self.page.driving and target is not None and not self.gone
         if not self.drove:
             return None
-        if not was:  # a new take
+        if not was or self.next_step % self.episode_steps == 0:  # a new take, or a new episode's start under it
             self.hand.take()
         return torch.as_tensor(self.hand(obs_t.cpu().numpy(), target), dtype=torch.float32, device=obs_t.device)
 
     def __call__(self, step: int, h_star: float, action=None) -> dict[int, float]:
         self.perfect_positives += int(h_star > 0)
+        self.next_step = step + 1
         if step % self.every == 0 or self.frame is None:  # the camera's copy of the arm, where the day's arm is
             data = self.env.unwrapped.data
             self.camera.unwrapped.set_state(data.qpos.copy(), data.qvel.copy())

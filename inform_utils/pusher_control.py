@@ -160,7 +160,8 @@ def arm_reach(model: mujoco.MjModel, height: float = WORK_HEIGHT) -> tuple[np.nd
 class PersonHand:
     """A person's hand on the arm at the page (browser_pusher's --drive-by): the action that takes their target, in
     the table's plane, to the fingertip (FingertipController), or with drive_by "object" to the object (MPPI on the
-    env's own model and state, pushing it there: shared autonomy). `take()` at each take: the planner starts afresh."""
+    env's own model and state, pushing it there: shared autonomy). `take()` at each take and each episode's start under
+    one: the planner starts afresh."""
 
     def __init__(self, env: gym.Env, drive_by: str = "fingertip", seed: int | None = None):
         self.drive_by = drive_by

@@ -169,7 +169,8 @@ def test_a_take_labels_the_agents_last_k_steps_and_driven_rows_stay_out_of_h(tmp
 def test_with_drive_by_object_the_planner_pushes_the_object_to_the_persons_target(tmp_path):
     """--drive-by object (shared autonomy): a take at the second step with a target 15 cm beside the object, away from
     the goal; after one episode the object is at the person's target (the planner's goal is theirs, not the env's),
-    every step driven and heard as a yes, and the day's record and the page's state say what the target moved."""
+    every step driven and heard as a yes, and the day's record and the page's state say what the target moved. Held
+    into the next episode, the planner starts afresh at its first step (its last plan was for the old state)."""
     person = []
 
     def before(step):
@@ -179,11 +180,14 @@ def test_with_drive_by_object_the_planner_pushes_the_object_to_the_persons_targe
             status, _, _ = session.request("POST", "/drive", body={"drive": "take", "target": person[0].tolist()})
             assert status == 200
 
-    day = PageDay(tmp_path, 100, before, pace=100.0, drive_by="object")
+    day = PageDay(tmp_path, 102, before, pace=100.0, drive_by="object")
     session = Session(day.teacher.page)
     session.load()
     assert session.state()["drive_by"] == "object"
+    takes, take = [], day.teacher.hand.take
+    day.teacher.hand.take = lambda: (takes.append(day.buffer.size), take())  # the step about to be taken
     day.run()
+    assert takes == [1, 100]
     day.teacher.page.close()
     obs = day.buffer.next_obs[99].numpy()  # the episode's last state (the env has since been reset)
     assert np.linalg.norm(obs[17:19] - person[0]) < 0.03, (obs[17:19], person[0])
