@@ -12,7 +12,8 @@ took, so a day re-made by its command is the same day) and by day.pt's sha256 (w
 the CPU kernels it ran on, and every flag it ran with). A night of the campaign already there is not run again: the
 study resumes; a campaign that holds a night of another day or other flags is refused before anything runs. --table
 prints the table from the results alone, each night it cannot read named with its cause; --with-campaigns adds other
-campaigns (a campaign a budget) to the rule for the methods.
+campaigns (a campaign a budget) to the rule for the methods. --retest-from runs adds the random-start test's sampled
+numbers to nights kept before it recorded them, from their own runs, where the test gives the kept numbers again.
 Exit 0; 1 if a night failed; 2 for bad input (or a night that refuses its input); 128 + the signal if stopped (the
 night in progress saves what finished and is not kept; signals that come within SAME_STOP seconds are one stop).
 
@@ -195,6 +196,10 @@ class Args:
     """episodes of the random-start test of each night's policies"""
     table: bool = False
     """print the table from results/{campaign} and run nothing"""
+    retest_from: str | None = None
+    """a folder of runs (runs/): the campaign's Pusher nights kept before their random-start test recorded the sampled
+    actions' numbers are tested again on their own runs there, and the numbers added where the test gives the kept
+    deterministic ones again; runs no night"""
     with_campaigns: list[str] = field(default_factory=list)
     """with --table: campaigns of the same methods at other budgets (one campaign a budget), whose nights join the rule
     for a night built for the data, a row per task, budget and method"""
@@ -508,7 +513,41 @@ def random_starts(run_dir: str, seed: int, env_id: str, episodes: int, stop: Sto
         metrics = last_json(run_child(cmd, stop), f"the random-start test of {path}")
         for key in ("return", "final_distance", "success_rate"):
             out[f"random_starts/{name}_{key}"] = metrics[f"eval/policy_{key}"]
+            out[f"random_starts/{name}_{key}_sampled"] = metrics[f"eval/policy_{key}_sampled"]
     return {**out, "random_starts/episodes": episodes} if out else out
+
+
+def retest(args: Args, stop: Stop) -> list[str]:
+    """--retest-from: each kept Pusher night of the campaign whose random-start test has no sampled numbers (kept
+    before the test recorded them) is tested again on its own run in `args.retest_from` (the run whose summary.json
+    has the kept one's bytes), and its random_starts.json replaced only if the test gives the kept deterministic
+    numbers again, exactly. Returns what it could not retest, with why."""
+    found = glob.glob(os.path.join(args.retest_from, "*", "summary.json"))
+    runs = {sha256(path): os.path.dirname(path) for path in found}
+    failed = []
+    for path in night_dirs(args):
+        file = os.path.join(path, "random_starts.json")
+        kept = read_json(file) if os.path.isfile(file) else {}
+        if not kept or any(key.endswith("_sampled") for key in kept):
+            continue  # no test (a night that did not complete), or the test already has them
+        run_dir = runs.get(sha256(os.path.join(path, "summary.json")))
+        if run_dir is None:
+            failed.append(f"{path}: no run in {args.retest_from} with its summary.json")
+            continue
+        summary = read_json(os.path.join(path, "summary.json"))
+        try:
+            tested = random_starts(run_dir, summary["seed"], summary["args"]["env_id"], kept["random_starts/episodes"],
+                                   stop, summary.get("contact"))  # fmt: skip
+        except NightFailed as e:
+            failed.append(f"{path}: {e}")
+            continue
+        if differ := [key for key, value in kept.items() if tested.get(key) != value]:
+            key = differ[0]
+            failed.append(f"{path}: tested again, {key} is {tested.get(key)}, not the kept {kept[key]}")
+            continue
+        write_json(file, tested)
+        print(f"[study] {path}: the sampled test added ({run_dir})", flush=True)
+    return failed
 
 
 def night_command(args: Args, day: str, variant: str, seed: int, extra: list[str]) -> list[str]:
@@ -1186,6 +1225,10 @@ def validate(args: Args, extra: list[str] = ()) -> dict[str, dict]:
         if not args.table or not re.fullmatch(FOLDER, other) or named.count(other) > 1:
             raise ValueError(f"--with-campaigns {other[:100]!r}: campaigns (folder names under {args.results_dir}/) "
                              "beside --table's, for the table only, each named once")  # fmt: skip
+    if args.retest_from is not None and (not study.pusher or args.table or args.days):
+        raise ValueError("--retest-from: for a campaign of Pusher nights already kept, without --days or --table")
+    if args.retest_from is not None and not os.path.isdir(args.retest_from):
+        raise ValueError(f"--retest-from {args.retest_from[:100]}: no such folder (the runs of the nights, runs/)")
     if args.table:  # a campaign that is a file (or a dangling link) holds no nights: not an empty table
         for flag, where in [("--results-dir", args.results_dir)] + [("--campaign", c) for c in named]:
             path = where if flag == "--results-dir" else os.path.join(args.results_dir, where)
@@ -1236,6 +1279,17 @@ def study_main(args: Args, extra: list[str]) -> int:
     if args.table:
         print(table(args))
         return 0
+    if args.retest_from is not None:
+        with Stop().installed() as stop:
+            try:
+                failed = retest(args, stop)
+            except Stopped:
+                print(f"error: stopped by {signal.Signals(stop.signum).name}; the nights retested are kept, run the "
+                      "same command again to resume", file=sys.stderr)  # fmt: skip
+                return 128 + stop.signum
+        for why in failed:
+            print(f"error: {why}", file=sys.stderr)
+        return 1 if failed else 0
     study = STUDIES[args.script]
     plan = [(day, variant, seed) for variant in args.variants or list(study.variants)
             for seed in (args.sleep_seeds if variant in study.all_seeds else args.sleep_seeds[:1])

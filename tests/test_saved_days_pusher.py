@@ -168,9 +168,20 @@ def test_the_sleep_study_runs_a_night_tests_it_on_random_starts_and_tabulates_it
     random_starts = json.loads((night_dir / "random_starts.json").read_text())
     assert random_starts["random_starts/inform_success_rate"] in (0.0, 0.5, 1.0)  # a mean over the 2 episodes
     assert "random_starts/tamer_return" in random_starts
+    assert random_starts["random_starts/inform_success_rate_sampled"] in (0.0, 0.5, 1.0)  # the sampled test beside it
     assert "| default | 1 |" in proc.stdout and "| tamer | 1 days |" in proc.stdout
     again = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=300)  # resumes: nothing runs
     assert again.returncode == 0 and "[study]" not in again.stdout
+    # a night kept before the test recorded the sampled numbers gets them from its own run, the same test again
+    old = {k: v for k, v in random_starts.items() if not k.endswith("_sampled")}
+    retest = [sys.executable, "-m", "inform_utils.sleep_study", "--campaign", "c", "--retest-from", "runs"]
+    for kept, code in ((old, 0), ({**old, "random_starts/tamer_return": 1.5}, 1)):  # then a number it does not give
+        (night_dir / "random_starts.json").write_text(json.dumps(kept))
+        proc = subprocess.run(retest, cwd=cwd, env=env, capture_output=True, text=True, timeout=300)
+        assert proc.returncode == code, proc.stderr[-2000:]
+        now = json.loads((night_dir / "random_starts.json").read_text())
+        assert now == (random_starts if code == 0 else kept)
+    assert "random_starts/tamer_return is" in proc.stderr and "not the kept 1.5" in proc.stderr
 
 
 def test_sleep_from_refuses_what_is_not_a_day(tmp_path):
