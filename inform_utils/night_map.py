@@ -54,6 +54,7 @@ MEASURES = {
     "inform_sac_pusher.py": Measure(
         name="random-start final distance", key="random_starts/{p}_final_distance", sign=-1, unit=" m", floor=0.0,
         beside=(("random-start success", "random_starts/{p}_success_rate", 1),
+                ("random-start final distance, sampled actions", "random_starts/{p}_final_distance_sampled", -1),
                 ("fixed start with the boxes, distance", ss.OBSTACLE, -1),
                 ("fixed start, the authors' sampled test, distance", "eval/authors_test/{p}_final_distance", -1)),
         day_size=("successful episodes", "sleep/success_episodes"),
@@ -197,6 +198,12 @@ def value_text(cell: dict, judged: dict) -> str:
     return text
 
 
+def beside_text(gains: list[float]) -> str:
+    """A measure beside the rule's: the mean paired gain over the days, with its p where there are two days or more."""
+    stats = ss.paired_interval(gains)
+    return "-" if not gains else f"{statistics.mean(gains):+.3f}" + (f" (p = {stats['p']:.2g})" if stats else "")
+
+
 def comparison_text(test: dict, unit: str) -> str:
     if not test["days"]:
         return "-"
@@ -220,7 +227,7 @@ def table(args: Args, cells: list[dict]) -> str:
     lines += ss.table_head(head)
     for cell in cells:
         for night, judged in cell["nights"].items():
-            beside = [", ".join(f"{statistics.mean(g):+.3f}" if g else "-" for g in pair) for pair in judged["beside"]]
+            beside = [", ".join(beside_text(g) for g in pair) for pair in judged["beside"]]
             ok = [s for s in cell["successes"] if s is not None]
             lines.append(ss.table_row([
                 cell["label"], str(cell["days"]), f"{min(ok)}-{max(ok)}" if ok else "-", mean_of(cell["expert"]),

@@ -49,6 +49,8 @@ def test_a_night_better_than_both_controls_on_every_day_consolidates_with_the_ha
         assert tests[control]["room"] == pytest.approx(1.0 - statistics.mean(CONTROL))
     assert judged["nights"]["default"]["verdict"] == "yes"
     assert judged["label"] == "500 perfect" and judged["successes"] == [100, 200, 300, 400, 500]
+    row = night_map.table(args(tmp_path), [judged]).splitlines()[-3]  # all 29 cells beside it: the same gains here
+    assert "| +0.140 (p = 0.0046), +0.140 (p = 0.0046) |" in row
 
 
 def test_a_night_that_loses_the_plain_task_or_misses_a_day_does_not_consolidate(tmp_path):
