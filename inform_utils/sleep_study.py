@@ -524,8 +524,11 @@ def retest(args: Args, stop: Stop) -> list[str]:
     numbers again, exactly. Returns what it could not retest, with why."""
     found = glob.glob(os.path.join(args.retest_from, "*", "summary.json"))
     runs = {sha256(path): os.path.dirname(path) for path in found}
-    failed = []
-    for path in night_dirs(args):
+    if not (nights := night_dirs(args)):
+        where = os.path.join(args.results_dir, args.campaign)
+        raise ValueError(f"--campaign {args.campaign}: no kept nights in {where}")
+    failed, added = [], 0
+    for path in nights:
         file = os.path.join(path, "random_starts.json")
         kept = read_json(file) if os.path.isfile(file) else {}
         if not kept or any(key.endswith("_sampled") for key in kept):
@@ -546,7 +549,9 @@ def retest(args: Args, stop: Stop) -> list[str]:
             failed.append(f"{path}: tested again, {key} is {tested.get(key)}, not the kept {kept[key]}")
             continue
         write_json(file, tested)
+        added += 1
         print(f"[study] {path}: the sampled test added ({run_dir})", flush=True)
+    print(f"[study] the sampled test added to {added} of {len(nights)} night(s); {len(failed)} could not be retested")
     return failed
 
 

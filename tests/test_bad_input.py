@@ -124,6 +124,8 @@ CASES = [
          "--retest-from nope: no such folder (the runs of the nights, runs/)"),
     case("sleep_study-retest-from-with-table", "inform_utils/sleep_study.py", "--table --campaign c --retest-from runs",
          "--retest-from: for a campaign of Pusher nights already kept, without --days or --table"),
+    case("sleep_study-retest-from-an-empty-campaign", "inform_utils/sleep_study.py", "--campaign c --retest-from .",
+         "--campaign c: no kept nights in results/c"),
     case("run_seeds-missing-script", "inform_utils/run_seeds.py", "--script nope.py", "nope.py: no such script"),
     case("run_seeds-seed-not-an-int", "inform_utils/run_seeds.py", "--seeds x", "Error parsing --seeds", tyro=True),
     case("pusher-layout-not-a-choice", "inform_sac_pusher.py", "--obstacle-layout diagonal", "invalid choice",

@@ -182,6 +182,7 @@ def test_the_sleep_study_runs_a_night_tests_it_on_random_starts_and_tabulates_it
         now = json.loads((night_dir / "random_starts.json").read_text())
         assert now == (random_starts if code == 0 else kept)
     assert "random_starts/tamer_return is" in proc.stderr and "not the kept 1.5" in proc.stderr
+    assert "the sampled test added to 0 of 1 night(s); 1 could not be retested" in proc.stdout
 
 
 def test_sleep_from_refuses_what_is_not_a_day(tmp_path):
