@@ -156,11 +156,13 @@ def test_the_map_and_the_persons_arm_day_are_said_as_they_ran():
     cells, nights = judged("map_maze", script="inform_dqn_gridworld.py")
     passed = {c: sum(cell["nights"]["default"]["tests"][c]["passes"] for cell in cells) for c in ("bc", "sham")}
     assert said and (int(said[1]), int(said[2]), int(said[3]), passed["sham"]) == (len(cells), nights, passed["bc"], 0)
-    said = re.search(r"the paper's Pusher-v4: (\d+) lengths of day, (\d+) nights; .*? on the Pusher neither the night "
-                     r"nor DWBC beats either control in any cell", text)  # fmt: skip
+    said = re.search(r"the paper's Pusher-v4: (\d+) lengths of day and (\d+) from random starts, (\d+) nights; .*? on "
+                     r"the Pusher neither the night nor DWBC beats either control in any cell", text)  # fmt: skip
     cells, nights = judged("map_v4", run_expert=False)
     tests = [test for cell in cells for night in cell["nights"].values() for test in night["tests"].values()]
-    assert said and (int(said[1]), int(said[2]), sum(t["passes"] for t in tests)) == (len(cells), nights, 0)
+    random = sum(cell["campaign"].endswith("_random") for cell in cells)
+    assert said and (int(said[1]), int(said[2]), int(said[3])) == (len(cells) - random, random, nights)
+    assert sum(t["passes"] for t in tests) == 0
     assert all(set(cell["nights"]) == {"default", "dwbc"} for cell in cells)
     count = sum(d["eval/inform_success_rate"] >= 1 for d in runs("browser_pusher_takeover_v5/drive"))  # seeds 1-5
     assert f"INFORM succeeds at the fixed start on {count} of 5 seeds, the goal 4" in text
