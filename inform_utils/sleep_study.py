@@ -530,23 +530,28 @@ def retest(args: Args, stop: Stop) -> list[str]:
     failed, added = [], 0
     for path in nights:
         file = os.path.join(path, "random_starts.json")
-        kept = read_json(file) if os.path.isfile(file) else {}
-        if not kept or any(key.endswith("_sampled") for key in kept):
-            continue  # no test (a night that did not complete), or the test already has them
-        run_dir = runs.get(sha256(os.path.join(path, "summary.json")))
-        if run_dir is None:
-            failed.append(f"{path}: no run in {args.retest_from} with its summary.json")
-            continue
-        summary = read_json(os.path.join(path, "summary.json"))
         try:
+            kept = read_json(file) if os.path.isfile(file) else {}
+            if not kept or any(key.endswith("_sampled") for key in kept):
+                continue  # no test (a night that did not complete), or the test already has them
+            run_dir = runs.get(sha256(os.path.join(path, "summary.json")))
+            if run_dir is None:
+                failed.append(f"{path}: no run in {args.retest_from} with its summary.json")
+                continue
+            summary = read_json(os.path.join(path, "summary.json"))
             tested = random_starts(run_dir, summary["seed"], summary["args"]["env_id"], kept["random_starts/episodes"],
                                    stop, summary.get("contact"))  # fmt: skip
-        except NightFailed as e:
+        except (NightFailed, BadFile, OSError) as e:
             failed.append(f"{path}: {e}")
             continue
-        if differ := [key for key, value in kept.items() if tested.get(key) != value]:
-            key = differ[0]
-            failed.append(f"{path}: tested again, {key} is {tested.get(key)}, not the kept {kept[key]}")
+        except KeyError as e:
+            failed.append(f"{path}: its kept files name no {e}")
+            continue
+        again = {key: value for key, value in tested.items() if not key.endswith("_sampled")}
+        if differ := sorted(key for key in kept.keys() | again.keys() if again.get(key) != kept.get(key)):
+            key = differ[0]  # a number the test no longer gives, gives otherwise, or gives without a kept one
+            failed.append(f"{path}: tested again, {key} is {again.get(key, 'missing')}, not the kept "
+                          f"{kept.get(key, 'none')}")  # fmt: skip
             continue
         write_json(file, tested)
         added += 1
@@ -1230,8 +1235,9 @@ def validate(args: Args, extra: list[str] = ()) -> dict[str, dict]:
         if not args.table or not re.fullmatch(FOLDER, other) or named.count(other) > 1:
             raise ValueError(f"--with-campaigns {other[:100]!r}: campaigns (folder names under {args.results_dir}/) "
                              "beside --table's, for the table only, each named once")  # fmt: skip
-    if args.retest_from is not None and (not study.pusher or args.table or args.days):
-        raise ValueError("--retest-from: for a campaign of Pusher nights already kept, without --days or --table")
+    if args.retest_from is not None and (not study.pusher or args.table or args.days or args.variants or extra):
+        raise ValueError("--retest-from: for a campaign of Pusher nights already kept, without --days, --variants, "
+                         "--table or flags after --")  # fmt: skip
     if args.retest_from is not None and not os.path.isdir(args.retest_from):
         raise ValueError(f"--retest-from {args.retest_from[:100]}: no such folder (the runs of the nights, runs/)")
     if args.table:  # a campaign that is a file (or a dangling link) holds no nights: not an empty table

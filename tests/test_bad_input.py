@@ -123,7 +123,7 @@ CASES = [
     case("sleep_study-retest-from-nowhere", "inform_utils/sleep_study.py", "--campaign c --retest-from nope",
          "--retest-from nope: no such folder (the runs of the nights, runs/)"),
     case("sleep_study-retest-from-with-table", "inform_utils/sleep_study.py", "--table --campaign c --retest-from runs",
-         "--retest-from: for a campaign of Pusher nights already kept, without --days or --table"),
+         "--retest-from: for a campaign of Pusher nights already kept, without --days, --variants, --table or"),
     case("sleep_study-retest-from-an-empty-campaign", "inform_utils/sleep_study.py", "--campaign c --retest-from .",
          "--campaign c: no kept nights in results/c"),
     case("run_seeds-missing-script", "inform_utils/run_seeds.py", "--script nope.py", "nope.py: no such script"),

@@ -175,13 +175,18 @@ def test_the_sleep_study_runs_a_night_tests_it_on_random_starts_and_tabulates_it
     # a night kept before the test recorded the sampled numbers gets them from its own run, the same test again
     old = {k: v for k, v in random_starts.items() if not k.endswith("_sampled")}
     retest = [sys.executable, "-m", "inform_utils.sleep_study", "--campaign", "c", "--retest-from", "runs"]
-    for kept, code in ((old, 0), ({**old, "random_starts/tamer_return": 1.5}, 1)):  # then a number it does not give
+    fewer = {k: v for k, v in old.items() if k != "random_starts/tamer_return"}
+    for kept, said in (
+        (old, None),
+        ({**old, "random_starts/tamer_return": 1.5}, "not the kept 1.5"),  # a number the test does not give again
+        (fewer, "not the kept none"),  # one it gives that was never kept: unchecked, so not written
+    ):
         (night_dir / "random_starts.json").write_text(json.dumps(kept))
         proc = subprocess.run(retest, cwd=cwd, env=env, capture_output=True, text=True, timeout=300)
-        assert proc.returncode == code, proc.stderr[-2000:]
+        assert proc.returncode == (0 if said is None else 1), proc.stderr[-2000:]
         now = json.loads((night_dir / "random_starts.json").read_text())
-        assert now == (random_starts if code == 0 else kept)
-    assert "random_starts/tamer_return is" in proc.stderr and "not the kept 1.5" in proc.stderr
+        assert now == (random_starts if said is None else kept)
+        assert said is None or ("random_starts/tamer_return is" in proc.stderr and said in proc.stderr), proc.stderr
     assert "the sampled test added to 0 of 1 night(s); 1 could not be retested" in proc.stdout
 
 
