@@ -872,6 +872,7 @@ def table(args: Args) -> str:
             name = variant if p == "inform" else f"{variant}, offline pick"
             row = [name, str(len(mine)), *cells, *([obstacle_p(args, mine, p, noise)] if study.pusher else []), beats]
             lines.append(table_row(row))
+    lines += fewer_days(rows, ran, columns, by_day)
     lines += ["", verdict(rows, ran, columns, spread, ("inform", "inform_selected") if study.pusher else ("inform",))]
     lines += ["", default_rule(args, rows, ran, noise)] if study.pusher else []
     if study.pusher:  # the methods at every budget: this campaign's nights and those of --with-campaigns
@@ -880,6 +881,23 @@ def table(args: Args) -> str:
         lines += ["", method_rule(args, every, judged)]
     lines += ["", per_day(rows, ran)] if study.pusher else []
     return "\n".join([*lines, *notes])  # kept for their curves, left out of the table: say so
+
+
+def fewer_days(rows: list[dict], variants: list[str], columns: tuple, by_day: dict) -> list[str]:
+    """TAMER's means over the days a variant's values stand on, where those are fewer than TAMER's (a day without a
+    successful episode gives its night nothing to sleep on): the rows above average over different days."""
+    groups = {}
+    for variant in variants:
+        days = {r["day"] for r in rows if r["variant"] == variant
+                and any(r.get(key.format(p="inform")) is not None for _, key, _ in columns)}  # fmt: skip
+        if days and len(days) < len(by_day):
+            groups.setdefault(tuple(sorted(days)), []).append(variant)
+    lines = []
+    for days, names in groups.items():
+        tamer = [f"{name} {mean_sd([by_day[d].get(key.format(p='tamer')) for d in days])}" for name, key, _ in columns]
+        lines.append(f"{', '.join(names)}: values on {len(days)} of {len(by_day)} days; TAMER on those days: "
+                     f"{', '.join(tamer)}")  # fmt: skip
+    return ["", *lines] if lines else []
 
 
 def per_day(rows: list[dict], variants: list[str]) -> str:

@@ -2,6 +2,7 @@
 
 import json
 import statistics
+from dataclasses import replace
 
 import pytest
 
@@ -75,6 +76,19 @@ def test_a_night_run_on_fewer_days_is_shown_beside_tamer_on_those_days(tmp_path)
     text = night_map.table(args(tmp_path), [night_map.judge(args(tmp_path), "nights_b")])
     row = next(line for line in text.splitlines() if line.startswith("| b |"))
     assert "| 0.300 | default | 0.900 |" in row
+
+
+def test_the_studys_table_gives_tamer_on_the_days_a_night_stands_on(tmp_path):
+    """sleep_study --table: TAMER's row is over all five days; a night that ran on days 1-4 only gets TAMER's mean over
+    days 1-4 beside it (0.25, not 0.30), and a cell whose nights ran every day no such line."""
+    from inform_utils import sleep_study
+
+    cell(tmp_path, "nights_a", [0.9] * 5, skip_day=5, tamer=[0.1, 0.2, 0.3, 0.4, 0.5])
+    study = sleep_study.Args(script="inform_dqn_gridworld.py", results_dir=str(tmp_path), campaign="nights_a")
+    assert "default: values on 4 of 5 days; TAMER on those days: " in (text := sleep_study.table(study))
+    assert "held-out start cells: success 0.250 ± 0.129," in text.split("values on 4 of 5 days")[1].splitlines()[0]
+    cell(tmp_path, "nights_b", [0.9] * 5, tamer=[0.1, 0.2, 0.3, 0.4, 0.5])
+    assert "values on" not in sleep_study.table(replace(study, campaign="nights_b"))
 
 
 def test_the_figure_is_drawn_and_bad_input_is_one_line(tmp_path):
