@@ -259,20 +259,23 @@ def figure(args: Args, cells: list[dict], path: str) -> None:
 
     measure = MEASURES[args.script]
     fig = Figure(figsize=(5.5 * len(CONTROLS), 4.2), layout="constrained")
+    qualities = [statistics.mean(c["tamer"].values()) for c in cells if c["tamer"]]
+    step = 0.015 * ((max(qualities) - min(qualities)) or 1.0)  # a second night's points beside the first's
     for ax, control in zip(fig.subplots(1, len(CONTROLS), sharey=True), CONTROLS, strict=True):
         for n, night in enumerate(NIGHTS):
             points = [(c, c["nights"][night]["tests"][control]) for c in cells if night in c["nights"]]
             points = [(c, t) for c, t in points if t["stats"] and c["tamer"]]
             if not points:
                 continue
-            x = [statistics.mean(c["tamer"].values()) + 0.004 * n for c, _ in points]
+            x = [statistics.mean(c["tamer"].values()) + step * n for c, _ in points]
             y = [t["stats"]["mean"] for _, t in points]
             err = [[t["stats"]["mean"] - t["stats"]["low"] for _, t in points],
                    [t["stats"]["high"] - t["stats"]["mean"] for _, t in points]]  # fmt: skip
             ax.errorbar(x, y, yerr=err, fmt="os"[n], capsize=3, label=f"{night} night")
             for xi, (c, t) in zip(x, points, strict=True):
-                ax.annotate(c["label"], (xi, t["stats"]["high"]), fontsize=6, rotation=60, xytext=(2, 2),
-                            textcoords="offset points")  # fmt: skip
+                if n == 0 or NIGHTS[0] not in c["nights"]:  # a cell named once, over its first night's points
+                    ax.annotate(c["label"], (xi, t["stats"]["high"]), fontsize=6, rotation=60, xytext=(2, 2),
+                                textcoords="offset points")  # fmt: skip
                 if t["room"] is not None:
                     ax.plot(xi, t["room"], marker="_", markersize=14, color="grey", linestyle="none")
         ax.axhline(0.0, color="black", lw=0.8)
