@@ -260,7 +260,7 @@ def figure(args: Args, cells: list[dict], path: str) -> None:
     measure = MEASURES[args.script]
     fig = Figure(figsize=(5.5 * len(CONTROLS), 4.2), layout="constrained")
     qualities = [statistics.mean(c["tamer"].values()) for c in cells if c["tamer"]]
-    step = 0.015 * ((max(qualities) - min(qualities)) or 1.0)  # a second night's points beside the first's
+    step = 0.015 * ((max(qualities) - min(qualities) if qualities else 0.0) or 1.0)  # a second night's points
     for ax, control in zip(fig.subplots(1, len(CONTROLS), sharey=True), CONTROLS, strict=True):
         for n, night in enumerate(NIGHTS):
             points = [(c, c["nights"][night]["tests"][control]) for c in cells if night in c["nights"]]
