@@ -522,11 +522,11 @@ def retest(args: Args, stop: Stop) -> list[str]:
     before the test recorded them) is tested again on its own run in `args.retest_from` (the run whose summary.json
     has the kept one's bytes), and its random_starts.json replaced only if the test gives the kept deterministic
     numbers again, exactly. Returns what it could not retest, with why."""
-    found = glob.glob(os.path.join(args.retest_from, "*", "summary.json"))
-    runs = {sha256(path): os.path.dirname(path) for path in found}
     if not (nights := night_dirs(args)):
         where = os.path.join(args.results_dir, args.campaign)
         raise ValueError(f"--campaign {args.campaign}: no kept nights in {where}")
+    found = glob.glob(os.path.join(args.retest_from, "*", "summary.json"))
+    runs = {sha256(path): os.path.dirname(path) for path in found}  # every run's, hashed once
     failed, added = [], 0
     for path in nights:
         file = os.path.join(path, "random_starts.json")
